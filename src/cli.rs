@@ -1,0 +1,306 @@
+//! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Mutex;
+
+use abysslight::{choose_window, Error, Options, Progress, SeafloorColour};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Exit status: everything worked.
+const EXIT_OK: u8 = 0;
+/// Exit status: the run finished, but some photos (or water-column frames) failed; see the report.
+const EXIT_SOME_FAILED: u8 = 1;
+/// Exit status: bad usage or a fatal error; nothing (more) was done.
+const EXIT_USAGE: u8 = 2;
+
+const EXIT_HELP: &str = "\
+EXIT STATUS:
+  0  every photo was corrected
+  1  the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
+  2  bad usage or a fatal error (nothing, or nothing more, was written)";
+
+/// Remove the lighting of co-moving artificial lights from deep-sea survey photos (Köser et al.).
+///
+/// A pixel sees I = A·F + S: seafloor albedo A times a factor image F (light cones, attenuation, vehicle pose)
+/// plus backscatter S. abysslight estimates S from water-column frames, F from a sliding window of survey photos,
+/// and writes A = (I - S) / F. No calibration of lights, water or camera is needed.
+#[derive(Parser, Debug)]
+#[command(name = "abysslight", version, after_help = EXIT_HELP, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Correct a dive: water-column frames + survey photos -> lighting-compensated photos.
+    #[command(after_help = EXIT_HELP)]
+    Correct(CorrectArgs),
+    /// Print the window size n for a contamination rate, and its breakdown probability P_half.
+    Window(WindowArgs),
+}
+
+#[derive(Args, Debug)]
+struct CorrectArgs {
+    /// Folder of water-column frames taken on the way down (only water in view), for the backscatter S.
+    /// Without it (and without --scatter) S = 0.
+    #[arg(long, value_name = "DIR")]
+    water_column: Option<PathBuf>,
+
+    /// Reuse a scatter image saved by an earlier run with --save-scatter (same rig, other dive).
+    #[arg(long, value_name = "FILE", conflicts_with = "water_column")]
+    scatter: Option<PathBuf>,
+
+    /// Folder of survey photos, searched recursively, processed in natural file-name order.
+    #[arg(long, value_name = "DIR")]
+    survey: Option<PathBuf>,
+
+    /// Output folder: mirrors the survey tree (same names, format and bit depth); run files go to _abysslight/.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+
+    /// Photos in the sliding window whose median gives F (odd) [default: 7].
+    #[arg(long, value_name = "N", conflicts_with = "contamination")]
+    window: Option<usize>,
+
+    /// Expected share of non-seafloor pixels (0 to 0.5); sets --window to the smallest odd n with P_half <= --risk.
+    #[arg(long, value_name = "C")]
+    contamination: Option<f64>,
+
+    /// Accepted probability that the median breaks down at a pixel, for --contamination [default: 0.01].
+    #[arg(long, value_name = "R")]
+    risk: Option<f64>,
+
+    /// Block size K of the spatial median downsampling before the temporal median [default: 8].
+    #[arg(long, value_name = "K")]
+    downsample: Option<usize>,
+
+    /// Colour C the seafloor gets after correction (white balance): grey, grey:0.5, 0.42,0.36,0.28,
+    /// 107,92,71 or #8a7560 [default: grey = 0.4, leaving headroom for brighter objects].
+    #[arg(long, value_name = "COLOUR", visible_alias = "seafloor-color")]
+    seafloor_colour: Option<SeafloorColour>,
+
+    /// Smallest F a pixel is divided by, so dark corners are not amplified without bound [default: 0.05].
+    #[arg(long, value_name = "F")]
+    factor_floor: Option<f32>,
+
+    /// Write S as a 16-bit PNG to <out>/_abysslight/scatter.png (reusable with --scatter).
+    #[arg(long)]
+    save_scatter: bool,
+
+    /// Write each photo's F·C = M - S (the lit seafloor without backscatter) as a 16-bit PNG, one pixel per
+    /// K×K block, to <out>/_abysslight/factors/.
+    #[arg(long)]
+    save_factors: bool,
+
+    /// JPEG output quality, 1-100 [default: 95]; JPEGs are written 4:4:4.
+    #[arg(long, value_name = "Q")]
+    jpeg_quality: Option<u8>,
+
+    /// Worker threads [default: all cores].
+    #[arg(long, short = 'j', value_name = "N")]
+    threads: Option<usize>,
+
+    /// Options from a TOML file (keys as the long flags, e.g. seafloor-colour = "#8a7560"); flags override it.
+    /// Relative paths in the file are relative to the file.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+
+    /// No progress bar and no log lines (errors are still printed).
+    #[arg(long, short = 'q')]
+    quiet: bool,
+}
+
+#[derive(Args, Debug)]
+struct WindowArgs {
+    /// Contamination rate c: expected share of non-seafloor pixels (0 to 0.5).
+    #[arg(long, value_name = "C")]
+    contamination: f64,
+    /// Accepted breakdown probability P_half.
+    #[arg(long, value_name = "R", default_value_t = 0.01)]
+    risk: f64,
+}
+
+/// Start from the config file (if any) and let each given flag override it.
+fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
+    let mut o = match &args.config {
+        Some(p) => Options::from_toml_file(p)?,
+        None => Options::default(),
+    };
+    macro_rules! set {
+        ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
+    }
+    set!(water_column, scatter, survey, out, threads);
+    if args.water_column.is_some() {
+        o.scatter = None;
+    }
+    if args.scatter.is_some() {
+        o.water_column = None;
+    }
+    if let Some(n) = args.window {
+        o.window = Some(n);
+        o.contamination = None;
+    }
+    if let Some(c) = args.contamination {
+        o.contamination = Some(c);
+        o.window = None;
+    }
+    if let Some(v) = args.risk {
+        o.risk = v;
+    }
+    if let Some(v) = args.downsample {
+        o.downsample = v;
+    }
+    if let Some(v) = args.seafloor_colour {
+        o.seafloor_colour = v;
+    }
+    if let Some(v) = args.factor_floor {
+        o.factor_floor = v;
+    }
+    if let Some(v) = args.jpeg_quality {
+        o.jpeg_quality = v;
+    }
+    o.save_scatter |= args.save_scatter;
+    o.save_factors |= args.save_factors;
+    if o.survey.is_none() {
+        return Err(Error::Usage("--survey DIR is required (or survey = \"DIR\" in --config)".into()));
+    }
+    if o.out.is_none() {
+        return Err(Error::Usage("--out DIR is required (or out = \"DIR\" in --config)".into()));
+    }
+    o.validate()?;
+    Ok(o)
+}
+
+/// Progress on stderr: a bar on a terminal, plain lines otherwise, nothing but errors with --quiet.
+struct Console {
+    bar: Option<ProgressBar>,
+    plain: bool,
+    count: Mutex<(usize, usize)>,
+}
+
+impl Console {
+    fn new(quiet: bool) -> Self {
+        let tty = std::io::stderr().is_terminal();
+        Console {
+            bar: None,
+            plain: !quiet && !tty,
+            count: Mutex::new((0, 0)),
+        }
+        .with_bar(!quiet && tty)
+    }
+    fn with_bar(mut self, on: bool) -> Self {
+        if on {
+            let bar = ProgressBar::new(0);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} photos ({per_sec}, eta {eta}) {msg}",
+                )
+                .unwrap(),
+            );
+            self.bar = Some(bar);
+        }
+        self
+    }
+    fn line(&self, s: &str) {
+        match &self.bar {
+            Some(b) => b.println(s),
+            None => eprintln!("{s}"),
+        }
+    }
+}
+
+impl Progress for Console {
+    fn warn(&self, m: &str) {
+        if self.plain || self.bar.is_some() {
+            self.line(&format!("abysslight: warning: {m}"));
+        }
+    }
+    fn stage(&self, m: &str) {
+        if self.plain || self.bar.is_some() {
+            self.line(&format!("abysslight: {m}"));
+        }
+    }
+    fn file_error(&self, e: &Error) {
+        self.line(&format!("abysslight: error: {e}"));
+    }
+    fn start(&self, total: usize) {
+        *self.count.lock().unwrap() = (0, total);
+        if let Some(b) = &self.bar {
+            b.set_length(total as u64);
+        }
+    }
+    fn photo_done(&self, input: &Path, ok: bool) {
+        let (i, n) = {
+            let mut c = self.count.lock().unwrap();
+            c.0 += 1;
+            *c
+        };
+        if let Some(b) = &self.bar {
+            b.inc(1);
+        } else if self.plain {
+            let status = if ok { "done" } else { "FAILED" };
+            eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+        }
+    }
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
+    let opts = options_from(&args)?;
+    let console = Console::new(args.quiet);
+    let report = abysslight::correct_mission(&opts, &console)?;
+    if !args.quiet {
+        eprintln!(
+            "abysslight: {} of {} photos corrected in {:.1} s ({} failed); report: {}",
+            report.corrected,
+            report.survey_photos,
+            report.elapsed_s,
+            report.failed + report.water_column_failed,
+            report.report_path.as_deref().unwrap_or(Path::new("-")).display()
+        );
+        if report.floored_pixels > 0 {
+            eprintln!(
+                "abysslight: {} pixels had F below --factor-floor {} (dark corners; their gain was capped)",
+                report.floored_pixels, opts.factor_floor
+            );
+        }
+    }
+    Ok(ExitCode::from(if report.all_ok() { EXIT_OK } else { EXIT_SOME_FAILED }))
+}
+
+fn window(args: WindowArgs) -> Result<ExitCode, Error> {
+    let w = choose_window(args.contamination, args.risk)?;
+    println!("n = {}", w.n);
+    println!("P_half = {:.6} ({:.3} %)", w.p_half, 100.0 * w.p_half);
+    Ok(ExitCode::from(EXIT_OK))
+}
+
+pub fn run() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() { EXIT_USAGE } else { EXIT_OK };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    let result = match cli.command {
+        Command::Correct(a) => correct(a),
+        Command::Window(a) => window(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("abysslight: error: {e}");
+            ExitCode::from(EXIT_USAGE)
+        }
+    }
+}

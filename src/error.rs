@@ -1,0 +1,59 @@
+//! Errors, grouped by who is at fault. Every variant that concerns a file names it.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in abysslight.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// The user asked for something contradictory or impossible (bad option value, missing folder, ...).
+    #[error("{0}")]
+    Usage(String),
+
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// A file is not a photo abysslight can read (corrupt, truncated, unsupported format or sample type).
+    #[error("{}: cannot decode: {reason}", path.display())]
+    Decode { path: PathBuf, reason: String },
+
+    /// A photo does not fit the mission (size or channel count differs from the first photo).
+    #[error("{}: {reason}", path.display())]
+    Mismatch { path: PathBuf, reason: String },
+
+    /// An output could not be encoded.
+    #[error("{}: cannot encode: {reason}", path.display())]
+    Encode { path: PathBuf, reason: String },
+
+    /// A configuration file is malformed.
+    #[error("{}: {reason}", path.display())]
+    Config { path: PathBuf, reason: String },
+}
+
+impl Error {
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// Short machine-readable kind, used in the run report.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Error::Usage(_) => "usage",
+            Error::Io { .. } => "io",
+            Error::Decode { .. } => "decode",
+            Error::Mismatch { .. } => "mismatch",
+            Error::Encode { .. } => "encode",
+            Error::Config { .. } => "config",
+        }
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

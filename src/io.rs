@@ -1,0 +1,387 @@
+//! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
+//! then renamed over the final name, so an interrupted run never leaves a half-written image.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use image::{DynamicImage, ImageFormat};
+
+use crate::error::{Error, Result};
+use crate::raster::{BitDepth, Layout, Photo, Raster, Samples};
+
+/// File name extensions taken as photos (case-insensitive).
+pub const PHOTO_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "tif", "tiff"];
+
+/// Name of the folder inside the output folder that holds the report and the estimates.
+pub const WORK_DIR: &str = "_abysslight";
+
+/// A photo found in an input folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Entry {
+    /// Full path.
+    pub path: PathBuf,
+    /// Path relative to the input folder (mirrored into the output folder).
+    pub relative: PathBuf,
+}
+
+/// What a folder scan found.
+#[derive(Debug, Default)]
+pub struct Found {
+    /// Photos, in natural order of their relative paths (`img2` before `img10`).
+    pub photos: Vec<Entry>,
+    /// Files passed over because their name does not end in a photo extension.
+    pub ignored: Vec<PathBuf>,
+}
+
+fn is_photo_name(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| PHOTO_EXTENSIONS.iter().any(|p| e.eq_ignore_ascii_case(p)))
+}
+
+/// Find the photos below `dir`, recursively, in natural order. Hidden files and folders (names starting with `.`)
+/// and abysslight's own `_abysslight` folders are skipped.
+pub fn find_photos(dir: &Path) -> Result<Found> {
+    let meta = std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
+    if !meta.is_dir() {
+        return Err(Error::Usage(format!("{}: not a folder", dir.display())));
+    }
+    let mut found = Found::default();
+    let walker = walkdir::WalkDir::new(dir)
+        .follow_links(true)
+        .into_iter()
+        .filter_entry(|e| {
+            e.depth() == 0
+                || !(e.file_name().to_string_lossy().starts_with('.') || e.file_name() == WORK_DIR)
+        });
+    for item in walker {
+        let item = item.map_err(|e| {
+            let path = e.path().unwrap_or(dir).to_owned();
+            Error::io(path, e.into())
+        })?;
+        if !item.file_type().is_file() {
+            continue;
+        }
+        let path = item.into_path();
+        if is_photo_name(&path) {
+            let relative = path.strip_prefix(dir).unwrap_or(&path).to_owned();
+            found.photos.push(Entry { path, relative });
+        } else {
+            found.ignored.push(path);
+        }
+    }
+    found
+        .photos
+        .sort_by(|a, b| alphanumeric_sort::compare_path(&a.relative, &b.relative));
+    Ok(found)
+}
+
+/// Image format of a path, from its extension.
+pub fn format_of(path: &Path) -> Option<ImageFormat> {
+    ImageFormat::from_path(path).ok()
+}
+
+/// Decode a photo into its native 8- or 16-bit samples.
+pub fn decode(path: &Path) -> Result<Photo> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    if file.metadata().map(|m| m.len()).unwrap_or(1) == 0 {
+        return Err(Error::Decode {
+            path: path.to_owned(),
+            reason: "empty file (0 bytes)".into(),
+        });
+    }
+    let mut reader = image::ImageReader::new(BufReader::new(file))
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    if reader.format().is_none() {
+        reader.set_format(format_of(path).ok_or_else(|| Error::Decode {
+            path: path.to_owned(),
+            reason: "unknown image format".into(),
+        })?);
+    }
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(8 << 30);
+    reader.limits(limits);
+    let img = reader.decode().map_err(|e| Error::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    })?;
+    photo_from_dynamic(img).map_err(|reason| Error::Decode {
+        path: path.to_owned(),
+        reason,
+    })
+}
+
+fn split_alpha<T: Copy>(v: Vec<T>, colour: usize) -> (Vec<T>, Vec<T>) {
+    let stride = colour + 1;
+    let mut c = Vec::with_capacity(v.len() / stride * colour);
+    let mut a = Vec::with_capacity(v.len() / stride);
+    for px in v.chunks_exact(stride) {
+        c.extend_from_slice(&px[..colour]);
+        a.push(px[colour]);
+    }
+    (c, a)
+}
+
+/// Convert an `image` buffer into a [`Photo`] (colour samples plus optional alpha).
+pub fn photo_from_dynamic(img: DynamicImage) -> std::result::Result<Photo, String> {
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    let (channels, samples, alpha) = match img {
+        DynamicImage::ImageLuma8(b) => (1, Samples::U8(b.into_raw()), None),
+        DynamicImage::ImageRgb8(b) => (3, Samples::U8(b.into_raw()), None),
+        DynamicImage::ImageLuma16(b) => (1, Samples::U16(b.into_raw()), None),
+        DynamicImage::ImageRgb16(b) => (3, Samples::U16(b.into_raw()), None),
+        DynamicImage::ImageLumaA8(b) => {
+            let (c, a) = split_alpha(b.into_raw(), 1);
+            (1, Samples::U8(c), Some(Samples::U8(a)))
+        }
+        DynamicImage::ImageRgba8(b) => {
+            let (c, a) = split_alpha(b.into_raw(), 3);
+            (3, Samples::U8(c), Some(Samples::U8(a)))
+        }
+        DynamicImage::ImageLumaA16(b) => {
+            let (c, a) = split_alpha(b.into_raw(), 1);
+            (1, Samples::U16(c), Some(Samples::U16(a)))
+        }
+        DynamicImage::ImageRgba16(b) => {
+            let (c, a) = split_alpha(b.into_raw(), 3);
+            (3, Samples::U16(c), Some(Samples::U16(a)))
+        }
+        other => {
+            return Err(format!(
+                "unsupported sample type {:?}: abysslight reads 8- and 16-bit grey or RGB photos",
+                other.color()
+            ))
+        }
+    };
+    Ok(Photo {
+        layout: Layout {
+            width,
+            height,
+            channels,
+        },
+        samples,
+        alpha,
+    })
+}
+
+fn merge_alpha<T: Copy>(c: &[T], a: &[T], colour: usize) -> Vec<T> {
+    let mut v = Vec::with_capacity(c.len() + a.len());
+    for (px, &al) in c.chunks_exact(colour).zip(a) {
+        v.extend_from_slice(px);
+        v.push(al);
+    }
+    v
+}
+
+/// Convert a [`Photo`] back into an `image` buffer.
+pub fn photo_to_dynamic(photo: &Photo) -> DynamicImage {
+    let (w, h) = (photo.layout.width as u32, photo.layout.height as u32);
+    let ch = photo.layout.channels;
+    let bad = "photo buffer does not match its layout";
+    match (&photo.samples, &photo.alpha, ch) {
+        (Samples::U8(c), None, 1) => DynamicImage::ImageLuma8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
+        (Samples::U8(c), None, _) => DynamicImage::ImageRgb8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
+        (Samples::U16(c), None, 1) => DynamicImage::ImageLuma16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
+        (Samples::U16(c), None, _) => DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
+        (Samples::U8(c), Some(Samples::U8(a)), 1) => {
+            DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad))
+        }
+        (Samples::U8(c), Some(Samples::U8(a)), _) => {
+            DynamicImage::ImageRgba8(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad))
+        }
+        (Samples::U16(c), Some(Samples::U16(a)), 1) => {
+            DynamicImage::ImageLumaA16(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad))
+        }
+        (Samples::U16(c), Some(Samples::U16(a)), _) => {
+            DynamicImage::ImageRgba16(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad))
+        }
+        _ => unreachable!("alpha and colour samples always share a bit depth"),
+    }
+}
+
+/// Encoder settings.
+#[derive(Debug, Clone, Copy)]
+pub struct EncodeSettings {
+    pub jpeg_quality: u8,
+}
+
+impl Default for EncodeSettings {
+    fn default() -> Self {
+        EncodeSettings { jpeg_quality: 95 }
+    }
+}
+
+/// Encode `photo` in `format` into `w`.
+pub fn encode_to<W: Write>(
+    photo: &Photo,
+    format: ImageFormat,
+    settings: EncodeSettings,
+    w: W,
+) -> std::result::Result<(), String> {
+    let l = photo.layout;
+    match format {
+        ImageFormat::Jpeg => {
+            let Samples::U8(c) = &photo.samples else {
+                return Err("JPEG holds 8-bit samples only".into());
+            };
+            let colour = if l.channels == 1 {
+                jpeg_encoder::ColorType::Luma
+            } else {
+                jpeg_encoder::ColorType::Rgb
+            };
+            let (w16, h16) = (
+                u16::try_from(l.width).map_err(|_| "too wide for JPEG")?,
+                u16::try_from(l.height).map_err(|_| "too tall for JPEG")?,
+            );
+            let mut enc = jpeg_encoder::Encoder::new(w, settings.jpeg_quality);
+            enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_4_4);
+            enc.encode(c, w16, h16, colour).map_err(|e| e.to_string())
+        }
+        ImageFormat::Png => {
+            let enc = image::codecs::png::PngEncoder::new_with_quality(
+                w,
+                image::codecs::png::CompressionType::Fast,
+                image::codecs::png::FilterType::Adaptive,
+            );
+            photo_to_dynamic(photo)
+                .write_with_encoder(enc)
+                .map_err(|e| e.to_string())
+        }
+        ImageFormat::Tiff => {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            photo_to_dynamic(photo)
+                .write_to(&mut buf, ImageFormat::Tiff)
+                .map_err(|e| e.to_string())?;
+            let mut w = w;
+            w.write_all(buf.get_ref()).map_err(|e| e.to_string())
+        }
+        other => Err(format!("writing {other:?} is not supported")),
+    }
+}
+
+/// Write `photo` to `path` atomically in the format given by `path`'s extension: encode into a temp file in the
+/// same folder, sync it, then rename it over `path`. Parent folders are created.
+pub fn write_atomic(photo: &Photo, path: &Path, settings: EncodeSettings) -> Result<()> {
+    let format = format_of(path).ok_or_else(|| Error::Encode {
+        path: path.to_owned(),
+        reason: "unknown output format (file name extension)".into(),
+    })?;
+    write_with(path, |w| {
+        encode_to(photo, format, settings, w).map_err(|reason| Error::Encode {
+            path: path.to_owned(),
+            reason,
+        })
+    })
+}
+
+/// Atomically create `path` from what `fill` writes: temp file in the same folder, sync, rename.
+pub fn write_with(path: &Path, fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>) -> Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!(".{name}."))
+        .suffix(".abysslight-tmp")
+        .tempfile_in(dir)
+        .map_err(|e| Error::io(dir, e))?;
+    {
+        let mut w = BufWriter::new(tmp.as_file());
+        fill(&mut w)?;
+        w.flush().map_err(|e| Error::io(path, e))?;
+    }
+    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// Save a raster in `[0, 1]` as a 16-bit PNG (atomically).
+pub fn save_raster_png16(raster: &Raster, path: &Path) -> Result<()> {
+    let photo = Photo {
+        layout: raster.layout(),
+        samples: Samples::U16(raster.to_u16()),
+        alpha: None,
+    };
+    write_atomic(&photo, path, EncodeSettings::default())
+}
+
+/// Load an image as a normalised raster (for a saved scatter image).
+pub fn load_raster(path: &Path) -> Result<Raster> {
+    let photo = decode(path)?;
+    Ok(Raster::from_photo(&photo))
+}
+
+/// Bit depth a format can hold for a given input depth (JPEG only holds 8 bits).
+pub fn output_depth(format: ImageFormat, input: BitDepth) -> BitDepth {
+    match format {
+        ImageFormat::Jpeg => BitDepth::Eight,
+        _ => input,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order_recursive_and_hidden_skipped() {
+        let d = tempfile::tempdir().unwrap();
+        for name in ["img10.jpg", "img2.jpg", "img1.PNG", "a/img3.tif", "notes.txt", ".hidden.jpg", "_abysslight/x.png"] {
+            let p = d.path().join(name);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, b"x").unwrap();
+        }
+        let f = find_photos(d.path()).unwrap();
+        let names: Vec<String> = f.photos.iter().map(|e| e.relative.to_string_lossy().into_owned()).collect();
+        assert_eq!(names, ["a/img3.tif", "img1.PNG", "img2.jpg", "img10.jpg"]);
+        assert_eq!(f.ignored.len(), 1);
+    }
+
+    #[test]
+    fn round_trip_each_format_and_depth() {
+        let d = tempfile::tempdir().unwrap();
+        let rgb8 = Photo {
+            layout: Layout { width: 5, height: 3, channels: 3 },
+            samples: Samples::U8((0..45).map(|i| (i * 5) as u8).collect()),
+            alpha: None,
+        };
+        let grey16 = Photo {
+            layout: Layout { width: 4, height: 2, channels: 1 },
+            samples: Samples::U16((0..8).map(|i| i * 8000 + 7).collect()),
+            alpha: Some(Samples::U16(vec![65535; 8])),
+        };
+        let grey16_opaque = Photo { alpha: None, ..grey16.clone() };
+        for (photo, name) in [(&rgb8, "a.png"), (&rgb8, "a.tif"), (&grey16, "g.png"), (&grey16_opaque, "g.tiff")] {
+            let p = d.path().join(name);
+            write_atomic(photo, &p, EncodeSettings::default()).unwrap();
+            assert_eq!(&decode(&p).unwrap(), photo, "{name}");
+        }
+        let j = d.path().join("a.jpg");
+        write_atomic(&rgb8, &j, EncodeSettings { jpeg_quality: 100 }).unwrap();
+        let back = decode(&j).unwrap();
+        assert_eq!(back.layout, rgb8.layout);
+        assert!(write_atomic(&grey16, &d.path().join("g.jpg"), EncodeSettings::default()).is_err());
+        // No temp files are left behind.
+        let leftovers: Vec<_> = std::fs::read_dir(d.path())
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().contains("abysslight-tmp"))
+            .collect();
+        assert!(leftovers.is_empty());
+    }
+
+    #[test]
+    fn bad_files_name_the_file_and_reason() {
+        let d = tempfile::tempdir().unwrap();
+        let empty = d.path().join("empty.jpg");
+        std::fs::write(&empty, b"").unwrap();
+        let e = decode(&empty).unwrap_err().to_string();
+        assert!(e.contains("empty.jpg") && e.contains("0 bytes"), "{e}");
+        let junk = d.path().join("junk.png");
+        std::fs::write(&junk, b"this is not a png").unwrap();
+        let e = decode(&junk).unwrap_err().to_string();
+        assert!(e.contains("junk.png") && e.contains("decode"), "{e}");
+        let e = decode(&d.path().join("missing.jpg")).unwrap_err().to_string();
+        assert!(e.contains("missing.jpg"), "{e}");
+    }
+}

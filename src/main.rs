@@ -1,0 +1,9 @@
+//! The `abysslight` command: parses arguments, turns them into library options and calls the library.
+
+mod cli;
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    cli::run()
+}

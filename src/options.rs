@@ -1,0 +1,327 @@
+//! [`Options`]: every setting of `abysslight correct`, shared by the library, the TOML config file and the CLI.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::Error;
+use crate::window::{choose_window, p_half, WindowChoice};
+
+/// Grey level of the default seafloor colour `C`. Below mid-grey, so that objects brighter than the sediment
+/// (corals, sponges, white shells, litter) keep 2.5× headroom before they clip.
+pub const DEFAULT_GREY: f32 = 0.4;
+
+/// Window size used when neither `window` nor `contamination` is given.
+pub const DEFAULT_WINDOW: usize = 7;
+
+/// The colour the seafloor is assumed to have after correction (`C` in `F = (M − S) / C`). It acts as a white
+/// balance: a measured sediment colour gives photos in that colour, grey gives neutral ones.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct SeafloorColour(pub [f32; 3]);
+
+impl Default for SeafloorColour {
+    fn default() -> Self {
+        SeafloorColour([DEFAULT_GREY; 3])
+    }
+}
+
+impl SeafloorColour {
+    /// `C` for a photo with `channels` colour channels (grey photos use the mean of the three).
+    pub fn for_channels(&self, channels: usize) -> Vec<f32> {
+        if channels == 3 {
+            self.0.to_vec()
+        } else {
+            vec![(self.0[0] + self.0[1] + self.0[2]) / 3.0; channels]
+        }
+    }
+}
+
+impl FromStr for SeafloorColour {
+    type Err = String;
+
+    /// Accepts `grey` (or `gray`), `grey:0.5`, a single level `0.5`, three components `0.42,0.36,0.28` (in
+    /// `(0, 1]`, or 8-bit `107,92,71` when any exceeds 1) or a hex colour `#8a7560`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let t = s.trim().to_ascii_lowercase();
+        let bad = || {
+            format!(
+                "invalid seafloor colour {s:?}: expected grey, grey:0.4, 0.42,0.36,0.28, 107,92,71 or #8a7560"
+            )
+        };
+        let rgb: [f32; 3] = if t == "grey" || t == "gray" {
+            [DEFAULT_GREY; 3]
+        } else if let Some(level) = t.strip_prefix("grey:").or_else(|| t.strip_prefix("gray:")) {
+            let v: f32 = level.trim().parse().map_err(|_| bad())?;
+            [v; 3]
+        } else if let Some(hex) = t.strip_prefix('#') {
+            if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+                return Err(bad());
+            }
+            let byte = |i: usize| u8::from_str_radix(&hex[i..i + 2], 16).unwrap() as f32 / 255.0;
+            [byte(0), byte(2), byte(4)]
+        } else {
+            let parts: Vec<f32> = t
+                .split(',')
+                .map(|p| p.trim().parse::<f32>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| bad())?;
+            let mut rgb = match parts.as_slice() {
+                [v] => [*v; 3],
+                [r, g, b] => [*r, *g, *b],
+                _ => return Err(bad()),
+            };
+            if rgb.iter().any(|&v| v > 1.0) {
+                for v in &mut rgb {
+                    *v /= 255.0;
+                }
+            }
+            rgb
+        };
+        if rgb.iter().any(|&v| !(v > 0.0 && v <= 1.0)) {
+            return Err(format!(
+                "invalid seafloor colour {s:?}: every component must be above 0 and at most 1 (or 255)"
+            ));
+        }
+        Ok(SeafloorColour(rgb))
+    }
+}
+
+impl TryFrom<String> for SeafloorColour {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<SeafloorColour> for String {
+    fn from(c: SeafloorColour) -> String {
+        c.to_string()
+    }
+}
+
+impl fmt::Display for SeafloorColour {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let [r, g, b] = self.0;
+        write!(f, "{r},{g},{b}")
+    }
+}
+
+/// Settings of a correction run. Field docs give the default and the symbol in Köser et al.
+///
+/// The same struct is read from a `--config` TOML file (keys in kebab-case, e.g. `seafloor-colour = "#8a7560"`)
+/// and filled from command-line flags, which override the file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields, rename_all = "kebab-case")]
+pub struct Options {
+    /// Folder of water-column frames taken on the way down (for `S`). Default: none, `S = 0`.
+    pub water_column: Option<PathBuf>,
+    /// A scatter image saved by an earlier run (`_abysslight/scatter.png`), used instead of `water_column`.
+    pub scatter: Option<PathBuf>,
+    /// Folder of survey photos, searched recursively. Required.
+    pub survey: Option<PathBuf>,
+    /// Output folder; mirrors the survey tree. Required.
+    pub out: Option<PathBuf>,
+    /// Temporal window `n` (odd). Default: 7, or computed from `contamination`.
+    pub window: Option<usize>,
+    /// Contamination rate `c`: expected share of non-seafloor pixels. Sets `window` to the smallest odd `n` with
+    /// `P_half ≤ risk`. Default: none.
+    pub contamination: Option<f64>,
+    /// Accepted breakdown probability `P_half` when choosing `n` from `contamination`. Default: 0.01.
+    pub risk: f64,
+    /// Block size `K` of the spatial median downsampling. Default: 8.
+    pub downsample: usize,
+    /// Seafloor colour `C`. Default: grey 0.4.
+    #[serde(alias = "seafloor-color")]
+    pub seafloor_colour: SeafloorColour,
+    /// Smallest value of `F` a pixel is divided by, so that dark corners do not explode (a gain of at most
+    /// `1/factor_floor` relative to a normally lit pixel). Default: 0.05.
+    pub factor_floor: f32,
+    /// Write `S` to `<out>/_abysslight/scatter.png` (16-bit). Default: false.
+    pub save_scatter: bool,
+    /// Write each photo's `F·C = M − S` to `<out>/_abysslight/factors/` (16-bit, one pixel per block). Default: false.
+    pub save_factors: bool,
+    /// JPEG output quality, 1–100. Default: 95.
+    pub jpeg_quality: u8,
+    /// Worker threads. Default: all cores.
+    pub threads: Option<usize>,
+    /// Memory the scatter estimate may hold at once, in MiB; more water-column frames than fit are processed in
+    /// row bands (each frame decoded once per band). Default: 2048.
+    pub scatter_memory_mib: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            water_column: None,
+            scatter: None,
+            survey: None,
+            out: None,
+            window: None,
+            contamination: None,
+            risk: 0.01,
+            downsample: 8,
+            seafloor_colour: SeafloorColour::default(),
+            factor_floor: 0.05,
+            save_scatter: false,
+            save_factors: false,
+            jpeg_quality: 95,
+            threads: None,
+            scatter_memory_mib: 2048,
+        }
+    }
+}
+
+impl Options {
+    /// Read options from a TOML file. Relative paths in it are taken relative to the file's folder.
+    pub fn from_toml_file(path: &Path) -> Result<Options, Error> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let mut opts: Options = toml::from_str(&text).map_err(|e| Error::Config {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        for p in [
+            &mut opts.water_column,
+            &mut opts.scatter,
+            &mut opts.survey,
+            &mut opts.out,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        }
+        Ok(opts)
+    }
+
+    /// The window size to use, with its breakdown probability at the given contamination (if known).
+    pub fn window_choice(&self) -> Result<WindowChoice, Error> {
+        match (self.window, self.contamination) {
+            (Some(_), Some(_)) => Err(Error::Usage(
+                "give either --window or --contamination, not both".into(),
+            )),
+            (None, Some(c)) => choose_window(c, self.risk),
+            (Some(n), None) => Ok(WindowChoice {
+                n,
+                p_half: f64::NAN,
+            }),
+            (None, None) => Ok(WindowChoice {
+                n: DEFAULT_WINDOW,
+                p_half: f64::NAN,
+            }),
+        }
+        .map(|w| match self.contamination {
+            Some(c) => WindowChoice {
+                n: w.n,
+                p_half: p_half(w.n, c),
+            },
+            None => w,
+        })
+    }
+
+    /// Check values that do not depend on the file system.
+    pub fn validate(&self) -> Result<(), Error> {
+        let usage = |m: String| Err(Error::Usage(m));
+        let w = self.window_choice()?;
+        if w.n == 0 || w.n % 2 == 0 {
+            return usage(format!(
+                "--window must be an odd number of photos (centred on the current one), got {}",
+                w.n
+            ));
+        }
+        if self.downsample == 0 {
+            return usage("--downsample must be at least 1".into());
+        }
+        if !(self.factor_floor > 0.0 && self.factor_floor.is_finite()) {
+            return usage(format!(
+                "--factor-floor must be above 0, got {}",
+                self.factor_floor
+            ));
+        }
+        if !(1..=100).contains(&self.jpeg_quality) {
+            return usage(format!(
+                "--jpeg-quality must be 1 to 100, got {}",
+                self.jpeg_quality
+            ));
+        }
+        if self.threads == Some(0) {
+            return usage("--threads must be at least 1".into());
+        }
+        if self.scatter.is_some() && self.water_column.is_some() {
+            return usage("give either --water-column or --scatter, not both".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_forms() {
+        let c: SeafloorColour = "0.42,0.36,0.28".parse().unwrap();
+        assert_eq!(c.0, [0.42, 0.36, 0.28]);
+        let h: SeafloorColour = "#8a7560".parse().unwrap();
+        assert!((h.0[0] - 138.0 / 255.0).abs() < 1e-6);
+        assert!((h.0[1] - 117.0 / 255.0).abs() < 1e-6);
+        assert!((h.0[2] - 96.0 / 255.0).abs() < 1e-6);
+        assert_eq!("grey".parse::<SeafloorColour>().unwrap().0, [DEFAULT_GREY; 3]);
+        assert_eq!("gray:0.5".parse::<SeafloorColour>().unwrap().0, [0.5; 3]);
+        let b: SeafloorColour = "138,117,96".parse().unwrap();
+        assert_eq!(b, h);
+        for bad in ["", "red", "#12345", "0,0,0", "1.5,0.2", "#gg0000", "-0.1"] {
+            assert!(bad.parse::<SeafloorColour>().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn toml_round_trip_and_relative_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = dir.path().join("mission.toml");
+        std::fs::write(
+            &cfg,
+            "survey = \"photos\"\nout = \"/abs/out\"\nwindow = 9\nseafloor-colour = \"#8a7560\"\n",
+        )
+        .unwrap();
+        let o = Options::from_toml_file(&cfg).unwrap();
+        assert_eq!(o.survey.unwrap(), dir.path().join("photos"));
+        assert_eq!(o.out.unwrap(), PathBuf::from("/abs/out"));
+        assert_eq!(o.window, Some(9));
+        assert_eq!(o.downsample, 8, "unset keys keep their defaults");
+        std::fs::write(&cfg, "windw = 9\n").unwrap();
+        let err = Options::from_toml_file(&cfg).unwrap_err().to_string();
+        assert!(err.contains("mission.toml") && err.contains("windw"), "{err}");
+    }
+
+    #[test]
+    fn validation() {
+        let ok = Options::default();
+        assert!(ok.validate().is_ok());
+        assert_eq!(ok.window_choice().unwrap().n, DEFAULT_WINDOW);
+        let even = Options {
+            window: Some(6),
+            ..Options::default()
+        };
+        assert!(even.validate().is_err());
+        let both = Options {
+            window: Some(7),
+            contamination: Some(0.2),
+            ..Options::default()
+        };
+        assert!(both.validate().is_err());
+        let from_c = Options {
+            contamination: Some(0.2),
+            risk: 0.05,
+            ..Options::default()
+        };
+        let w = from_c.window_choice().unwrap();
+        assert_eq!(w.n, 7);
+        assert!((w.p_half - 0.033344).abs() < 1e-9);
+    }
+}

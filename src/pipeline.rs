@@ -1,0 +1,541 @@
+//! `correct`, top to bottom: find the photos, estimate `S`, then stream the survey once in order:
+//!
+//! 1. a decoder thread reads photos ahead (bounded queue);
+//! 2. each photo is block-median downsampled and its low-resolution image enters the ring buffer of the window;
+//! 3. once the window of the oldest waiting photo is complete, its `M` (temporal median), `F` and the corrected
+//!    photo are computed (rayon over rows);
+//! 4. encoder threads write outputs atomically (bounded queue).
+//!
+//! Memory: at most `n` low-resolution images, at most `n` full-resolution photos waiting for their window (at the
+//! start of a mission; `n/2 + 1` later), plus the few in the decode and encode queues. It does not grow with the
+//! number of photos.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use crossbeam_channel::bounded;
+
+use crate::correct::{correct_in_place, CorrectStats};
+use crate::error::{Error, Result};
+use crate::factor::{factor, lit_seafloor};
+use crate::io::{self, decode, find_photos, write_atomic, EncodeSettings, Entry, WORK_DIR};
+use crate::median::{block_median, stack_median};
+use crate::options::Options;
+use crate::raster::{Layout, Photo, Raster, Samples};
+use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
+use crate::scatter::{self, Scatter};
+use crate::window::window_range;
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1000.0
+}
+
+/// Absolute, normalised form of a path that may not exist yet (its existing ancestor is canonicalised).
+fn absolute(p: &Path) -> PathBuf {
+    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
+    let mut existing = abs.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = existing.canonicalize() {
+            let mut out = c;
+            for r in rest.iter().rev() {
+                out.push(r);
+            }
+            return out;
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_owned());
+                existing = parent;
+            }
+            _ => return abs,
+        }
+    }
+}
+
+/// Refuse an output folder that would write into an input folder.
+fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
+    let out_abs = absolute(out);
+    for (what, dir) in inputs {
+        let dir_abs = absolute(dir);
+        if out_abs == dir_abs {
+            return Err(Error::Usage(format!(
+                "--out {} is the {what} folder: abysslight never writes over its inputs; choose another folder",
+                out.display()
+            )));
+        }
+        if out_abs.starts_with(&dir_abs) {
+            return Err(Error::Usage(format!(
+                "--out {} is inside the {what} folder {}: outputs would be read back as inputs; choose a folder \
+                 outside it",
+                out.display(),
+                dir.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+struct Decoded {
+    entry: Entry,
+    photo: Result<Photo>,
+    decode_ms: f64,
+}
+
+struct Waiting {
+    seq: usize,
+    entry: Entry,
+    photo: Photo,
+    decode_ms: f64,
+    downsample_ms: f64,
+}
+
+struct WriteJob {
+    photo: Photo,
+    frame: FrameReport,
+}
+
+/// Output path of a survey photo.
+pub fn output_path(out: &Path, entry: &Entry) -> PathBuf {
+    out.join(&entry.relative)
+}
+
+/// Run `abysslight correct` as described by `opts`.
+pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report> {
+    opts.validate()?;
+    match opts.threads {
+        Some(t) => rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .map_err(|e| Error::Usage(format!("cannot start {t} threads: {e}")))?
+            .install(|| run(opts, progress)),
+        None => run(opts, progress),
+    }
+}
+
+fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
+    let started = Instant::now();
+    let survey = opts
+        .survey
+        .as_deref()
+        .ok_or_else(|| Error::Usage("--survey is required".into()))?;
+    let out = opts
+        .out
+        .as_deref()
+        .ok_or_else(|| Error::Usage("--out is required".into()))?;
+    let mut inputs = vec![("survey", survey)];
+    if let Some(w) = opts.water_column.as_deref() {
+        inputs.push(("water-column", w));
+    }
+    check_output_folder(out, &inputs)?;
+    let window = opts.window_choice()?;
+    let n = window.n;
+    let k = opts.downsample;
+
+    let found = find_photos(survey)?;
+    if found.photos.is_empty() {
+        return Err(Error::Usage(format!(
+            "no photos ({}) found below {}",
+            io::PHOTO_EXTENSIONS.join(", "),
+            survey.display()
+        )));
+    }
+    let mut warnings = Vec::new();
+    let warn = |warnings: &mut Vec<String>, m: String| {
+        progress.warn(&m);
+        warnings.push(m);
+    };
+    if !found.ignored.is_empty() {
+        warn(
+            &mut warnings,
+            format!(
+                "{} file(s) in {} are not photos by name and were passed over (e.g. {})",
+                found.ignored.len(),
+                survey.display(),
+                found.ignored[0].display()
+            ),
+        );
+    }
+    let work_dir = out.join(WORK_DIR);
+    std::fs::create_dir_all(&work_dir).map_err(|e| Error::io(&work_dir, e))?;
+
+    // --- S -------------------------------------------------------------------------------------------------
+    let mut errors: Vec<FileError> = Vec::new();
+    let mut water_column_failed = 0;
+    let mut scatter_info = ScatterInfo {
+        source: "none".into(),
+        path: None,
+        frames: 0,
+        passes: 0,
+        saved_to: None,
+    };
+    let scatter: Option<Scatter> = if let Some(path) = opts.scatter.as_deref() {
+        progress.stage(&format!("loading scatter image {}", path.display()));
+        scatter_info.source = "file".into();
+        scatter_info.path = Some(path.to_owned());
+        Some(Scatter::load(path)?)
+    } else if let Some(dir) = opts.water_column.as_deref() {
+        let wc = find_photos(dir)?;
+        progress.stage(&format!(
+            "estimating scatter S from {} water-column frames in {}",
+            wc.photos.len(),
+            dir.display()
+        ));
+        scatter_info.source = "water-column".into();
+        scatter_info.path = Some(dir.to_owned());
+        let budget = opts.scatter_memory_mib.max(1) << 20;
+        let s = scatter::estimate(&wc.photos, budget, |e| {
+            progress.file_error(&e);
+            water_column_failed += 1;
+            errors.push(FileError::from_error(error_path(&e), &e));
+        })?;
+        match &s {
+            Some(s) => {
+                scatter_info.frames = s.frames;
+                scatter_info.passes = s.passes;
+                if s.frames < 3 {
+                    warn(
+                        &mut warnings,
+                        format!(
+                            "only {} usable water-column frame(s): the median cannot reject particles with fewer \
+                             than 3",
+                            s.frames
+                        ),
+                    );
+                }
+            }
+            None => warn(
+                &mut warnings,
+                format!(
+                    "no usable water-column frames in {}: continuing with S = 0 (no backscatter removal)",
+                    dir.display()
+                ),
+            ),
+        }
+        s
+    } else {
+        warn(
+            &mut warnings,
+            "no --water-column or --scatter given: assuming no backscatter (S = 0)".into(),
+        );
+        None
+    };
+    if let (Some(s), true) = (&scatter, opts.save_scatter) {
+        let p = work_dir.join("scatter.png");
+        io::save_raster_png16(&s.full, &p)?;
+        scatter_info.saved_to = Some(p);
+    }
+    let scatter_low = scatter.as_ref().map(|s| s.downsampled(k));
+
+    // --- the survey stream -----------------------------------------------------------------------------------
+    let total_files = found.photos.len();
+    progress.stage(&format!(
+        "correcting {total_files} survey photos (window n = {n}, blocks {k}x{k})"
+    ));
+    progress.start(total_files);
+    let writers = opts
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
+        .max(1);
+    let settings = EncodeSettings {
+        jpeg_quality: opts.jpeg_quality,
+    };
+    let done: Mutex<Vec<FrameReport>> = Mutex::new(Vec::new());
+    let write_errors: Mutex<Vec<FileError>> = Mutex::new(Vec::new());
+    let mut totals = CorrectStats::default();
+    let mut layout: Option<Layout> = None;
+    let mut survey_failed = 0usize;
+
+    let stream_result: Result<()> = std::thread::scope(|scope| {
+        let (dec_tx, dec_rx) = bounded::<Decoded>(2);
+        let (wr_tx, wr_rx) = bounded::<WriteJob>(writers);
+        let entries = &found.photos;
+        scope.spawn(move || {
+            for entry in entries {
+                let t = Instant::now();
+                let photo = decode(&entry.path);
+                if dec_tx
+                    .send(Decoded {
+                        entry: entry.clone(),
+                        photo,
+                        decode_ms: ms(t),
+                    })
+                    .is_err()
+                {
+                    break;
+                }
+            }
+        });
+        for _ in 0..writers {
+            let rx = wr_rx.clone();
+            let (done, write_errors) = (&done, &write_errors);
+            scope.spawn(move || {
+                for mut job in rx {
+                    let t = Instant::now();
+                    let r = write_atomic(&job.photo, &job.frame.output, settings);
+                    job.frame.encode_ms = ms(t);
+                    let ok = r.is_ok();
+                    progress.photo_done(&job.frame.input, ok);
+                    match r {
+                        Ok(()) => done.lock().unwrap().push(job.frame),
+                        Err(e) => {
+                            progress.file_error(&e);
+                            write_errors
+                                .lock()
+                                .unwrap()
+                                .push(FileError::from_error(&job.frame.input, &e));
+                        }
+                    }
+                }
+            });
+        }
+        drop(wr_rx);
+
+        let mut ring: VecDeque<(usize, Raster)> = VecDeque::with_capacity(n + 1);
+        let mut waiting: VecDeque<Waiting> = VecDeque::new();
+        let mut seq = 0usize;
+        let ctx = Ctx {
+            n,
+            k,
+            opts,
+            colour: Vec::new(),
+            scatter: scatter.as_ref().map(|s| &s.full),
+            scatter_low: scatter_low.as_ref(),
+            out,
+            work_dir: &work_dir,
+        };
+        let mut ctx = ctx;
+        for d in dec_rx {
+            let photo = match d.photo {
+                Ok(p) => p,
+                Err(e) => {
+                    progress.file_error(&e);
+                    errors.push(FileError::from_error(&d.entry.path, &e));
+                    survey_failed += 1;
+                    progress.photo_done(&d.entry.path, false);
+                    continue;
+                }
+            };
+            match layout {
+                None => {
+                    if let Some(s) = &scatter {
+                        if s.full.layout() != photo.layout {
+                            return Err(Error::Mismatch {
+                                path: scatter_info.path.clone().unwrap_or_default(),
+                                reason: format!(
+                                    "scatter estimate is {}, but the survey photos are {} ({}): water-column \
+                                     frames and survey photos must come from the same camera",
+                                    s.full.layout(),
+                                    photo.layout,
+                                    d.entry.path.display()
+                                ),
+                            });
+                        }
+                    }
+                    layout = Some(photo.layout);
+                    ctx.colour = opts.seafloor_colour.for_channels(photo.layout.channels);
+                }
+                Some(l) if l != photo.layout => {
+                    let e = Error::Mismatch {
+                        path: d.entry.path.clone(),
+                        reason: format!(
+                            "photo is {}, the mission's photos are {}; skipped (split mixed missions into one \
+                             folder per camera setting)",
+                            photo.layout, l
+                        ),
+                    };
+                    progress.file_error(&e);
+                    errors.push(FileError::from_error(&d.entry.path, &e));
+                    survey_failed += 1;
+                    progress.photo_done(&d.entry.path, false);
+                    continue;
+                }
+                _ => {}
+            }
+            let t = Instant::now();
+            let l = photo.layout;
+            let low = match &photo.samples {
+                Samples::U8(v) => block_median(v, l.width, l.height, l.channels, k),
+                Samples::U16(v) => block_median(v, l.width, l.height, l.channels, k),
+            };
+            ring.push_back((seq, low));
+            if ring.len() > n {
+                ring.pop_front();
+            }
+            waiting.push_back(Waiting {
+                seq,
+                entry: d.entry,
+                photo,
+                decode_ms: d.decode_ms,
+                downsample_ms: ms(t),
+            });
+            seq += 1;
+            ctx.flush(&mut waiting, &ring, seq, false, &wr_tx, &mut totals)?;
+        }
+        ctx.flush(&mut waiting, &ring, seq, true, &wr_tx, &mut totals)?;
+        if seq > 0 && seq < n {
+            let m = format!(
+                "only {seq} usable survey photo(s), fewer than the window n = {n}: every photo's F is the median \
+                 of all of them"
+            );
+            progress.warn(&m);
+            warnings.push(m);
+        }
+        drop(wr_tx);
+        Ok(())
+    });
+    progress.finish();
+    stream_result?;
+
+    let mut frames = done.into_inner().unwrap();
+    frames.sort_by_key(|f| f.index);
+    let write_errors = write_errors.into_inner().unwrap();
+    survey_failed += write_errors.len();
+    errors.extend(write_errors);
+    let mut report = Report {
+        tool: "abysslight".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        options: opts.clone(),
+        window,
+        layout,
+        scatter: scatter_info,
+        survey_photos: total_files,
+        corrected: frames.len(),
+        failed: survey_failed,
+        water_column_failed,
+        ignored_files: found.ignored.len(),
+        floored_pixels: totals.floored_pixels,
+        clipped_samples: totals.clipped_samples,
+        frames,
+        errors,
+        warnings,
+        elapsed_s: started.elapsed().as_secs_f64(),
+        report_path: None,
+    };
+    let report_path = work_dir.join("report.json");
+    report.report_path = Some(report_path.clone());
+    io::write_with(&report_path, |w| {
+        serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
+            path: report_path.clone(),
+            reason: e.to_string(),
+        })
+    })?;
+    Ok(report)
+}
+
+fn error_path(e: &Error) -> &Path {
+    match e {
+        Error::Io { path, .. }
+        | Error::Decode { path, .. }
+        | Error::Mismatch { path, .. }
+        | Error::Encode { path, .. }
+        | Error::Config { path, .. } => path,
+        Error::Usage(_) => Path::new(""),
+    }
+}
+
+/// What the per-photo step needs besides the photo.
+struct Ctx<'a> {
+    n: usize,
+    k: usize,
+    opts: &'a Options,
+    colour: Vec<f32>,
+    scatter: Option<&'a Raster>,
+    scatter_low: Option<&'a Raster>,
+    out: &'a Path,
+    work_dir: &'a Path,
+}
+
+impl Ctx<'_> {
+    /// Correct every waiting photo whose window is complete (all of them at the end of the stream).
+    fn flush(
+        &self,
+        waiting: &mut VecDeque<Waiting>,
+        ring: &VecDeque<(usize, Raster)>,
+        decoded: usize,
+        eof: bool,
+        wr_tx: &crossbeam_channel::Sender<WriteJob>,
+        totals: &mut CorrectStats,
+    ) -> Result<()> {
+        while let Some(front) = waiting.front() {
+            let i = front.seq;
+            let range = if eof {
+                window_range(i, self.n, decoded)
+            } else {
+                let s = i.saturating_sub(self.n / 2);
+                s..s + self.n
+            };
+            if !eof && decoded < range.end {
+                break;
+            }
+            let mut w = waiting.pop_front().unwrap();
+            let t = Instant::now();
+            let stack: Vec<&Raster> = ring
+                .iter()
+                .filter(|(s, _)| range.contains(s))
+                .map(|(_, r)| r)
+                .collect();
+            debug_assert_eq!(stack.len(), range.len(), "ring buffer lost a frame of the window");
+            let m = stack_median(&stack);
+            let f = factor(&m, self.scatter_low, &self.colour);
+            let estimate_ms = w.downsample_ms + ms(t);
+            if self.opts.save_factors {
+                let p = self
+                    .work_dir
+                    .join("factors")
+                    .join(&w.entry.relative)
+                    .with_extension("png");
+                io::save_raster_png16(&lit_seafloor(&f, &self.colour), &p)?;
+            }
+            let t = Instant::now();
+            let l = w.photo.layout;
+            let floor = self.opts.factor_floor;
+            let stats = match &mut w.photo.samples {
+                Samples::U8(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor),
+                Samples::U16(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor),
+            };
+            *totals += stats;
+            let frame = FrameReport {
+                output: output_path(self.out, &w.entry),
+                input: w.entry.path,
+                index: i,
+                window: [range.start, range.end - 1],
+                decode_ms: w.decode_ms,
+                estimate_ms,
+                correct_ms: ms(t),
+                encode_ms: 0.0,
+                floored_pixels: stats.floored_pixels,
+                clipped_samples: stats.clipped_samples,
+            };
+            if wr_tx
+                .send(WriteJob {
+                    photo: w.photo,
+                    frame,
+                })
+                .is_err()
+            {
+                return Err(Error::Usage("all output writers stopped".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn output_inside_input_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let survey = d.path().join("survey");
+        std::fs::create_dir_all(&survey).unwrap();
+        assert!(check_output_folder(&survey, &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&survey.join("out"), &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&survey.join("./x/../"), &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&d.path().join("out"), &[("survey", &survey)]).is_ok());
+        assert!(check_output_folder(&d.path().join("survey2"), &[("survey", &survey)]).is_ok());
+    }
+}

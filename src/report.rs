@@ -1,0 +1,125 @@
+//! The run report (`_abysslight/report.json`) and the [`Progress`] hooks a front end uses to show a run.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::error::Error;
+use crate::options::Options;
+use crate::raster::Layout;
+use crate::window::WindowChoice;
+
+/// Receives what happens during a run. The library prints nothing itself; the CLI draws a progress bar on a
+/// terminal and plain log lines otherwise.
+pub trait Progress: Sync {
+    /// Something the user should know that does not stop the run.
+    fn warn(&self, message: &str);
+    /// A stage of the run starts (e.g. "estimating scatter from 80 water-column frames").
+    fn stage(&self, message: &str);
+    /// A file failed; the run goes on without it.
+    fn file_error(&self, error: &Error);
+    /// The survey pass starts, over `total` photos.
+    fn start(&self, total: usize);
+    /// A photo was corrected and written (or failed: then `file_error` was called too).
+    fn photo_done(&self, input: &Path, ok: bool);
+    /// The survey pass ended.
+    fn finish(&self);
+}
+
+/// A [`Progress`] that ignores everything.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn warn(&self, _: &str) {}
+    fn stage(&self, _: &str) {}
+    fn file_error(&self, _: &Error) {}
+    fn start(&self, _: usize) {}
+    fn photo_done(&self, _: &Path, _: bool) {}
+    fn finish(&self) {}
+}
+
+/// One file that could not be used.
+#[derive(Debug, Clone, Serialize)]
+pub struct FileError {
+    pub path: PathBuf,
+    /// `decode`, `mismatch`, `io`, `encode`, ...
+    pub kind: String,
+    pub message: String,
+}
+
+impl FileError {
+    pub fn from_error(path: &Path, e: &Error) -> Self {
+        FileError {
+            path: path.to_owned(),
+            kind: e.kind().to_string(),
+            message: e.to_string(),
+        }
+    }
+}
+
+/// What happened to one survey photo.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    /// Position among the usable photos of the mission.
+    pub index: usize,
+    /// Usable photos `[first, last]` whose median gave this photo's `F`.
+    pub window: [usize; 2],
+    pub decode_ms: f64,
+    /// Block median, temporal median and `F`.
+    pub estimate_ms: f64,
+    pub correct_ms: f64,
+    pub encode_ms: f64,
+    /// Pixels where `F` was below `factor-floor`.
+    pub floored_pixels: u64,
+    /// Samples clipped to the output range (objects brighter than the seafloor colour allows).
+    pub clipped_samples: u64,
+}
+
+/// Where `S` came from.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScatterInfo {
+    /// `water-column`, `file` or `none`.
+    pub source: String,
+    pub path: Option<PathBuf>,
+    pub frames: usize,
+    pub passes: usize,
+    pub saved_to: Option<PathBuf>,
+}
+
+/// Everything about one `correct` run.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    pub tool: String,
+    pub version: String,
+    pub options: Options,
+    pub window: WindowChoice,
+    pub layout: Option<Layout>,
+    pub scatter: ScatterInfo,
+    /// Photos found in the survey folder.
+    pub survey_photos: usize,
+    /// Photos corrected and written.
+    pub corrected: usize,
+    /// Photos that failed (decode, mismatch or write errors).
+    pub failed: usize,
+    /// Water-column frames that failed.
+    pub water_column_failed: usize,
+    /// Files in the survey folder passed over because their names are not photo names.
+    pub ignored_files: usize,
+    pub floored_pixels: u64,
+    pub clipped_samples: u64,
+    pub frames: Vec<FrameReport>,
+    pub errors: Vec<FileError>,
+    pub warnings: Vec<String>,
+    pub elapsed_s: f64,
+    /// Where this report was written.
+    pub report_path: Option<PathBuf>,
+}
+
+impl Report {
+    /// True when every photo was corrected.
+    pub fn all_ok(&self) -> bool {
+        self.failed == 0 && self.water_column_failed == 0
+    }
+}

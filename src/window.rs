@@ -1,0 +1,163 @@
+//! The sliding temporal window: how many photos (`n`) the median over time needs, and which photos it spans.
+//!
+//! With contamination rate `c` (the chance that a given pixel of a given photo is not uniform seafloor), the
+//! temporal median of `n` samples breaks down when at least half of them are contaminated:
+//! `P_half = Σ_{u ≥ n/2} Binom(u; n, c)`. [`choose_window`] returns the smallest odd `n` with `P_half ≤ risk`.
+
+use serde::Serialize;
+
+use crate::error::Error;
+
+/// Largest window [`choose_window`] will propose.
+pub const MAX_WINDOW: usize = 1001;
+
+/// Probability that at least half of `n` samples are contaminated, each independently with probability `c`:
+/// `Σ_{u = ⌈n/2⌉}^{n} C(n, u) c^u (1 − c)^(n − u)`.
+pub fn p_half(n: usize, c: f64) -> f64 {
+    if n == 0 {
+        return 1.0;
+    }
+    if c <= 0.0 {
+        return 0.0;
+    }
+    if c >= 1.0 {
+        return 1.0;
+    }
+    let u_min = n.div_ceil(2);
+    let (ln_c, ln_q) = (c.ln(), (1.0 - c).ln());
+    // ln C(n, u) built up incrementally; terms summed in linear space (they are all ≤ 1).
+    let mut ln_binom = 0.0f64; // ln C(n, 0)
+    let mut sum = 0.0;
+    for u in 0..=n {
+        if u > 0 {
+            ln_binom += ((n - u + 1) as f64).ln() - (u as f64).ln();
+        }
+        if u >= u_min {
+            sum += (ln_binom + u as f64 * ln_c + (n - u) as f64 * ln_q).exp();
+        }
+    }
+    sum.min(1.0)
+}
+
+/// A window size and its breakdown probability.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct WindowChoice {
+    pub n: usize,
+    pub p_half: f64,
+}
+
+/// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`.
+pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Error> {
+    if !(0.0..0.5).contains(&contamination) {
+        return Err(Error::Usage(format!(
+            "--contamination must be in [0, 0.5), got {contamination}: a median breaks down once half its \
+             samples are contaminated, so no window size can help"
+        )));
+    }
+    if !(risk > 0.0 && risk < 1.0) {
+        return Err(Error::Usage(format!("--risk must be in (0, 1), got {risk}")));
+    }
+    let mut n = 1;
+    while n <= MAX_WINDOW {
+        let p = p_half(n, contamination);
+        if p <= risk {
+            return Ok(WindowChoice { n, p_half: p });
+        }
+        n += 2;
+    }
+    Err(Error::Usage(format!(
+        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}"
+    )))
+}
+
+/// First photo of the window of photo `i` in a mission of `total` photos: centred on `i` where possible, shifted
+/// at the start and end so it still holds `n` photos. Missions shorter than `n` use all photos.
+pub fn window_start(i: usize, n: usize, total: usize) -> usize {
+    if total <= n {
+        return 0;
+    }
+    i.saturating_sub(n / 2).min(total - n)
+}
+
+/// The photos `[start, end)` in the window of photo `i`.
+pub fn window_range(i: usize, n: usize, total: usize) -> std::ops::Range<usize> {
+    let s = window_start(i, n, total);
+    s..(s + n).min(total)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Independent check: enumerate all 2^n contamination patterns and add up the probability of those in which
+    /// at least half of the samples are contaminated.
+    fn p_half_by_enumeration(n: usize, c: f64) -> f64 {
+        let mut total = 0.0;
+        for pattern in 0u32..(1 << n) {
+            let u = pattern.count_ones() as usize;
+            if 2 * u >= n {
+                total += c.powi(u as i32) * (1.0 - c).powi((n - u) as i32);
+            }
+        }
+        total
+    }
+
+    #[test]
+    fn paper_example_c02_n7_is_about_3_percent() {
+        // Exact: 35·.2⁴·.8³ + 21·.2⁵·.8² + 7·.2⁶·.8 + .2⁷ = 0.033344
+        let p = p_half(7, 0.2);
+        assert!((p - 0.033344).abs() < 1e-12, "{p}");
+    }
+
+    #[test]
+    fn p_half_matches_enumeration() {
+        for n in 1..=15 {
+            for &c in &[0.01, 0.1, 0.2, 0.33, 0.45, 0.5, 0.7] {
+                let a = p_half(n, c);
+                let b = p_half_by_enumeration(n, c);
+                assert!((a - b).abs() < 1e-12, "n={n} c={c}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn chosen_window_is_smallest_odd_meeting_risk() {
+        for &c in &[0.0, 0.05, 0.2, 0.3, 0.4] {
+            for &risk in &[0.05, 0.01, 0.001] {
+                let w = choose_window(c, risk).unwrap();
+                assert_eq!(w.n % 2, 1);
+                assert!(p_half_by_enumeration(w.n.min(15), c) <= risk || w.n > 15);
+                assert!(w.p_half <= risk);
+                if w.n >= 3 {
+                    assert!(p_half(w.n - 2, c) > risk, "c={c} risk={risk} n={}", w.n);
+                }
+            }
+        }
+        // c = 0.2: n = 7 gives 3.3 %, so a 5 % risk takes 7 and a 1 % risk needs more.
+        assert_eq!(choose_window(0.2, 0.05).unwrap().n, 7);
+        assert!(choose_window(0.2, 0.01).unwrap().n > 7);
+    }
+
+    #[test]
+    fn contamination_at_or_above_half_is_refused() {
+        assert!(choose_window(0.5, 0.01).is_err());
+        assert!(choose_window(-0.1, 0.01).is_err());
+        assert!(choose_window(0.2, 0.0).is_err());
+    }
+
+    #[test]
+    fn window_shifts_at_the_ends_and_always_holds_n() {
+        let (n, total) = (7, 20);
+        for i in 0..total {
+            let r = window_range(i, n, total);
+            assert_eq!(r.len(), n);
+            assert!(r.contains(&i));
+            if i >= 3 && i + 3 < total {
+                assert_eq!(r, i - 3..i + 4, "centred in the middle");
+            }
+        }
+        assert_eq!(window_range(0, 7, 20), 0..7);
+        assert_eq!(window_range(19, 7, 20), 13..20);
+        assert_eq!(window_range(2, 7, 4), 0..4, "short mission uses all photos");
+    }
+}
