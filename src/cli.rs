@@ -38,7 +38,7 @@ struct Cli {
 enum Command {
     /// Correct a dive: water-column frames + survey photos -> lighting-compensated photos.
     #[command(after_help = EXIT_HELP)]
-    Correct(CorrectArgs),
+    Correct(Box<CorrectArgs>),
     /// Print the window size n for a contamination rate, and its breakdown probability P_half.
     Window(WindowArgs),
 }
@@ -166,10 +166,14 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     o.save_scatter |= args.save_scatter;
     o.save_factors |= args.save_factors;
     if o.survey.is_none() {
-        return Err(Error::Usage("--survey DIR is required (or survey = \"DIR\" in --config)".into()));
+        return Err(Error::Usage(
+            "--survey DIR is required (or survey = \"DIR\" in --config)".into(),
+        ));
     }
     if o.out.is_none() {
-        return Err(Error::Usage("--out DIR is required (or out = \"DIR\" in --config)".into()));
+        return Err(Error::Usage(
+            "--out DIR is required (or out = \"DIR\" in --config)".into(),
+        ));
     }
     o.validate()?;
     Ok(o)
@@ -264,7 +268,11 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
             report.survey_photos,
             report.elapsed_s,
             report.failed + report.water_column_failed,
-            report.report_path.as_deref().unwrap_or(Path::new("-")).display()
+            report
+                .report_path
+                .as_deref()
+                .unwrap_or(Path::new("-"))
+                .display()
         );
         if report.floored_pixels > 0 {
             eprintln!(
@@ -273,7 +281,11 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
             );
         }
     }
-    Ok(ExitCode::from(if report.all_ok() { EXIT_OK } else { EXIT_SOME_FAILED }))
+    Ok(ExitCode::from(if report.all_ok() {
+        EXIT_OK
+    } else {
+        EXIT_SOME_FAILED
+    }))
 }
 
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
@@ -293,7 +305,7 @@ pub fn run() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Correct(a) => correct(a),
+        Command::Correct(a) => correct(*a),
         Command::Window(a) => window(a),
     };
     match result {

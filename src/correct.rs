@@ -35,11 +35,19 @@ pub fn correct_in_place<T: Sample>(
     k: usize,
     floor: f32,
 ) -> CorrectStats {
-    let Layout { width, height, channels: c } = layout;
+    let Layout {
+        width,
+        height,
+        channels: c,
+    } = layout;
     assert_eq!(samples.len(), width * height * c);
     assert_eq!(factor_low.channels, c);
     if let Some(s) = scatter {
-        assert_eq!(s.layout(), layout, "scatter image size differs from the photo");
+        assert_eq!(
+            s.layout(),
+            layout,
+            "scatter image size differs from the photo"
+        );
     }
     let row_len = width * c;
     if row_len == 0 {
@@ -54,7 +62,12 @@ pub fn correct_in_place<T: Sample>(
         .map(|(y, row)| {
             let t = ty[y];
             let mut frow = vec![0.0f32; factor_low.width * c];
-            lerp_rows(factor_low.row(t.i0 as usize), factor_low.row(t.i1 as usize), t.t, &mut frow);
+            lerp_rows(
+                factor_low.row(t.i0 as usize),
+                factor_low.row(t.i1 as usize),
+                t.t,
+                &mut frow,
+            );
             let srow = scatter.map(|s| s.row(y));
             let mut stats = CorrectStats::default();
             for (x, tp) in tx.iter().enumerate() {
@@ -63,7 +76,7 @@ pub fn correct_in_place<T: Sample>(
                     let a = frow[tp.i0 as usize * c + ch];
                     let b = frow[tp.i1 as usize * c + ch];
                     let mut f = a + (b - a) * tp.t;
-                    if !(f >= floor) {
+                    if f < floor || f.is_nan() {
                         f = floor;
                         floored = true;
                     }
@@ -114,11 +127,19 @@ mod tests {
 
     #[test]
     fn fused_correction_matches_unfused_reference() {
-        let layout = Layout { width: 29, height: 17, channels: 3 };
+        let layout = Layout {
+            width: 29,
+            height: 17,
+            channels: 3,
+        };
         let k = 4;
-        let low = Raster::from_fn(8, 5, 3, |x, y, c| 0.02 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32);
+        let low = Raster::from_fn(8, 5, 3, |x, y, c| {
+            0.02 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
+        });
         let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
-        let samples: Vec<u16> = (0..29 * 17 * 3).map(|i| ((i * 7919) % 65536) as u16).collect();
+        let samples: Vec<u16> = (0..29 * 17 * 3)
+            .map(|i| ((i * 7919) % 65536) as u16)
+            .collect();
         for s in [None, Some(&scatter)] {
             let expect = reference(&samples, layout, s, &low, k, 0.05);
             let mut got = samples.clone();
@@ -126,17 +147,27 @@ mod tests {
             for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
                 assert!((*g as i32 - *e as i32).abs() <= 1, "sample {i}: {g} vs {e}");
             }
-            assert!(stats.floored_pixels > 0, "the low-res F has values under the floor");
+            assert!(
+                stats.floored_pixels > 0,
+                "the low-res F has values under the floor"
+            );
         }
     }
 
     #[test]
     fn uniform_lighting_recovers_albedo() {
         // I = A·F + S with F, S constant: the correction returns A exactly (in 8-bit units).
-        let layout = Layout { width: 16, height: 8, channels: 1 };
+        let layout = Layout {
+            width: 16,
+            height: 8,
+            channels: 1,
+        };
         let (f, s) = (0.5f32, 0.1f32);
         let albedo: Vec<u8> = (0..128).map(|i| (i * 2) as u8).collect();
-        let mut photo: Vec<u8> = albedo.iter().map(|&a| u8::from_f32((a as f32 / 255.0 * f + s) * 255.0)).collect();
+        let mut photo: Vec<u8> = albedo
+            .iter()
+            .map(|&a| u8::from_f32((a as f32 / 255.0 * f + s) * 255.0))
+            .collect();
         let low = Raster::filled(2, 1, 1, f);
         let sc = Raster::filled(16, 8, 1, s);
         let stats = correct_in_place(&mut photo, layout, Some(&sc), &low, 8, 0.05);

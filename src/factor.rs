@@ -13,7 +13,11 @@ pub fn factor(m: &Raster, s_low: Option<&Raster>, colour: &[f32]) -> Raster {
     let c = m.channels;
     assert_eq!(colour.len(), c, "one seafloor colour component per channel");
     if let Some(s) = s_low {
-        assert_eq!(s.layout(), m.layout(), "scatter and factor image differ in size");
+        assert_eq!(
+            s.layout(),
+            m.layout(),
+            "scatter and factor image differ in size"
+        );
     }
     let mut f = m.clone();
     for (i, v) in f.data.iter_mut().enumerate() {
@@ -63,10 +67,18 @@ pub fn taps(len: usize, k: usize) -> Vec<Tap> {
         }
         let c0 = block_centre(b, k, len);
         if b + 1 >= nb || xf <= c0 {
-            out.push(Tap { i0: b as u32, i1: b as u32, t: 0.0 });
+            out.push(Tap {
+                i0: b as u32,
+                i1: b as u32,
+                t: 0.0,
+            });
         } else {
             let c1 = block_centre(b + 1, k, len);
-            out.push(Tap { i0: b as u32, i1: (b + 1) as u32, t: (xf - c0) / (c1 - c0) });
+            out.push(Tap {
+                i0: b as u32,
+                i1: (b + 1) as u32,
+                t: (xf - c0) / (c1 - c0),
+            });
         }
     }
     out
@@ -80,7 +92,12 @@ pub fn upsample(low: &Raster, k: usize, width: usize, height: usize) -> Raster {
     let mut out = Raster::filled(width, height, c, 0.0);
     let mut row = vec![0.0f32; low.width * c];
     for (y, t) in ty.iter().enumerate() {
-        lerp_rows(low.row(t.i0 as usize), low.row(t.i1 as usize), t.t, &mut row);
+        lerp_rows(
+            low.row(t.i0 as usize),
+            low.row(t.i1 as usize),
+            t.t,
+            &mut row,
+        );
         let dst = &mut out.data[y * width * c..(y + 1) * width * c];
         for (x, tp) in tx.iter().enumerate() {
             for ch in 0..c {
@@ -121,7 +138,9 @@ mod tests {
         let plane = |x: f32, y: f32| 0.2 + 0.01 * x - 0.004 * y;
         let bw = w.div_ceil(k);
         let bh = h.div_ceil(k);
-        let low = Raster::from_fn(bw, bh, 1, |bx, by, _| plane(block_centre(bx, k, w), block_centre(by, k, h)));
+        let low = Raster::from_fn(bw, bh, 1, |bx, by, _| {
+            plane(block_centre(bx, k, w), block_centre(by, k, h))
+        });
         let up = upsample(&low, k, w, h);
         let (x_lo, x_hi) = (block_centre(0, k, w), block_centre(bw - 1, k, w));
         let (y_lo, y_hi) = (block_centre(0, k, h), block_centre(bh - 1, k, h));
@@ -129,7 +148,11 @@ mod tests {
             for x in 0..w {
                 let (xf, yf) = (x as f32, y as f32);
                 let expect = plane(xf.clamp(x_lo, x_hi), yf.clamp(y_lo, y_hi));
-                assert!((up.get(x, y, 0) - expect).abs() < 1e-5, "({x},{y}) {} vs {expect}", up.get(x, y, 0));
+                assert!(
+                    (up.get(x, y, 0) - expect).abs() < 1e-5,
+                    "({x},{y}) {} vs {expect}",
+                    up.get(x, y, 0)
+                );
             }
         }
     }

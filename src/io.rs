@@ -181,22 +181,30 @@ pub fn photo_to_dynamic(photo: &Photo) -> DynamicImage {
     let ch = photo.layout.channels;
     let bad = "photo buffer does not match its layout";
     match (&photo.samples, &photo.alpha, ch) {
-        (Samples::U8(c), None, 1) => DynamicImage::ImageLuma8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
-        (Samples::U8(c), None, _) => DynamicImage::ImageRgb8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
-        (Samples::U16(c), None, 1) => DynamicImage::ImageLuma16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
-        (Samples::U16(c), None, _) => DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad)),
-        (Samples::U8(c), Some(Samples::U8(a)), 1) => {
-            DynamicImage::ImageLumaA8(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad))
+        (Samples::U8(c), None, 1) => {
+            DynamicImage::ImageLuma8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad))
         }
-        (Samples::U8(c), Some(Samples::U8(a)), _) => {
-            DynamicImage::ImageRgba8(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad))
+        (Samples::U8(c), None, _) => {
+            DynamicImage::ImageRgb8(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad))
         }
-        (Samples::U16(c), Some(Samples::U16(a)), 1) => {
-            DynamicImage::ImageLumaA16(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad))
+        (Samples::U16(c), None, 1) => {
+            DynamicImage::ImageLuma16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad))
         }
-        (Samples::U16(c), Some(Samples::U16(a)), _) => {
-            DynamicImage::ImageRgba16(image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad))
+        (Samples::U16(c), None, _) => {
+            DynamicImage::ImageRgb16(image::ImageBuffer::from_raw(w, h, c.clone()).expect(bad))
         }
+        (Samples::U8(c), Some(Samples::U8(a)), 1) => DynamicImage::ImageLumaA8(
+            image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad),
+        ),
+        (Samples::U8(c), Some(Samples::U8(a)), _) => DynamicImage::ImageRgba8(
+            image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad),
+        ),
+        (Samples::U16(c), Some(Samples::U16(a)), 1) => DynamicImage::ImageLumaA16(
+            image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 1)).expect(bad),
+        ),
+        (Samples::U16(c), Some(Samples::U16(a)), _) => DynamicImage::ImageRgba16(
+            image::ImageBuffer::from_raw(w, h, merge_alpha(c, a, 3)).expect(bad),
+        ),
         _ => unreachable!("alpha and colour samples always share a bit depth"),
     }
 }
@@ -277,10 +285,19 @@ pub fn write_atomic(photo: &Photo, path: &Path, settings: EncodeSettings) -> Res
 }
 
 /// Atomically create `path` from what `fill` writes: temp file in the same folder, sync, rename.
-pub fn write_with(path: &Path, fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+pub fn write_with(
+    path: &Path,
+    fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>,
+) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = tempfile::Builder::new()
         .prefix(&format!(".{name}."))
         .suffix(".abysslight-tmp")
@@ -327,13 +344,25 @@ mod tests {
     #[test]
     fn natural_order_recursive_and_hidden_skipped() {
         let d = tempfile::tempdir().unwrap();
-        for name in ["img10.jpg", "img2.jpg", "img1.PNG", "a/img3.tif", "notes.txt", ".hidden.jpg", "_abysslight/x.png"] {
+        for name in [
+            "img10.jpg",
+            "img2.jpg",
+            "img1.PNG",
+            "a/img3.tif",
+            "notes.txt",
+            ".hidden.jpg",
+            "_abysslight/x.png",
+        ] {
             let p = d.path().join(name);
             std::fs::create_dir_all(p.parent().unwrap()).unwrap();
             std::fs::write(p, b"x").unwrap();
         }
         let f = find_photos(d.path()).unwrap();
-        let names: Vec<String> = f.photos.iter().map(|e| e.relative.to_string_lossy().into_owned()).collect();
+        let names: Vec<String> = f
+            .photos
+            .iter()
+            .map(|e| e.relative.to_string_lossy().into_owned())
+            .collect();
         assert_eq!(names, ["a/img3.tif", "img1.PNG", "img2.jpg", "img10.jpg"]);
         assert_eq!(f.ignored.len(), 1);
     }
@@ -342,17 +371,33 @@ mod tests {
     fn round_trip_each_format_and_depth() {
         let d = tempfile::tempdir().unwrap();
         let rgb8 = Photo {
-            layout: Layout { width: 5, height: 3, channels: 3 },
+            layout: Layout {
+                width: 5,
+                height: 3,
+                channels: 3,
+            },
             samples: Samples::U8((0..45).map(|i| (i * 5) as u8).collect()),
             alpha: None,
         };
         let grey16 = Photo {
-            layout: Layout { width: 4, height: 2, channels: 1 },
+            layout: Layout {
+                width: 4,
+                height: 2,
+                channels: 1,
+            },
             samples: Samples::U16((0..8).map(|i| i * 8000 + 7).collect()),
             alpha: Some(Samples::U16(vec![65535; 8])),
         };
-        let grey16_opaque = Photo { alpha: None, ..grey16.clone() };
-        for (photo, name) in [(&rgb8, "a.png"), (&rgb8, "a.tif"), (&grey16, "g.png"), (&grey16_opaque, "g.tiff")] {
+        let grey16_opaque = Photo {
+            alpha: None,
+            ..grey16.clone()
+        };
+        for (photo, name) in [
+            (&rgb8, "a.png"),
+            (&rgb8, "a.tif"),
+            (&grey16, "g.png"),
+            (&grey16_opaque, "g.tiff"),
+        ] {
             let p = d.path().join(name);
             write_atomic(photo, &p, EncodeSettings::default()).unwrap();
             assert_eq!(&decode(&p).unwrap(), photo, "{name}");
@@ -365,7 +410,13 @@ mod tests {
         // No temp files are left behind.
         let leftovers: Vec<_> = std::fs::read_dir(d.path())
             .unwrap()
-            .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().contains("abysslight-tmp"))
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .contains("abysslight-tmp")
+            })
             .collect();
         assert!(leftovers.is_empty());
     }
@@ -381,7 +432,9 @@ mod tests {
         std::fs::write(&junk, b"this is not a png").unwrap();
         let e = decode(&junk).unwrap_err().to_string();
         assert!(e.contains("junk.png") && e.contains("decode"), "{e}");
-        let e = decode(&d.path().join("missing.jpg")).unwrap_err().to_string();
+        let e = decode(&d.path().join("missing.jpg"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing.jpg"), "{e}");
     }
 }

@@ -271,7 +271,10 @@ mod tests {
         assert!((h.0[0] - 138.0 / 255.0).abs() < 1e-6);
         assert!((h.0[1] - 117.0 / 255.0).abs() < 1e-6);
         assert!((h.0[2] - 96.0 / 255.0).abs() < 1e-6);
-        assert_eq!("grey".parse::<SeafloorColour>().unwrap().0, [DEFAULT_GREY; 3]);
+        assert_eq!(
+            "grey".parse::<SeafloorColour>().unwrap().0,
+            [DEFAULT_GREY; 3]
+        );
         assert_eq!("gray:0.5".parse::<SeafloorColour>().unwrap().0, [0.5; 3]);
         let b: SeafloorColour = "138,117,96".parse().unwrap();
         assert_eq!(b, h);
@@ -296,7 +299,10 @@ mod tests {
         assert_eq!(o.downsample, 8, "unset keys keep their defaults");
         std::fs::write(&cfg, "windw = 9\n").unwrap();
         let err = Options::from_toml_file(&cfg).unwrap_err().to_string();
-        assert!(err.contains("mission.toml") && err.contains("windw"), "{err}");
+        assert!(
+            err.contains("mission.toml") && err.contains("windw"),
+            "{err}"
+        );
     }
 
     #[test]

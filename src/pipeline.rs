@@ -477,7 +477,11 @@ impl Ctx<'_> {
                 .filter(|(s, _)| range.contains(s))
                 .map(|(_, r)| r)
                 .collect();
-            debug_assert_eq!(stack.len(), range.len(), "ring buffer lost a frame of the window");
+            debug_assert_eq!(
+                stack.len(),
+                range.len(),
+                "ring buffer lost a frame of the window"
+            );
             let m = stack_median(&stack);
             let f = factor(&m, self.scatter_low, &self.colour);
             let estimate_ms = w.downsample_ms + ms(t);

@@ -211,6 +211,9 @@ impl Raster {
 
     /// Quantise to 16-bit samples (rounded, clamped to `[0, 1]`).
     pub fn to_u16(&self) -> Vec<u16> {
-        self.data.iter().map(|&v| u16::from_f32(v * 65535.0)).collect()
+        self.data
+            .iter()
+            .map(|&v| u16::from_f32(v * 65535.0))
+            .collect()
     }
 }

@@ -85,7 +85,8 @@ pub fn estimate(
                 let l = photo.layout;
                 layout = Some((l, photo.depth()));
                 let row_bytes = l.width * l.channels * 2;
-                rows_per_band = (memory_budget / (frames.len().max(1) * row_bytes.max(1))).clamp(1, l.height.max(1));
+                rows_per_band = (memory_budget / (frames.len().max(1) * row_bytes.max(1)))
+                    .clamp(1, l.height.max(1));
             }
             Some((l, d)) if l != photo.layout || d != photo.depth() => {
                 on_error(Error::Mismatch {
@@ -128,16 +129,18 @@ pub fn estimate(
         }
         let out = &mut full.data[y0 * row_len..y1 * row_len];
         let band_ref = &band;
-        out.par_chunks_mut(row_len).enumerate().for_each(|(r, out_row)| {
-            let mut scratch = vec![0u16; band_ref.len()];
-            let base = r * row_len;
-            for (i, o) in out_row.iter_mut().enumerate() {
-                for (s, f) in scratch.iter_mut().zip(band_ref) {
-                    *s = f[base + i];
+        out.par_chunks_mut(row_len)
+            .enumerate()
+            .for_each(|(r, out_row)| {
+                let mut scratch = vec![0u16; band_ref.len()];
+                let base = r * row_len;
+                for (i, o) in out_row.iter_mut().enumerate() {
+                    for (s, f) in scratch.iter_mut().zip(band_ref) {
+                        *s = f[base + i];
+                    }
+                    *o = median_of_samples(&mut scratch) / max;
                 }
-                *o = median_of_samples(&mut scratch) / max;
-            }
-        });
+            });
         passes += 1;
         y0 = y1;
     }
@@ -158,7 +161,11 @@ mod tests {
     fn frame(seed: u64, w: usize, h: usize) -> Photo {
         let mut s = seed | 1;
         Photo {
-            layout: Layout { width: w, height: h, channels: 3 },
+            layout: Layout {
+                width: w,
+                height: h,
+                channels: 3,
+            },
             samples: Samples::U8(
                 (0..w * h * 3)
                     .map(|_| {
@@ -185,7 +192,10 @@ mod tests {
                 .map(|(i, p)| {
                     let path = d.path().join(format!("b{b}_{i}.png"));
                     write_atomic(p, &path, EncodeSettings::default()).unwrap();
-                    Entry { relative: path.clone(), path }
+                    Entry {
+                        relative: path.clone(),
+                        path,
+                    }
                 })
                 .collect();
             let expected: Vec<f64> = (0..w * h * 3)
@@ -201,13 +211,18 @@ mod tests {
                 })
                 .collect();
             for budget in [1usize << 30, w * 3 * 2 * b * 2] {
-                let s = estimate(&entries, budget, |e| panic!("{e}")).unwrap().unwrap();
+                let s = estimate(&entries, budget, |e| panic!("{e}"))
+                    .unwrap()
+                    .unwrap();
                 assert_eq!(s.frames, b);
                 if budget < 1000 {
                     assert!(s.passes > 1, "small budget must band");
                 }
                 for (g, e) in s.full.data.iter().zip(&expected) {
-                    assert!((*g as f64 - e).abs() <= 0.5 / 65535.0 + 1e-7, "b={b}: {g} vs {e}");
+                    assert!(
+                        (*g as f64 - e).abs() <= 0.5 / 65535.0 + 1e-7,
+                        "b={b}: {g} vs {e}"
+                    );
                 }
             }
         }
@@ -217,19 +232,32 @@ mod tests {
     fn bad_and_mismatched_frames_are_reported_and_left_out() {
         let d = tempfile::tempdir().unwrap();
         let mut entries = Vec::new();
-        for (i, p) in [frame(1, 6, 4), frame(2, 5, 4), frame(3, 6, 4)].iter().enumerate() {
+        for (i, p) in [frame(1, 6, 4), frame(2, 5, 4), frame(3, 6, 4)]
+            .iter()
+            .enumerate()
+        {
             let path = d.path().join(format!("{i}.png"));
             write_atomic(p, &path, EncodeSettings::default()).unwrap();
-            entries.push(Entry { relative: path.clone(), path });
+            entries.push(Entry {
+                relative: path.clone(),
+                path,
+            });
         }
         let junk = d.path().join("junk.png");
         std::fs::write(&junk, b"nope").unwrap();
-        entries.push(Entry { relative: junk.clone(), path: junk });
+        entries.push(Entry {
+            relative: junk.clone(),
+            path: junk,
+        });
         let mut errors = Vec::new();
-        let s = estimate(&entries, 1 << 20, |e| errors.push(e.to_string())).unwrap().unwrap();
+        let s = estimate(&entries, 1 << 20, |e| errors.push(e.to_string()))
+            .unwrap()
+            .unwrap();
         assert_eq!(s.frames, 2);
         assert_eq!(errors.len(), 2, "{errors:?}");
-        assert!(errors.iter().any(|e| e.contains("1.png") && e.contains("5x4")));
+        assert!(errors
+            .iter()
+            .any(|e| e.contains("1.png") && e.contains("5x4")));
         assert!(errors.iter().any(|e| e.contains("junk.png")));
     }
 
@@ -240,9 +268,14 @@ mod tests {
         for i in 0..4 {
             let path = d.path().join(format!("{i}.png"));
             write_atomic(&frame(i + 1, 7, 5), &path, EncodeSettings::default()).unwrap();
-            entries.push(Entry { relative: path.clone(), path });
+            entries.push(Entry {
+                relative: path.clone(),
+                path,
+            });
         }
-        let s = estimate(&entries, 1 << 20, |e| panic!("{e}")).unwrap().unwrap();
+        let s = estimate(&entries, 1 << 20, |e| panic!("{e}"))
+            .unwrap()
+            .unwrap();
         let p = d.path().join("scatter.png");
         crate::io::save_raster_png16(&s.full, &p).unwrap();
         assert_eq!(Scatter::load(&p).unwrap().full, s.full);

@@ -55,7 +55,9 @@ pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Erro
         )));
     }
     if !(risk > 0.0 && risk < 1.0) {
-        return Err(Error::Usage(format!("--risk must be in (0, 1), got {risk}")));
+        return Err(Error::Usage(format!(
+            "--risk must be in (0, 1), got {risk}"
+        )));
     }
     let mut n = 1;
     while n <= MAX_WINDOW {
