@@ -37,7 +37,7 @@ pub mod scatter;
 pub mod window;
 
 pub use error::{Error, Result};
-pub use options::{Options, SeafloorColour};
+pub use options::{Options, SeafloorColour, Shard};
 pub use pipeline::correct_mission;
 pub use raster::{Photo, Raster};
 pub use report::{Progress, Report, Silent};

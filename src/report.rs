@@ -101,6 +101,8 @@ pub struct Report {
     pub survey_photos: usize,
     /// Photos corrected and written.
     pub corrected: usize,
+    /// Photos skipped because `--resume` found their output complete.
+    pub skipped_existing: usize,
     /// Photos that failed (decode, mismatch or write errors).
     pub failed: usize,
     /// Water-column frames that failed.
