@@ -12,6 +12,7 @@
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -78,9 +79,33 @@ fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
     Ok(())
 }
 
-struct Decoded {
+/// Counts the full-resolution photos alive at once (decoded and not yet written or dropped).
+#[derive(Default)]
+struct LiveCount {
+    now: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+impl LiveCount {
+    fn enter(&self) -> Live<'_> {
+        let v = self.now.fetch_add(1, Ordering::SeqCst) + 1;
+        self.peak.fetch_max(v, Ordering::SeqCst);
+        Live(self)
+    }
+}
+
+/// Held beside each decoded photo; leaving scope marks the photo as freed.
+struct Live<'a>(&'a LiveCount);
+
+impl Drop for Live<'_> {
+    fn drop(&mut self) {
+        self.0.now.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+struct Decoded<'a> {
     item: usize,
-    photo: Result<Photo>,
+    photo: Result<(Photo, Live<'a>)>,
     decode_ms: f64,
 }
 
@@ -100,10 +125,11 @@ struct Item<'a> {
     role: Role,
 }
 
-struct Waiting {
+struct Waiting<'a> {
     seq: usize,
     item: usize,
     photo: Photo,
+    _live: Live<'a>,
     decode_ms: f64,
     downsample_ms: f64,
 }
@@ -135,9 +161,10 @@ fn halo_start(entries: &[Entry], chunk_start: usize, n: usize) -> usize {
     i
 }
 
-struct WriteJob {
+struct WriteJob<'a> {
     photo: Photo,
     frame: FrameReport,
+    _live: Live<'a>,
 }
 
 /// Output path of a survey photo.
@@ -336,15 +363,17 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut totals = CorrectStats::default();
     let mut layout: Option<Layout> = None;
     let mut survey_failed = 0usize;
+    let live = LiveCount::default();
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
-        let (dec_tx, dec_rx) = bounded::<Decoded>(2);
-        let (wr_tx, wr_rx) = bounded::<WriteJob>(writers);
+        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
+        let (wr_tx, wr_rx) = bounded::<WriteJob<'_>>(writers);
         let items = &items;
+        let live = &live;
         scope.spawn(move || {
             for (item, it) in items.iter().enumerate() {
                 let t = Instant::now();
-                let photo = decode(&it.entry.path);
+                let photo = decode(&it.entry.path).map(|p| (p, live.enter()));
                 let d = Decoded {
                     item,
                     photo,
@@ -408,7 +437,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             let path = &items[d.item].entry.path;
             match d.photo {
                 Err(e) => fail(&mut errors, d.item, e),
-                Ok(photo) => {
+                Ok((photo, photo_live)) => {
                     let mismatch = match layout {
                         None => {
                             if let Some(s) = &scatter {
@@ -456,6 +485,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                             seq,
                             item: d.item,
                             photo,
+                            _live: photo_live,
                             decode_ms: d.decode_ms,
                             downsample_ms: ms(t),
                         });
@@ -503,6 +533,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         survey_photos: total_files,
         corrected: frames.len(),
         skipped_existing,
+        peak_photos_in_memory: live.peak.load(Ordering::SeqCst),
         failed: survey_failed,
         water_column_failed,
         ignored_files: found.ignored.len(),
@@ -594,13 +625,13 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     /// Correct every waiting photo whose window is complete (all of them at the end of the stream).
-    fn flush(
+    fn flush<'l>(
         &self,
-        waiting: &mut VecDeque<Waiting>,
+        waiting: &mut VecDeque<Waiting<'l>>,
         ring: &VecDeque<(usize, Raster)>,
         decoded: usize,
         eof: bool,
-        wr_tx: &crossbeam_channel::Sender<WriteJob>,
+        wr_tx: &crossbeam_channel::Sender<WriteJob<'l>>,
         totals: &mut CorrectStats,
     ) -> Result<()> {
         while let Some(front) = waiting.front() {
@@ -670,6 +701,7 @@ impl Ctx<'_> {
                 .send(WriteJob {
                     photo: w.photo,
                     frame,
+                    _live: w._live,
                 })
                 .is_err()
             {

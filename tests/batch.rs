@@ -232,3 +232,33 @@ fn unreadable_as_root(path: &Path) -> bool {
     }
     false
 }
+
+#[test]
+fn photos_held_in_memory_do_not_grow_with_the_mission() {
+    let d = tempfile::tempdir().unwrap();
+    let small = common::dive(16, 8, 1, 0, 0.0, false, 3);
+    let mut peaks = Vec::new();
+    for count in [60usize, 600] {
+        let survey = d.path().join(format!("s{count}"));
+        std::fs::create_dir_all(&survey).unwrap();
+        let first = write_all(&small.photos, &survey, "seed", "png").remove(0);
+        for i in 0..count {
+            std::fs::copy(&first, survey.join(format!("img{i}.png"))).unwrap();
+        }
+        std::fs::remove_file(&first).unwrap();
+        let o = Options {
+            threads: Some(2),
+            ..opts(d.path(), &format!("s{count}"), &format!("o{count}"), 7)
+        };
+        let r = correct_mission(&o, &Silent).unwrap();
+        assert_eq!(r.corrected, count);
+        peaks.push(r.peak_photos_in_memory);
+    }
+    eprintln!("peak full-resolution photos in memory: {peaks:?}");
+    let bound = 7 + 3 + 2 * 2;
+    assert!(
+        peaks.iter().all(|&p| p >= 7 && p <= bound),
+        "{peaks:?} outside [n, {bound}]"
+    );
+    // The count can differ by scheduling, never by mission length beyond the bound above.
+}
