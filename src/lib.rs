@@ -34,6 +34,7 @@ pub mod pipeline;
 pub mod raster;
 pub mod report;
 pub mod scatter;
+pub mod source;
 pub mod window;
 
 pub use error::{Error, Result};

@@ -21,12 +21,13 @@ use crossbeam_channel::bounded;
 use crate::correct::{correct_in_place, CorrectStats};
 use crate::error::{Error, Result};
 use crate::factor::{factor, lit_seafloor};
-use crate::io::{self, decode, find_photos, write_atomic, EncodeSettings, Entry, WORK_DIR};
+use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::median::{block_median, stack_median};
 use crate::options::Options;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::scatter::{self, Scatter};
+use crate::source::{FileList, Item, Role, Sink, Source};
 use crate::window::window_range;
 
 fn ms(since: Instant) -> f64 {
@@ -104,30 +105,14 @@ impl Drop for Live<'_> {
 }
 
 struct Decoded<'a> {
-    item: usize,
+    item: Item,
     photo: Result<(Photo, Live<'a>)>,
     decode_ms: f64,
 }
 
-/// What to do with a survey photo the stream reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Role {
-    /// Correct and write it.
-    Write,
-    /// Its output exists (`--resume`): read it for its neighbours' windows only.
-    Done,
-    /// Another shard's photo, read for this shard's windows only.
-    Halo,
-}
-
-struct Item<'a> {
-    entry: &'a Entry,
-    role: Role,
-}
-
 struct Waiting<'a> {
     seq: usize,
-    item: usize,
+    item: Item,
     photo: Photo,
     _live: Live<'a>,
     decode_ms: f64,
@@ -321,9 +306,16 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             } else {
                 Role::Write
             };
-            Item { entry, role }
+            Item {
+                index: j,
+                entry: entry.clone(),
+                role,
+            }
         })
         .collect();
+    let total_items = items.len();
+    let source = FileList::new(items);
+    let sink = Sink::Folder;
     // The stream can stop once every photo of the chunk has been handled.
     let last_needed = chunk.end.saturating_sub(first);
     if let Some(s) = opts.shard {
@@ -368,16 +360,14 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let stream_result: Result<()> = std::thread::scope(|scope| {
         let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
         let (wr_tx, wr_rx) = bounded::<WriteJob<'_>>(writers);
-        let items = &items;
         let live = &live;
+        let mut source = source;
         scope.spawn(move || {
-            for (item, it) in items.iter().enumerate() {
-                let t = Instant::now();
-                let photo = decode(&it.entry.path).map(|p| (p, live.enter()));
+            while let Some((item, photo, decode_ms)) = source.next_photo() {
                 let d = Decoded {
                     item,
-                    photo,
-                    decode_ms: ms(t),
+                    photo: photo.map(|p| (p, live.enter())),
+                    decode_ms,
                 };
                 if dec_tx.send(d).is_err() {
                     break;
@@ -386,11 +376,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         });
         for _ in 0..writers {
             let rx = wr_rx.clone();
-            let (done, write_errors) = (&done, &write_errors);
+            let (done, write_errors, sink) = (&done, &write_errors, &sink);
             scope.spawn(move || {
                 for mut job in rx {
                     let t = Instant::now();
-                    let r = write_atomic(&job.photo, &job.frame.output, settings);
+                    let r = sink.write(&job.photo, &job.frame.output, settings);
                     job.frame.encode_ms = ms(t);
                     progress.photo_done(&job.frame.input, r.is_ok());
                     match r {
@@ -420,23 +410,23 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scatter_low: scatter_low.as_ref(),
             out,
             work_dir: &work_dir,
-            items,
             progress,
         };
-        let mut fail = |errors: &mut Vec<FileError>, item: usize, e: Error| {
+        let mut fail = |errors: &mut Vec<FileError>, item: &Item, e: Error| {
             // A halo photo belongs to another shard, which reports it.
-            if items[item].role != Role::Halo {
+            if item.role != Role::Halo {
                 progress.file_error(&e);
-                errors.push(FileError::from_error(&items[item].entry.path, &e));
+                errors.push(FileError::from_error(&item.entry.path, &e));
                 survey_failed += 1;
-                progress.photo_done(&items[item].entry.path, false);
+                progress.photo_done(&item.entry.path, false);
             }
         };
         let mut reached_end = true;
         for d in dec_rx {
-            let path = &items[d.item].entry.path;
+            let path = &d.item.entry.path;
+            let index = d.item.index;
             match d.photo {
-                Err(e) => fail(&mut errors, d.item, e),
+                Err(e) => fail(&mut errors, &d.item, e),
                 Ok((photo, photo_live)) => {
                     let mismatch = match layout {
                         None => {
@@ -469,7 +459,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                         _ => None,
                     };
                     if let Some(e) = mismatch {
-                        fail(&mut errors, d.item, e);
+                        fail(&mut errors, &d.item, e);
                     } else {
                         let t = Instant::now();
                         let l = photo.layout;
@@ -495,9 +485,8 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                 }
             }
             // A shard stops reading once every photo of its chunk has been corrected.
-            if d.item + 1 >= last_needed && waiting.iter().all(|w| items[w.item].role == Role::Halo)
-            {
-                reached_end = d.item + 1 == items.len();
+            if index + 1 >= last_needed && waiting.iter().all(|w| w.item.role == Role::Halo) {
+                reached_end = index + 1 == total_items;
                 break;
             }
         }
@@ -619,7 +608,6 @@ struct Ctx<'a> {
     scatter_low: Option<&'a Raster>,
     out: &'a Path,
     work_dir: &'a Path,
-    items: &'a [Item<'a>],
     progress: &'a dyn Progress,
 }
 
@@ -646,8 +634,8 @@ impl Ctx<'_> {
                 break;
             }
             let mut w = waiting.pop_front().unwrap();
-            let entry = self.items[w.item].entry;
-            match self.items[w.item].role {
+            let entry = &w.item.entry;
+            match w.item.role {
                 Role::Write => {}
                 Role::Halo => continue,
                 Role::Done => {
