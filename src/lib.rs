@@ -28,6 +28,7 @@ pub mod correct;
 pub mod error;
 pub mod factor;
 pub mod io;
+pub mod mask;
 pub mod median;
 pub mod options;
 pub mod pipeline;
@@ -35,6 +36,7 @@ pub mod raster;
 pub mod report;
 pub mod scatter;
 pub mod source;
+pub mod transfer;
 pub mod window;
 
 pub use error::{Error, Result};
