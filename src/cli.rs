@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
+use abysslight::options::Transfer;
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -107,6 +108,21 @@ struct CorrectArgs {
     #[arg(long, short = 'j', value_name = "N")]
     threads: Option<usize>,
 
+    /// How stored values relate to light: srgb (most JPEGs), linear (machine-vision, RAW) or gamma:G.
+    /// Estimation and correction run in linear light [default: linear].
+    #[arg(long, value_name = "CURVE")]
+    transfer: Option<Transfer>,
+
+    /// Mask image the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of
+    /// every median and copied unchanged to the output.
+    #[arg(long, value_name = "FILE")]
+    mask: Option<PathBuf>,
+
+    /// Find pixels that stay the same through the mission (overlays, lasers) and mask them too; the mask found
+    /// is written to <out>/_abysslight/mask-auto.png.
+    #[arg(long)]
+    mask_auto: bool,
+
     /// Skip photos whose output already exists (outputs are only renamed into place when complete); their
     /// neighbours are still read, so the result equals an uninterrupted run.
     #[arg(long)]
@@ -162,7 +178,11 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     macro_rules! set {
         ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
     }
-    set!(water_column, scatter, survey, out, threads);
+    set!(water_column, scatter, survey, out, threads, mask);
+    if let Some(t) = args.transfer {
+        o.transfer = t;
+    }
+    o.mask_auto |= args.mask_auto;
     if args.water_column.is_some() {
         o.scatter = None;
     }

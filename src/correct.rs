@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::factor::{lerp_rows, taps};
 use crate::raster::{Layout, Raster, Sample};
+use crate::transfer::Curve;
 
 /// What the correction of one photo did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -26,7 +27,8 @@ impl std::ops::AddAssign for CorrectStats {
 
 /// Correct `samples` (interleaved, `layout`) in place: `A = (I − S) / max(F, floor)`, where `F` is `factor_low`
 /// (one sample per `k`×`k` block) upsampled bilinearly between block centres, and `S` is `scatter` at full
-/// resolution (`None`: `S = 0`).
+/// resolution (`None`: `S = 0`), both in linear light. `curve` converts stored codes to linear light and back.
+#[allow(clippy::too_many_arguments)]
 pub fn correct_in_place<T: Sample>(
     samples: &mut [T],
     layout: Layout,
@@ -34,6 +36,7 @@ pub fn correct_in_place<T: Sample>(
     factor_low: &Raster,
     k: usize,
     floor: f32,
+    curve: &Curve,
 ) -> CorrectStats {
     let Layout {
         width,
@@ -55,7 +58,7 @@ pub fn correct_in_place<T: Sample>(
     }
     let tx = taps(width, k);
     let ty = taps(height, k);
-    let (max, inv_max) = (T::MAX, 1.0 / T::MAX);
+    let max = T::MAX as u16;
     samples
         .par_chunks_mut(row_len)
         .enumerate()
@@ -82,11 +85,12 @@ pub fn correct_in_place<T: Sample>(
                     }
                     let i = x * c + ch;
                     let s = srow.map_or(0.0, |s| s[i]);
-                    let v = (row[i].to_u16() as f32 * inv_max - s) / f * max;
-                    if !(0.0..=max).contains(&v) {
+                    let a = (curve.linear(row[i].to_u16()) - s) / f;
+                    let code = curve.code(a);
+                    if (code == 0 && a < 0.0) || (code == max && a > 1.0) {
                         stats.clipped_samples += 1;
                     }
-                    row[i] = T::from_f32(v);
+                    row[i] = T::from_f32(code as f32);
                 }
                 stats.floored_pixels += floored as u64;
             }
@@ -102,6 +106,7 @@ pub fn correct_in_place<T: Sample>(
 mod tests {
     use super::*;
     use crate::factor::upsample;
+    use crate::transfer::Transfer;
 
     /// Unfused reference: build the full-size F first, then apply the formula pixel by pixel in f64.
     fn reference(
@@ -143,7 +148,8 @@ mod tests {
         for s in [None, Some(&scatter)] {
             let expect = reference(&samples, layout, s, &low, k, 0.05);
             let mut got = samples.clone();
-            let stats = correct_in_place(&mut got, layout, s, &low, k, 0.05);
+            let curve = Curve::new(Transfer::Linear, 65536);
+            let stats = correct_in_place(&mut got, layout, s, &low, k, 0.05, &curve);
             for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
                 assert!((*g as i32 - *e as i32).abs() <= 1, "sample {i}: {g} vs {e}");
             }
@@ -170,10 +176,42 @@ mod tests {
             .collect();
         let low = Raster::filled(2, 1, 1, f);
         let sc = Raster::filled(16, 8, 1, s);
-        let stats = correct_in_place(&mut photo, layout, Some(&sc), &low, 8, 0.05);
+        let curve = Curve::new(Transfer::Linear, 256);
+        let stats = correct_in_place(&mut photo, layout, Some(&sc), &low, 8, 0.05, &curve);
         for (g, a) in photo.iter().zip(&albedo) {
             assert!((*g as i32 - *a as i32).abs() <= 1, "{g} vs {a}");
         }
         assert_eq!(stats.floored_pixels, 0);
+    }
+
+    #[test]
+    fn srgb_correction_works_in_linear_light() {
+        // Stored sRGB codes of I = A·F + S (linear light); the correction must return sRGB codes of A.
+        let layout = Layout {
+            width: 8,
+            height: 2,
+            channels: 1,
+        };
+        let (f, s) = (0.4f32, 0.05f32);
+        let t = Transfer::Srgb;
+        let albedo: Vec<f32> = (0..16).map(|i| 0.05 + 0.05 * i as f32).collect();
+        let mut photo: Vec<u8> = albedo
+            .iter()
+            .map(|&a| (t.from_linear(a * f + s) * 255.0).round() as u8)
+            .collect();
+        let curve = Curve::new(t, 256);
+        correct_in_place(
+            &mut photo,
+            layout,
+            Some(&Raster::filled(8, 2, 1, s)),
+            &Raster::filled(1, 1, 1, f),
+            8,
+            0.05,
+            &curve,
+        );
+        for (i, (&g, &a)) in photo.iter().zip(&albedo).enumerate() {
+            let expect = t.from_linear(a) * 255.0;
+            assert!((g as f32 - expect).abs() <= 1.5, "{i}: {g} vs {expect}");
+        }
     }
 }

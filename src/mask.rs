@@ -1,7 +1,8 @@
 //! Static regions: pixels that move with the camera and are not seafloor (burned-in overlays, laser dots, vehicle
-//! parts). They are left out of every median, `F` and `S` under them are filled smoothly from the surrounding
-//! estimate, and the corrected photo keeps them exactly as recorded (copied from the input), so they stay
-//! recognisable and do not leave halos in their surroundings.
+//! parts). They are left out of every median, so they do not bend `F` and `S` around them (no halos); `F` and `S`
+//! under them are filled smoothly from the surrounding estimate, and the masked pixels are corrected with that
+//! fill like any other. Overlays keep their shape and colour (bright text may clip to white), and a safety margin
+//! drawn around them blends into the corrected seafloor.
 
 use std::path::Path;
 
@@ -253,21 +254,41 @@ impl Default for DetectSettings {
     }
 }
 
-/// Find static pixels (overlays, laser dots, vehicle parts) in the per-pixel temporal median of photos spread over
-/// the mission. Seafloor moves through the frame and blurs out in that median, leaving the smooth lighting;
-/// whatever moves with the camera stays sharp. Pixels far from a smooth fit of the median are static.
-pub fn detect_static(median: &Raster, settings: DetectSettings) -> Mask {
+/// Find static pixels (overlays, laser dots, vehicle parts) from per-pixel temporal medians of photos taken from
+/// different parts of the mission (e.g. its three thirds). Seafloor moves through the frame and blurs out in such a
+/// median, leaving the smooth lighting; whatever moves with the camera stays sharp. A pixel is static when it is
+/// far from a smooth fit in *every* median: dark nodules that happen to sit at one place in many photos of one part
+/// of the mission do not repeat in the others.
+pub fn detect_static(medians: &[Raster], settings: DetectSettings) -> Mask {
+    assert!(!medians.is_empty(), "no medians to detect static pixels in");
+    let (w, h) = (medians[0].width, medians[0].height);
+    let mut all = Mask {
+        width: w,
+        height: h,
+        ignore: vec![true; w * h],
+    };
+    for m in medians {
+        let found = sharp_structure(m, settings);
+        for (a, f) in all.ignore.iter_mut().zip(&found.ignore) {
+            *a &= *f;
+        }
+    }
+    all.dilate(settings.grow)
+}
+
+/// Pixels of one median far from a smooth fit of it (not grown).
+fn sharp_structure(median: &Raster, settings: DetectSettings) -> Mask {
     let (w, h, c) = (median.width, median.height, median.channels);
     let block = (w.min(h) / 16).max(16);
     let codes: Vec<u16> = median.to_u16();
     let layout = median.layout();
-    let mut mask = Mask::empty(w, h);
+    let mut ignore = Mask::empty(w, h);
+    let mut found = Mask::empty(w, h);
     // Twice: the second smooth fit leaves out what the first found, so large overlays do not bend it.
     for _ in 0..2 {
-        let mut low = block_median_masked(&codes, layout, block, &mask);
+        let mut low = block_median_masked(&codes, layout, block, &ignore);
         fill_missing(&mut low);
         let smooth = upsample(&low, block, w, h);
-        let mut found = Mask::empty(w, h);
         for p in 0..w * h {
             found.ignore[p] = (0..c).any(|ch| {
                 let m = median.data[p * c + ch];
@@ -276,9 +297,9 @@ pub fn detect_static(median: &Raster, settings: DetectSettings) -> Mask {
                 d > settings.absolute && d > settings.relative * s.max(0.0)
             });
         }
-        mask = found.dilate(settings.grow);
+        ignore = found.dilate(settings.grow);
     }
-    mask
+    found
 }
 
 #[cfg(test)]
@@ -377,7 +398,7 @@ mod tests {
                 light(x, y)
             }
         });
-        let m = detect_static(&median, DetectSettings::default());
+        let m = detect_static(&[median], DetectSettings::default());
         let truth = |x: usize, y: usize| is_box(x, y) || is_dot(x, y);
         let (mut hit, mut truth_n, mut false_pos) = (0, 0, 0);
         for y in 0..h {

@@ -7,6 +7,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
+pub use crate::transfer::Transfer;
 use crate::window::{choose_window, p_half, WindowChoice};
 
 /// Grey level of the default seafloor colour `C`. Below mid-grey, so that objects brighter than the sediment
@@ -203,6 +204,15 @@ pub struct Options {
     /// Write only chunk `K` of `N` contiguous chunks of the survey (reading the neighbours its windows need).
     /// The union of all shards' outputs equals a single run. Default: none (the whole survey).
     pub shard: Option<Shard>,
+    /// How stored values relate to light: `srgb`, `linear` or `gamma:G`. Estimation and correction run in
+    /// linear light. Default: linear.
+    pub transfer: Transfer,
+    /// Mask image, the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of every
+    /// median and copied unchanged to the output. Default: none.
+    pub mask: Option<PathBuf>,
+    /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
+    /// found is written to `_abysslight/mask-auto.png`. Default: false.
+    pub mask_auto: bool,
 }
 
 impl Default for Options {
@@ -225,6 +235,9 @@ impl Default for Options {
             scatter_memory_mib: 2048,
             resume: false,
             shard: None,
+            transfer: Transfer::default(),
+            mask: None,
+            mask_auto: false,
         }
     }
 }
@@ -243,6 +256,7 @@ impl Options {
             &mut opts.scatter,
             &mut opts.survey,
             &mut opts.out,
+            &mut opts.mask,
         ]
         .into_iter()
         .flatten()

@@ -22,12 +22,14 @@ use crate::correct::{correct_in_place, CorrectStats};
 use crate::error::{Error, Result};
 use crate::factor::{factor, lit_seafloor};
 use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
+use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettings, Mask};
 use crate::median::{block_median, stack_median};
 use crate::options::Options;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::scatter::{self, Scatter};
 use crate::source::{FileList, Item, Role, Sink, Source};
+use crate::transfer::Curve;
 use crate::window::window_range;
 
 fn ms(since: Instant) -> f64 {
@@ -150,6 +152,17 @@ struct WriteJob<'a> {
     photo: Photo,
     frame: FrameReport,
     _live: Live<'a>,
+}
+
+/// Up to `most` entries spread evenly over `entries` (first and last included).
+fn spread(entries: &[Entry], most: usize) -> Vec<Entry> {
+    let n = entries.len();
+    if n <= most {
+        return entries.to_vec();
+    }
+    (0..most)
+        .map(|i| entries[i * (n - 1) / (most - 1)].clone())
+        .collect()
 }
 
 /// Output path of a survey photo.
@@ -282,7 +295,106 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         io::save_raster_png16(&s.full, &p)?;
         scatter_info.saved_to = Some(p);
     }
-    let scatter_low = scatter.as_ref().map(|s| s.downsampled(k));
+
+    // --- static regions (--mask, --mask-auto) ----------------------------------------------------------------
+    let mut mask: Option<Mask> = match opts.mask.as_deref() {
+        Some(p) => {
+            let m = Mask::load(p)?;
+            progress.stage(&format!(
+                "mask {}: {} pixels ignored",
+                p.display(),
+                m.count()
+            ));
+            Some(m)
+        }
+        None => None,
+    };
+    if opts.mask_auto {
+        let sample: Vec<Entry> = spread(&found.photos, 45);
+        // Medians of the three thirds of the mission: static content shows in all of them.
+        let parts = if sample.len() >= 9 { 3 } else { 1 };
+        progress.stage(&format!(
+            "looking for static pixels (overlays, lasers) in {} photos spread over the mission",
+            sample.len()
+        ));
+        if parts == 1 {
+            warn(
+                &mut warnings,
+                format!(
+                    "--mask-auto had only {} photos to compare: the mask may include coincidental dark spots",
+                    sample.len()
+                ),
+            );
+        }
+        let budget = opts.scatter_memory_mib.max(1) << 20;
+        let mut medians = Vec::new();
+        for p in 0..parts {
+            let part = &sample[p * sample.len() / parts..(p + 1) * sample.len() / parts];
+            if let Some(m) = scatter::estimate(part, budget, |_| {})? {
+                medians.push(m.full);
+            }
+        }
+        if !medians.is_empty() && medians.iter().all(|m| m.layout() == medians[0].layout()) {
+            let found_mask = detect_static(&medians, DetectSettings::default());
+            let p = work_dir.join("mask-auto.png");
+            found_mask.save(&p)?;
+            let share = found_mask.count() as f64 / found_mask.ignore.len().max(1) as f64;
+            progress.stage(&format!(
+                "static pixels found: {:.2} % of the frame, written to {}",
+                100.0 * share,
+                p.display()
+            ));
+            match &mut mask {
+                Some(m) if (m.width, m.height) == (found_mask.width, found_mask.height) => {
+                    m.union(&found_mask)
+                }
+                Some(_) => {}
+                None => mask = Some(found_mask),
+            }
+        }
+    }
+    if let (Some(m), Some(s)) = (&mask, &scatter) {
+        m.check(
+            s.full.layout(),
+            opts.mask.as_deref().unwrap_or(Path::new("mask-auto.png")),
+        )?;
+    }
+
+    // --- S in linear light, at full and at block resolution ---------------------------------------------------
+    let transfer = opts.transfer;
+    let scatter_low = scatter.as_ref().map(|s| {
+        let codes = s.full.to_u16();
+        let mut low = match &mask {
+            Some(m) => block_median_masked(&codes, s.full.layout(), k, m),
+            None => {
+                crate::median::block_median(&codes, s.full.width, s.full.height, s.full.channels, k)
+            }
+        };
+        fill_missing(&mut low);
+        for v in &mut low.data {
+            *v = transfer.to_linear(*v);
+        }
+        low
+    });
+    let scatter_lin: Option<Raster> = scatter.as_ref().map(|s| {
+        let mut full = s.full.clone();
+        if !transfer.is_linear() {
+            for v in &mut full.data {
+                *v = transfer.to_linear(*v);
+            }
+        }
+        // Under the mask, S holds whatever is burned into the water-column frames too: use the smooth fill.
+        if let (Some(m), Some(low)) = (&mask, &scatter_low) {
+            let smooth = crate::factor::upsample(low, k, full.width, full.height);
+            let c = full.channels;
+            for (p, _) in m.ignore.iter().enumerate().filter(|(_, &i)| i) {
+                full.data[p * c..(p + 1) * c].copy_from_slice(&smooth.data[p * c..(p + 1) * c]);
+            }
+        }
+        full
+    });
+    drop(scatter);
+    let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
 
     // --- which photos to read and which to write ---------------------------------------------------------------
     let total_files = found.photos.len();
@@ -406,8 +518,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             k,
             opts,
             colour: Vec::new(),
-            scatter: scatter.as_ref().map(|s| &s.full),
+            scatter: scatter_lin.as_ref(),
             scatter_low: scatter_low.as_ref(),
+            mask: mask.as_ref(),
+            curves: &curves,
             out,
             work_dir: &work_dir,
             progress,
@@ -430,22 +544,33 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                 Ok((photo, photo_live)) => {
                     let mismatch = match layout {
                         None => {
-                            if let Some(s) = &scatter {
-                                if s.full.layout() != photo.layout {
+                            if let Some(s) = &scatter_lin {
+                                if s.layout() != photo.layout {
                                     return Err(Error::Mismatch {
                                         path: scatter_info.path.clone().unwrap_or_default(),
                                         reason: format!(
                                             "scatter estimate is {}, but the survey photos are {} ({}): \
                                              water-column frames and survey photos must come from the same camera",
-                                            s.full.layout(),
+                                            s.layout(),
                                             photo.layout,
                                             path.display()
                                         ),
                                     });
                                 }
                             }
+                            if let Some(m) = &mask {
+                                m.check(
+                                    photo.layout,
+                                    opts.mask.as_deref().unwrap_or(Path::new("mask-auto.png")),
+                                )?;
+                            }
                             layout = Some(photo.layout);
-                            ctx.colour = opts.seafloor_colour.for_channels(photo.layout.channels);
+                            ctx.colour = opts
+                                .seafloor_colour
+                                .for_channels(photo.layout.channels)
+                                .into_iter()
+                                .map(|c| transfer.to_linear(c))
+                                .collect();
                             None
                         }
                         Some(l) if l != photo.layout => Some(Error::Mismatch {
@@ -463,10 +588,21 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                     } else {
                         let t = Instant::now();
                         let l = photo.layout;
-                        let low = match &photo.samples {
-                            Samples::U8(v) => block_median(v, l.width, l.height, l.channels, k),
-                            Samples::U16(v) => block_median(v, l.width, l.height, l.channels, k),
+                        let mut low = match (&photo.samples, &mask) {
+                            (Samples::U8(v), None) => {
+                                block_median(v, l.width, l.height, l.channels, k)
+                            }
+                            (Samples::U16(v), None) => {
+                                block_median(v, l.width, l.height, l.channels, k)
+                            }
+                            (Samples::U8(v), Some(m)) => block_median_masked(v, l, k, m),
+                            (Samples::U16(v), Some(m)) => block_median_masked(v, l, k, m),
                         };
+                        if !transfer.is_linear() {
+                            for v in &mut low.data {
+                                *v = transfer.to_linear(*v);
+                            }
+                        }
                         ring.push_back((seq, low));
                         if ring.len() > n {
                             ring.pop_front();
@@ -609,6 +745,9 @@ struct Ctx<'a> {
     out: &'a Path,
     work_dir: &'a Path,
     progress: &'a dyn Progress,
+    mask: Option<&'a Mask>,
+    /// Transfer tables for 8- and 16-bit photos.
+    curves: &'a (Curve, Curve),
 }
 
 impl Ctx<'_> {
@@ -655,7 +794,10 @@ impl Ctx<'_> {
                 "ring buffer lost a frame of the window"
             );
             let m = stack_median(&stack);
-            let f = factor(&m, self.scatter_low, &self.colour);
+            let mut f = factor(&m, self.scatter_low, &self.colour);
+            if self.mask.is_some() {
+                fill_missing(&mut f);
+            }
             let estimate_ms = w.downsample_ms + ms(t);
             if self.opts.save_factors {
                 let p = self
@@ -668,9 +810,10 @@ impl Ctx<'_> {
             let t = Instant::now();
             let l = w.photo.layout;
             let floor = self.opts.factor_floor;
+            let (c8, c16) = self.curves;
             let stats = match &mut w.photo.samples {
-                Samples::U8(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor),
-                Samples::U16(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor),
+                Samples::U8(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor, c8),
+                Samples::U16(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor, c16),
             };
             *totals += stats;
             let frame = FrameReport {

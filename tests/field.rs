@@ -1,0 +1,191 @@
+//! Real-footage problems on synthetic dives: burned-in overlays and laser dots (masks), gamma-encoded photos.
+
+mod common;
+
+use abysslight::io::decode;
+use abysslight::mask::Mask;
+use abysslight::raster::{Photo, Samples};
+use abysslight::{correct_mission, Options, Silent};
+use common::*;
+
+const W: usize = 128;
+const H: usize = 96;
+
+/// Overlay: a text box in the top-left corner (static pattern plus digits that change every frame) and three
+/// laser dots.
+fn overlay_pixel(x: usize, y: usize, frame: usize) -> Option<[u8; 3]> {
+    if (4..70).contains(&x) && (3..13).contains(&y) {
+        let digit_zone = x >= 50;
+        let on = if digit_zone {
+            ((x * 7 + y * 3 + frame * 13) % 5) < 2
+        } else {
+            (x / 2 + y) % 3 == 0
+        };
+        return Some(if on { [255, 255, 255] } else { [0, 0, 0] });
+    }
+    for (cx, cy) in [(30i32, 60i32), (100, 60), (64, 40)] {
+        if (x as i32 - cx).pow(2) + (y as i32 - cy).pow(2) <= 5 {
+            return Some([255, 40, 30]);
+        }
+    }
+    None
+}
+
+fn truth_mask() -> Mask {
+    let mut m = Mask::empty(W, H);
+    for y in 0..H {
+        for x in 0..W {
+            m.ignore[y * W + x] = overlay_pixel(x, y, 0).is_some();
+        }
+    }
+    m
+}
+
+fn burn_in(photos: &mut [Photo]) {
+    for (f, p) in photos.iter_mut().enumerate() {
+        let Samples::U8(v) = &mut p.samples else {
+            unreachable!()
+        };
+        for y in 0..H {
+            for x in 0..W {
+                if let Some(rgb) = overlay_pixel(x, y, f) {
+                    v[(y * W + x) * 3..(y * W + x) * 3 + 3].copy_from_slice(&rgb);
+                }
+            }
+        }
+    }
+}
+
+/// Scaled albedo error over the pixels within `ring` px of the overlay but not on it.
+fn ring_error(corrected: &[Vec<f32>], albedo: &[Vec<f32>], ring: usize) -> f64 {
+    let truth = truth_mask();
+    let near = truth.dilate(ring);
+    let pick = |v: &Vec<f32>| -> Vec<f32> {
+        v.iter()
+            .enumerate()
+            .filter(|(i, _)| near.ignore[i / 3] && !truth.ignore[i / 3])
+            .map(|(_, v)| *v)
+            .collect()
+    };
+    scaled_error(
+        &corrected.iter().map(pick).collect::<Vec<_>>(),
+        &albedo.iter().map(pick).collect::<Vec<_>>(),
+    )
+}
+
+#[test]
+fn masked_overlays_leave_no_halo_and_stay_recognisable() {
+    let d = tempfile::tempdir().unwrap();
+    let frames = 20;
+    let mut dive = dive(W, H, frames, 7, 0.2, false, 17);
+    burn_in(&mut dive.photos);
+    burn_in(&mut dive.water);
+    write_all(&dive.water, &d.path().join("water"), "w", "png");
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    truth_mask().save(&d.path().join("mask.png")).unwrap();
+    let base = Options {
+        water_column: Some(d.path().join("water")),
+        survey: Some(d.path().join("survey")),
+        contamination: Some(0.2),
+        ..Options::default()
+    };
+    let mut errors = Vec::new();
+    for (name, mask, auto) in [
+        ("none", None, false),
+        ("given", Some(d.path().join("mask.png")), false),
+        ("auto", None, true),
+    ] {
+        let out = d.path().join(format!("out_{name}"));
+        let r = correct_mission(
+            &Options {
+                out: Some(out.clone()),
+                mask,
+                mask_auto: auto,
+                ..base.clone()
+            },
+            &Silent,
+        )
+        .unwrap();
+        assert_eq!(r.corrected, frames);
+        let photos: Vec<Photo> = (1..=frames)
+            .map(|i| decode(&out.join(format!("img{i}.png"))).unwrap())
+            .collect();
+        let corrected: Vec<Vec<f32>> = photos.iter().map(normalised).collect();
+        let ring = ring_error(&corrected, &dive.albedo, 12);
+        let all = scaled_error(&corrected, &dive.albedo);
+        eprintln!(
+            "mask {name}: error within 12 px of the overlay {ring:.4}, whole photos {all:.4}"
+        );
+        errors.push(ring);
+        if name != "none" {
+            // The overlay stays recognisable: its white and black pixels stay white and black.
+            for (f, p) in photos.iter().enumerate() {
+                let Samples::U8(a) = &p.samples else {
+                    unreachable!()
+                };
+                for y in 3..13 {
+                    for x in 4..70 {
+                        let px = (y * W + x) * 3;
+                        match overlay_pixel(x, y, f) {
+                            Some([255, 255, 255]) => {
+                                assert!(a[px + 1] >= 240, "{name}: text at ({x},{y}) lost")
+                            }
+                            Some([0, 0, 0]) => {
+                                assert!(a[px + 1] <= 10, "{name}: box at ({x},{y}) lost")
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+            }
+        }
+        if auto {
+            let found = Mask::load(&out.join("_abysslight/mask-auto.png")).unwrap();
+            let truth = truth_mask();
+            let hit = truth
+                .ignore
+                .iter()
+                .zip(&found.ignore)
+                .filter(|(t, f)| **t && **f)
+                .count();
+            assert!(
+                hit as f64 >= 0.9 * truth.count() as f64,
+                "auto mask found {hit} of {}",
+                truth.count()
+            );
+            let far = truth.dilate(4);
+            let false_pos = found
+                .ignore
+                .iter()
+                .zip(&far.ignore)
+                .filter(|(f, n)| **f && !**n)
+                .count();
+            assert!(
+                false_pos < W * H / 100,
+                "auto mask marks {false_pos} pixels far from any overlay"
+            );
+        }
+    }
+    let (none, given, auto) = (errors[0], errors[1], errors[2]);
+    assert!(given < 0.03, "halo with the true mask: {given}");
+    assert!(auto < 0.03, "halo with the automatic mask: {auto}");
+    assert!(
+        none > given,
+        "the unmasked overlay disturbs its surroundings more ({none} vs {given})"
+    );
+    // Without a mask the static laser dots are absorbed into F and vanish from the photos; with one they stay.
+    let redness = |dir: &str| -> f64 {
+        let p = normalised(&decode(&d.path().join(dir).join("img10.png")).unwrap());
+        let dots: Vec<usize> = (0..W * H)
+            .filter(|&i| i / W > 20 && truth_mask().ignore[i])
+            .collect();
+        dots.iter()
+            .map(|&i| (p[i * 3] - p[i * 3 + 1]) as f64)
+            .sum::<f64>()
+            / dots.len() as f64
+    };
+    let (red_none, red_given) = (redness("out_none"), redness("out_given"));
+    eprintln!("laser dot redness (R - G): no mask {red_none:.3}, mask {red_given:.3}");
+    assert!(red_given > 0.7, "{red_given}");
+    assert!(red_none < 0.3, "{red_none}");
+}
