@@ -8,10 +8,11 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 /// A transfer curve between stored values `v` and linear light `L`, both in `[0, 1]`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum Transfer {
     /// Stored values are linear in light (machine-vision cameras, RAW conversions).
+    #[default]
     Linear,
     /// The sRGB curve (IEC 61966-2-1), used by almost every JPEG.
     Srgb,
@@ -54,12 +55,6 @@ impl Transfer {
 
     pub fn is_linear(self) -> bool {
         self == Transfer::Linear || self == Transfer::Gamma(1.0)
-    }
-}
-
-impl Default for Transfer {
-    fn default() -> Self {
-        Transfer::Linear
     }
 }
 
