@@ -327,6 +327,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
                 .unwrap_or(Path::new("-"))
                 .display()
         );
+        eprintln!("abysslight: {}", report.monitor.line(report.corrected));
         if report.floored_pixels > 0 {
             eprintln!(
                 "abysslight: {} pixels had F below --factor-floor {} (dark corners; their gain was capped)",

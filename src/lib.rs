@@ -30,6 +30,7 @@ pub mod factor;
 pub mod io;
 pub mod mask;
 pub mod median;
+pub mod monitor;
 pub mod options;
 pub mod pipeline;
 pub mod raster;

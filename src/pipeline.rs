@@ -24,6 +24,7 @@ use crate::factor::{factor, lit_seafloor};
 use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettings, Mask};
 use crate::median::{block_median, stack_median};
+use crate::monitor::{contamination, Monitor, Summary, Thresholds};
 use crate::options::Options;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
@@ -522,6 +523,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scatter_low: scatter_low.as_ref(),
             mask: mask.as_ref(),
             curves: &curves,
+            monitor: Monitor::new(Thresholds::default()),
             out,
             work_dir: &work_dir,
             progress,
@@ -645,6 +647,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
 
     let mut frames = done.into_inner().unwrap();
     frames.sort_by_key(|f| f.index);
+    let mut monitor = Summary::default();
+    for f in &frames {
+        monitor.add(&f.health.flags);
+    }
     let write_errors = write_errors.into_inner().unwrap();
     survey_failed += write_errors.len();
     errors.extend(write_errors);
@@ -664,6 +670,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         ignored_files: found.ignored.len(),
         floored_pixels: totals.floored_pixels,
         clipped_samples: totals.clipped_samples,
+        monitor,
         frames,
         errors,
         warnings,
@@ -748,12 +755,13 @@ struct Ctx<'a> {
     mask: Option<&'a Mask>,
     /// Transfer tables for 8- and 16-bit photos.
     curves: &'a (Curve, Curve),
+    monitor: Monitor,
 }
 
 impl Ctx<'_> {
     /// Correct every waiting photo whose window is complete (all of them at the end of the stream).
     fn flush<'l>(
-        &self,
+        &mut self,
         waiting: &mut VecDeque<Waiting<'l>>,
         ring: &VecDeque<(usize, Raster)>,
         decoded: usize,
@@ -798,6 +806,25 @@ impl Ctx<'_> {
             if self.mask.is_some() {
                 fill_missing(&mut f);
             }
+            let lit = lit_seafloor(&f, &self.colour);
+            let own = ring
+                .iter()
+                .find(|(s, _)| *s == i)
+                .map(|(_, r)| r)
+                .expect("a photo's own low-resolution image is in its window");
+            let contaminated = contamination(
+                own,
+                &lit,
+                self.scatter_low,
+                self.monitor.thresholds.block_deviation,
+            );
+            let mut health = self.monitor.observe(&f, contaminated);
+            if eof && decoded < self.n {
+                health.flags.push(format!(
+                    "only {decoded} photos in the mission, fewer than the window n = {}",
+                    self.n
+                ));
+            }
             let estimate_ms = w.downsample_ms + ms(t);
             if self.opts.save_factors {
                 let p = self
@@ -805,7 +832,7 @@ impl Ctx<'_> {
                     .join("factors")
                     .join(&entry.relative)
                     .with_extension("png");
-                io::save_raster_png16(&lit_seafloor(&f, &self.colour), &p)?;
+                io::save_raster_png16(&lit, &p)?;
             }
             let t = Instant::now();
             let l = w.photo.layout;
@@ -827,6 +854,7 @@ impl Ctx<'_> {
                 encode_ms: 0.0,
                 floored_pixels: stats.floored_pixels,
                 clipped_samples: stats.clipped_samples,
+                health,
             };
             if wr_tx
                 .send(WriteJob {

@@ -75,6 +75,8 @@ pub struct FrameReport {
     pub floored_pixels: u64,
     /// Samples clipped to the output range (objects brighter than the seafloor colour allows).
     pub clipped_samples: u64,
+    /// Contamination, change of F, and flags when the estimate is likely broken.
+    pub health: crate::monitor::Health,
 }
 
 /// Where `S` came from.
@@ -114,6 +116,8 @@ pub struct Report {
     pub ignored_files: usize,
     pub floored_pixels: u64,
     pub clipped_samples: u64,
+    /// How many photos were flagged, by reason.
+    pub monitor: crate::monitor::Summary,
     pub frames: Vec<FrameReport>,
     pub errors: Vec<FileError>,
     pub warnings: Vec<String>,

@@ -189,3 +189,72 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
     assert!(red_given > 0.7, "{red_given}");
     assert!(red_none < 0.3, "{red_none}");
 }
+
+#[test]
+fn seafloor_colour_change_half_way_is_flagged() {
+    let d = tempfile::tempdir().unwrap();
+    let frames = 30;
+    let blue = [0.35, 0.5, 0.6];
+    let dive = dive_with(64, 48, frames, 0, 0.2, false, 23, |f| {
+        if f < 15 {
+            SEDIMENT
+        } else {
+            blue
+        }
+    });
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    let r = correct_mission(
+        &Options {
+            survey: Some(d.path().join("survey")),
+            out: Some(d.path().join("out")),
+            window: Some(7),
+            ..Options::default()
+        },
+        &Silent,
+    )
+    .unwrap();
+    let flagged: Vec<bool> = r
+        .frames
+        .iter()
+        .map(|f| !f.health.flags.is_empty())
+        .collect();
+    eprintln!(
+        "colour shift per photo: {:?}",
+        r.frames
+            .iter()
+            .map(|f| (f.health.colour_shift * 100.0).round())
+            .collect::<Vec<_>>()
+    );
+    // Before the change (and before its window reaches it) nothing is flagged; after it every photo is.
+    assert!(flagged[..11].iter().all(|f| !f), "{flagged:?}");
+    assert!(flagged[19..].iter().all(|f| *f), "{flagged:?}");
+    assert!(
+        r.frames[25]
+            .health
+            .flags
+            .iter()
+            .any(|f| f.contains("colour")),
+        "{:?}",
+        r.frames[25].health.flags
+    );
+    assert!(r.monitor.colour_shift >= 11, "{:?}", r.monitor);
+    // A dive without a change is not flagged.
+    let steady = dive_with(64, 48, frames, 0, 0.2, false, 23, |_| SEDIMENT);
+    write_all(&steady.photos, &d.path().join("steady"), "img", "png");
+    let r = correct_mission(
+        &Options {
+            survey: Some(d.path().join("steady")),
+            out: Some(d.path().join("out_steady")),
+            window: Some(7),
+            ..Options::default()
+        },
+        &Silent,
+    )
+    .unwrap();
+    assert_eq!(
+        r.monitor.flagged,
+        0,
+        "{:#?}",
+        r.frames.iter().map(|f| &f.health).collect::<Vec<_>>()
+    );
+}

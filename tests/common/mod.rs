@@ -84,15 +84,40 @@ pub fn dive(
     sixteen: bool,
     seed: u64,
 ) -> Dive {
+    dive_with(
+        w,
+        h,
+        frames,
+        water_frames,
+        contamination,
+        sixteen,
+        seed,
+        |_| SEDIMENT,
+    )
+}
+
+/// As [`dive`], with the sediment colour of each frame given by `sediment(frame)`.
+#[allow(clippy::too_many_arguments)]
+pub fn dive_with(
+    w: usize,
+    h: usize,
+    frames: usize,
+    water_frames: usize,
+    contamination: f32,
+    sixteen: bool,
+    seed: u64,
+    sediment: impl Fn(usize) -> [f32; 3],
+) -> Dive {
     let mut rng = Rng::new(seed);
     let mut albedo = Vec::new();
     let mut photos = Vec::new();
-    for _ in 0..frames {
+    for frame in 0..frames {
+        let colour = sediment(frame);
         let mut a = vec![0.0f32; w * h * 3];
         for px in a.chunks_exact_mut(3) {
             let tex = 1.0 + 0.16 * (rng.f32() - 0.5);
             for c in 0..3 {
-                px[c] = SEDIMENT[c] * tex;
+                px[c] = colour[c] * tex;
             }
         }
         // Dark blobs until the target share of pixels is covered.
