@@ -29,6 +29,7 @@ pub mod error;
 pub mod factor;
 pub mod io;
 pub mod median;
+pub mod metadata;
 pub mod options;
 pub mod pipeline;
 pub mod raster;
@@ -37,6 +38,7 @@ pub mod scatter;
 pub mod window;
 
 pub use error::{Error, Result};
+pub use metadata::Metadata;
 pub use options::{Options, SeafloorColour};
 pub use pipeline::correct_mission;
 pub use raster::{Photo, Raster};
