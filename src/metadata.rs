@@ -17,9 +17,9 @@
 //! | colour space, pixel size | (ICC) | `gAMA`, `cHRM`, `sRGB`, `cICP`, `pHYs` | resolution tags |
 //!
 //! Deliberately not carried:
-//! - the EXIF thumbnail (IFD1): it is a small copy of the *uncorrected* photo, and file browsers that show it would
-//!   show the lighting abysslight removed. EXIF blocks keep their bytes otherwise (maker notes whose internal
-//!   offsets count from the start of the block stay valid);
+//! - the EXIF thumbnail (IFD1) and Photoshop's thumbnail resources: they are small copies of the *uncorrected*
+//!   photo, and file browsers that show them would show the lighting abysslight removed. EXIF blocks keep their
+//!   bytes otherwise (maker notes whose internal offsets count from the start of the block stay valid);
 //! - in TIFF outputs, the tags that describe how the pixels are stored (size, bits, compression, strips, ...):
 //!   those of the output are written by the encoder. A maker note moves in a TIFF output, and maker notes with
 //!   absolute offsets (e.g. Canon's) may not be readable afterwards; when the input's byte order differs from the
@@ -216,13 +216,50 @@ fn exif_for_output(blob: &[u8]) -> std::result::Result<Vec<u8>, String> {
             thumb.get(0x0202).and_then(|e| e.uint(order)),
         ) {
             let (start, end) = (start as usize, start as usize + len as usize);
-            // Only when the thumbnail ends the block (allowing one byte of padding) and nothing of IFD0 follows.
-            if start > link + 4 && end <= blob.len() && end + 1 >= blob.len() {
-                out.truncate(start);
+            // Cut the thumbnail off when it ends the block (allowing one byte of padding), as cameras write it;
+            // elsewhere, blank it, so that no copy of the uncorrected photo stays in the file.
+            if start > link + 4 && end <= blob.len() {
+                if end + 1 >= blob.len() {
+                    out.truncate(start);
+                } else {
+                    out[start..end].fill(0);
+                }
             }
         }
     }
     Ok(out)
+}
+
+/// Photoshop image resources as they go into an output: without the thumbnail resources (1033, 1036), which
+/// show the uncorrected photo. Resources are `8BIM`, id, padded Pascal name, size, padded data. A block that does not
+/// parse is kept as it is.
+fn photoshop_for_output(irb: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(irb.len());
+    let mut at = 0;
+    while at < irb.len() {
+        let Some(head) = irb.get(at..at + 7) else {
+            return irb.to_vec();
+        };
+        let id = u16::from_be_bytes([head[4], head[5]]);
+        let name = 1 + head[6] as usize;
+        let size_at = at + 6 + name + name % 2;
+        let Some(size) = irb.get(size_at..size_at + 4) else {
+            return irb.to_vec();
+        };
+        let size = u32::from_be_bytes([size[0], size[1], size[2], size[3]]) as usize;
+        let end = size_at + 4 + size + size % 2;
+        if !matches!(&head[..4], b"8BIM" | b"MeSa" | b"PHUT" | b"AgHg" | b"DCSR")
+            || end > irb.len() + size % 2
+        {
+            return irb.to_vec();
+        }
+        let end = end.min(irb.len());
+        if id != 1033 && id != 1036 {
+            out.extend_from_slice(&irb[at..end]);
+        }
+        at = end;
+    }
+    out
 }
 
 /// Write `photo` to `output` atomically (as [`io::write_atomic`]) with the metadata of `input` (see the module
@@ -310,11 +347,49 @@ mod tests {
                 .is_some());
             assert!(exif.fields().all(|f| f.ifd_num == exif::In::PRIMARY));
         }
+        // A thumbnail that does not end the block is blanked in place.
+        let (mut blob, thumb_at) = exif_with_thumbnail(Order::Little);
+        let thumb_end = blob.len();
+        blob.extend_from_slice(b"trailing data");
+        let out = exif_for_output(&blob).unwrap();
+        assert_eq!(out.len(), blob.len());
+        assert!(out[thumb_at..thumb_end].iter().all(|&b| b == 0));
+        assert_eq!(out[thumb_end..], blob[thumb_end..]);
         // A block without IFD1 is unchanged; a block that is not TIFF is refused.
         let plain = ifd::write_tiff(Order::Little, &Ifd::default()).unwrap();
         assert_eq!(exif_for_output(&plain).unwrap(), plain);
         assert!(exif_for_output(b"Exif\0\0II*\0").is_err());
         assert!(exif_for_output(b"II*\0\x08\0\0\0\x05").is_err());
+    }
+
+    /// One Photoshop image resource: `8BIM`, id, Pascal name padded to even length, size, data padded to even.
+    pub(super) fn resource(id: u16, name: &str, data: &[u8]) -> Vec<u8> {
+        let mut r = b"8BIM".to_vec();
+        r.extend_from_slice(&id.to_be_bytes());
+        r.push(name.len() as u8);
+        r.extend_from_slice(name.as_bytes());
+        if name.len() % 2 == 0 {
+            r.push(0);
+        }
+        r.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        r.extend_from_slice(data);
+        if data.len() % 2 == 1 {
+            r.push(0);
+        }
+        r
+    }
+
+    #[test]
+    fn photoshop_thumbnails_are_taken_out() {
+        let iptc = resource(0x0404, "", b"\x1c\x02\x05\x00\x04Dive");
+        let res = resource(0x03ed, "res", &[0, 72, 0, 0, 0, 1, 0, 1]);
+        let thumb = resource(0x040c, "", b"\xff\xd8uncorrected\xff\xd9");
+        let old_thumb = resource(0x0409, "t", b"\xff\xd8old\xff\xd9");
+        let irb = [iptc.clone(), thumb, res.clone(), old_thumb].concat();
+        assert_eq!(photoshop_for_output(&irb), [iptc.clone(), res].concat());
+        // A block that does not parse is kept as it is.
+        let bad = [&iptc[..], b"junk"].concat();
+        assert_eq!(photoshop_for_output(&bad), bad);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use std::io::Read;
 
-use super::{exif_for_output, Metadata, Text};
+use super::{exif_for_output, photoshop_for_output, Metadata, Text};
 
 const EXIF_ID: &[u8] = b"Exif\0\0";
 const XMP_ID: &[u8] = b"http://ns.adobe.com/xap/1.0/\0";
@@ -185,7 +185,7 @@ fn segments(meta: &Metadata, dropped: &mut Vec<String>) -> Vec<u8> {
         }
     }
     if let Some(ps) = &meta.photoshop {
-        for part in ps.chunks(MAX_PAYLOAD - PHOTOSHOP_ID.len()) {
+        for part in photoshop_for_output(ps).chunks(MAX_PAYLOAD - PHOTOSHOP_ID.len()) {
             segment(&mut out, APP13, &[PHOTOSHOP_ID, part]);
         }
     }

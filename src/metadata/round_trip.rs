@@ -156,7 +156,9 @@ fn base_meta(little_endian: bool) -> Metadata {
 fn jpeg_round_trip() {
     let mut meta = base_meta(true);
     meta.xmp_extension = vec![b"0123456789ABCDEF0123456789ABCDEF\0\0\0\x05\0\0\0\0<rest>".to_vec()];
-    meta.photoshop = Some(b"8BIM\x04\x04\0\0\0\0\0\x08\x1c\x02\x05\0\x03Dive".to_vec());
+    let iptc = super::tests::resource(0x0404, "", b"\x1c\x02\x05\x00\x04Dive");
+    let thumb = super::tests::resource(0x040c, "", THUMB);
+    meta.photoshop = Some([iptc.clone(), thumb].concat());
     meta.text = vec![Text {
         keyword: "Comment".into(),
         text: "Dive 42, transect 7 — Ω".into(),
@@ -173,10 +175,14 @@ fn jpeg_round_trip() {
         back,
         Metadata {
             exif: Some(stripped.clone()),
+            photoshop: Some(iptc.clone()),
             ..meta.clone()
         }
     );
     assert_eq!(back.orientation(), Some(6));
+    // The Photoshop resources (which hold IPTC), as image's JPEG decoder finds them: without the thumbnail.
+    let mut dec = image::codecs::jpeg::JpegDecoder::new(Cursor::new(&out)).unwrap();
+    assert_eq!(dec.iptc_metadata().unwrap(), Some(iptc));
 
     // Read back independently.
     let exif = exif::Reader::new()
@@ -366,7 +372,12 @@ fn tiff_round_trip_in_both_byte_orders() {
         let back = Metadata::from_bytes(&out).unwrap();
         assert!(back.problems.is_empty(), "{:?}", back.problems);
         assert_eq!((&back.xmp, &back.icc), (&meta.xmp, &meta.icc));
-        assert_eq!((&back.iptc, &back.photoshop), (&meta.iptc, &meta.photoshop));
+        assert_eq!(&back.photoshop, &meta.photoshop);
+        // IPTC is stored as LONGs, so it comes back zero-padded to a multiple of 4 bytes.
+        assert_eq!(
+            back.iptc.as_deref(),
+            Some(&b"\x1c\x02\x05\x00\x04Dive\0\0\0"[..])
+        );
         let again = exif::Reader::new()
             .read_raw(back.exif.clone().unwrap())
             .unwrap();

@@ -6,7 +6,7 @@ use std::io::{Read, Seek};
 use super::ifd::{
     self, read_header, read_ifd, write_ifd, write_tiff, Entry, Ifd, Reader, EXIF_IFD,
 };
-use super::Metadata;
+use super::{photoshop_for_output, Metadata};
 
 const XMP: u16 = 700;
 const IPTC: u16 = 33723;
@@ -149,11 +149,18 @@ pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>
             Err(e) => dropped.push(format!("EXIF block not carried: {e}")),
         }
     }
+    let photoshop = meta.photoshop.as_deref().map(photoshop_for_output);
+    // IPTC as Photoshop and ExifTool write it: LONGs holding the record's bytes, zero-padded to a multiple of 4.
+    let iptc = meta.iptc.as_ref().map(|v| {
+        let mut v = v.clone();
+        v.resize(v.len().div_ceil(4) * 4, 0);
+        v
+    });
     for (tag, kind, value) in [
         (XMP, 1, &meta.xmp),
         (ICC, 7, &meta.icc),
-        (IPTC, 7, &meta.iptc),
-        (PHOTOSHOP, 7, &meta.photoshop),
+        (IPTC, ifd::TYPE_LONG, &iptc),
+        (PHOTOSHOP, 1, &photoshop),
     ] {
         if let Some(v) = value {
             ifd0.set(Entry::new(tag, kind, v.clone()));
