@@ -20,8 +20,9 @@ use crossbeam_channel::bounded;
 use crate::correct::{correct_in_place, CorrectStats};
 use crate::error::{Error, Result};
 use crate::factor::{factor, lit_seafloor};
-use crate::io::{self, decode, find_photos, write_atomic, EncodeSettings, Entry, WORK_DIR};
+use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::median::{block_median, stack_median};
+use crate::metadata;
 use crate::options::Options;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
@@ -274,7 +275,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scope.spawn(move || {
                 for mut job in rx {
                     let t = Instant::now();
-                    let r = write_atomic(&job.photo, &job.frame.output, settings);
+                    // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
+                    let (input, output) = (&job.frame.input, &job.frame.output);
+                    let warn = |m: &str| progress.warn(m);
+                    let r = metadata::write_carrying(&job.photo, input, output, settings, &warn);
                     job.frame.encode_ms = ms(t);
                     let ok = r.is_ok();
                     progress.photo_done(&job.frame.input, ok);
