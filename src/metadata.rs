@@ -13,8 +13,9 @@
 //! | XMP | APP1 packet and extended-XMP segments | `iTXt` `XML:com.adobe.xmp` | tag 700 |
 //! | ICC profile | APP2 `ICC_PROFILE` (any number of segments) | `iCCP` | tag 34675 |
 //! | IPTC / Photoshop resources | APP13 `Photoshop 3.0` | — | tags 33723 and 34377 |
-//! | comments, text | COM segments | `tEXt`, `zTXt`, `iTXt` (keyword and text) | ImageDescription (in EXIF IFD0) |
-//! | colour space, pixel size | (ICC) | `gAMA`, `cHRM`, `sRGB`, `cICP`, `pHYs` | resolution tags |
+//! | comments, text | COM segments | `tEXt`, `zTXt`, `iTXt` (keyword and text) | ImageDescription, Artist, Copyright, ... (descriptive IFD0 tags) |
+//! | colour space, pixel size | ICC; EXIF resolution | `gAMA`, `cHRM`, `sRGB`, `cICP`, `pHYs` | ICC; resolution tags |
+//! | georeferencing | — | — | GeoTIFF tags (same pixel grid) |
 //!
 //! Deliberately not carried:
 //! - the EXIF thumbnail (IFD1) and Photoshop's thumbnail resources: they are small copies of the *uncorrected*
@@ -24,7 +25,8 @@
 //!   those of the output are written by the encoder. A maker note moves in a TIFF output, and maker notes with
 //!   absolute offsets (e.g. Canon's) may not be readable afterwards; when the input's byte order differs from the
 //!   output's, it is left out;
-//! - JPEG segments that describe the input's coding or other images (JFIF, Adobe APP14, MPF and other APPn),
+//! - JPEG segments that describe the input's coding or other images (JFIF, whose pixel density the encoder writes
+//!   afresh; Adobe APP14; MPF and other APPn),
 //!   PNG `tIME` (it is the modification time) and `sBIT` (the significant bits of the input's samples), TIFF pages
 //!   after the first, GDAL statistics and Photoshop layers (they describe the uncorrected pixels).
 //!
@@ -91,9 +93,9 @@ fn sniff(head: &[u8]) -> Option<ImageFormat> {
         Some(ImageFormat::Jpeg)
     } else if head.starts_with(b"\x89PNG\r\n\x1a\n") {
         Some(ImageFormat::Png)
-    } else if head.starts_with(b"II\x2a\x00")
-        || head.starts_with(b"MM\x00\x2a")
-        || head.starts_with(b"II\x2b\x00")
+    } else if [b"II\x2a\x00", b"MM\x00\x2a", b"II\x2b\x00", b"MM\x00\x2b"]
+        .iter()
+        .any(|m| head.starts_with(*m))
     {
         Some(ImageFormat::Tiff)
     } else {

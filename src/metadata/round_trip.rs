@@ -441,3 +441,31 @@ fn malformed_blocks_are_reported_and_the_rest_is_read() {
     assert_eq!(meta.text.len(), 1);
     assert!(meta.problems[0].contains("zTXt"), "{:?}", meta.problems);
 }
+
+#[test]
+fn png_text_after_the_image_data_is_read() {
+    let mut file = Vec::new();
+    {
+        let mut enc = ::png::Encoder::new(&mut file, 4, 4);
+        enc.set_color(::png::ColorType::Grayscale);
+        let mut w = enc.write_header().unwrap();
+        w.write_image_data(&[7; 16]).unwrap();
+        let mut data = b"Comment\0".to_vec();
+        data.extend_from_slice(b"written after IDAT");
+        w.write_chunk(::png::chunk::ChunkType(*b"tEXt"), &data)
+            .unwrap();
+        w.finish().unwrap();
+    }
+    let idat = file.windows(4).position(|w| w == b"IDAT").unwrap();
+    let text = file.windows(4).position(|w| w == b"tEXt").unwrap();
+    assert!(text > idat);
+    let meta = Metadata::from_bytes(&file).unwrap();
+    assert!(meta.problems.is_empty(), "{:?}", meta.problems);
+    assert_eq!(
+        meta.text,
+        [Text {
+            keyword: "Comment".into(),
+            text: "written after IDAT".into()
+        }]
+    );
+}
