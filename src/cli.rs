@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
-use abysslight::{choose_window, Error, Options, Progress, SeafloorColour};
+use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -41,6 +41,9 @@ enum Command {
     Correct(Box<CorrectArgs>),
     /// Print the window size n for a contamination rate, and its breakdown probability P_half.
     Window(WindowArgs),
+    /// Estimate the backscatter S from water-column frames once, for --scatter (e.g. before sharded runs).
+    #[command(after_help = EXIT_HELP)]
+    Scatter(ScatterArgs),
 }
 
 #[derive(Args, Debug)]
@@ -104,12 +107,38 @@ struct CorrectArgs {
     #[arg(long, short = 'j', value_name = "N")]
     threads: Option<usize>,
 
+    /// Skip photos whose output already exists (outputs are only renamed into place when complete); their
+    /// neighbours are still read, so the result equals an uninterrupted run.
+    #[arg(long)]
+    resume: bool,
+
+    /// Write only chunk K of N contiguous chunks of the survey (K = 1..N), reading the neighbours its windows need:
+    /// the union of all N shards equals one run. For SLURM/PBS array jobs and GNU parallel.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<Shard>,
+
     /// Options from a TOML file (keys as the long flags, e.g. seafloor-colour = "#8a7560"); flags override it.
     /// Relative paths in the file are relative to the file.
     #[arg(long, value_name = "FILE.toml")]
     config: Option<PathBuf>,
 
     /// No progress bar and no log lines (errors are still printed).
+    #[arg(long, short = 'q')]
+    quiet: bool,
+}
+
+#[derive(Args, Debug)]
+struct ScatterArgs {
+    /// Folder of water-column frames.
+    #[arg(long, value_name = "DIR")]
+    water_column: PathBuf,
+    /// Where to write S (16-bit PNG).
+    #[arg(long, value_name = "FILE.png")]
+    out: PathBuf,
+    /// Memory the estimate may hold at once, in MiB (more frames are processed in row bands).
+    #[arg(long, value_name = "MIB", default_value_t = 2048)]
+    memory: usize,
+    /// No log lines (errors are still printed).
     #[arg(long, short = 'q')]
     quiet: bool,
 }
@@ -164,6 +193,10 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         o.jpeg_quality = v;
     }
     o.save_scatter |= args.save_scatter;
+    o.resume |= args.resume;
+    if let Some(v) = args.shard {
+        o.shard = Some(v);
+    }
     o.save_factors |= args.save_factors;
     if o.survey.is_none() {
         return Err(Error::Usage(
@@ -288,6 +321,29 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
     }))
 }
 
+fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
+    let console = Console::new(args.quiet);
+    let s = abysslight::pipeline::estimate_scatter_file(
+        &args.water_column,
+        &args.out,
+        args.memory,
+        &console,
+    )?;
+    if !args.quiet {
+        eprintln!(
+            "abysslight: S from {} frame(s) written to {} ({} failed)",
+            s.frames,
+            args.out.display(),
+            s.failed
+        );
+    }
+    Ok(ExitCode::from(if s.failed == 0 {
+        EXIT_OK
+    } else {
+        EXIT_SOME_FAILED
+    }))
+}
+
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     let w = choose_window(args.contamination, args.risk)?;
     println!("n = {}", w.n);
@@ -307,6 +363,7 @@ pub fn run() -> ExitCode {
     let result = match cli.command {
         Command::Correct(a) => correct(*a),
         Command::Window(a) => window(a),
+        Command::Scatter(a) => scatter(a),
     };
     match result {
         Ok(code) => code,

@@ -2,7 +2,7 @@
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use image::{DynamicImage, ImageFormat};
@@ -82,24 +82,30 @@ pub fn format_of(path: &Path) -> Option<ImageFormat> {
     ImageFormat::from_path(path).ok()
 }
 
-/// Decode a photo into its native 8- or 16-bit samples.
+/// Decode a photo into its native 8- or 16-bit samples. JPEGs are decoded strictly: damaged or truncated data is
+/// an error (lenient decoders fill the missing part with grey).
 pub fn decode(path: &Path) -> Result<Photo> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
-    if file.metadata().map(|m| m.len()).unwrap_or(1) == 0 {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if data.is_empty() {
         return Err(Error::Decode {
             path: path.to_owned(),
             reason: "empty file (0 bytes)".into(),
         });
     }
-    let mut reader = image::ImageReader::new(BufReader::new(file))
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
-    if reader.format().is_none() {
-        reader.set_format(format_of(path).ok_or_else(|| Error::Decode {
+    let format = image::guess_format(&data)
+        .ok()
+        .or_else(|| format_of(path))
+        .ok_or_else(|| Error::Decode {
             path: path.to_owned(),
             reason: "unknown image format".into(),
-        })?);
+        })?;
+    if format == ImageFormat::Jpeg {
+        return decode_jpeg_strict(&data).map_err(|reason| Error::Decode {
+            path: path.to_owned(),
+            reason,
+        });
     }
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data), format);
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(8 << 30);
     reader.limits(limits);
@@ -110,6 +116,46 @@ pub fn decode(path: &Path) -> Result<Photo> {
     photo_from_dynamic(img).map_err(|reason| Error::Decode {
         path: path.to_owned(),
         reason,
+    })
+}
+
+fn decode_jpeg_strict(data: &[u8]) -> std::result::Result<Photo, String> {
+    use zune_core::bytestream::ZCursor;
+    use zune_core::colorspace::ColorSpace;
+    use zune_core::options::DecoderOptions;
+    let options = DecoderOptions::default()
+        .set_strict_mode(true)
+        .set_max_width(usize::MAX)
+        .set_max_height(usize::MAX);
+    let mut dec = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(data), options);
+    let damaged = |e: zune_jpeg::errors::DecodeErrors| format!("damaged or truncated JPEG: {e}");
+    dec.decode_headers().map_err(damaged)?;
+    let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
+    let grey = matches!(
+        dec.input_colorspace(),
+        Some(ColorSpace::Luma | ColorSpace::LumaA)
+    );
+    let channels = if grey { 1 } else { 3 };
+    dec.set_options(dec.options().jpeg_set_out_colorspace(if grey {
+        ColorSpace::Luma
+    } else {
+        ColorSpace::RGB
+    }));
+    let pixels = dec.decode().map_err(damaged)?;
+    if pixels.len() != width * height * channels {
+        return Err(format!(
+            "damaged JPEG: decoded {} samples for {width}x{height}x{channels}",
+            pixels.len()
+        ));
+    }
+    Ok(Photo {
+        layout: Layout {
+            width,
+            height,
+            channels,
+        },
+        samples: Samples::U8(pixels),
+        alpha: None,
     })
 }
 

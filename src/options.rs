@@ -109,6 +109,52 @@ impl fmt::Display for SeafloorColour {
     }
 }
 
+/// One of `count` contiguous chunks of a survey (`--shard K/N`, `K` from 1 to `N`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct Shard {
+    /// 1-based.
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// The photos `[start, end)` of a survey of `total` photos that this shard writes.
+    pub fn range(&self, total: usize) -> std::ops::Range<usize> {
+        let bound = |k: usize| k * total / self.count;
+        bound(self.index - 1)..bound(self.index)
+    }
+}
+
+impl FromStr for Shard {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || format!("invalid shard {s:?}: expected K/N with 1 <= K <= N, e.g. 3/10");
+        let (k, n) = s.trim().split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+impl TryFrom<String> for Shard {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<Shard> for String {
+    fn from(s: Shard) -> String {
+        format!("{}/{}", s.index, s.count)
+    }
+}
+
 /// Settings of a correction run. Field docs give the default and the symbol in Köser et al.
 ///
 /// The same struct is read from a `--config` TOML file (keys in kebab-case, e.g. `seafloor-colour = "#8a7560"`)
@@ -150,6 +196,13 @@ pub struct Options {
     /// Memory the scatter estimate may hold at once, in MiB; more water-column frames than fit are processed in
     /// row bands (each frame decoded once per band). Default: 2048.
     pub scatter_memory_mib: usize,
+    /// Skip photos whose output already exists (complete: outputs are only ever renamed into place when
+    /// complete). Their neighbours are still read for the windows, so results equal an uninterrupted run.
+    /// Default: false.
+    pub resume: bool,
+    /// Write only chunk `K` of `N` contiguous chunks of the survey (reading the neighbours its windows need).
+    /// The union of all shards' outputs equals a single run. Default: none (the whole survey).
+    pub shard: Option<Shard>,
 }
 
 impl Default for Options {
@@ -170,6 +223,8 @@ impl Default for Options {
             jpeg_quality: 95,
             threads: None,
             scatter_memory_mib: 2048,
+            resume: false,
+            shard: None,
         }
     }
 }
@@ -303,6 +358,32 @@ mod tests {
             err.contains("mission.toml") && err.contains("windw"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn shards_cover_the_survey_exactly_once() {
+        assert_eq!(
+            "3/10".parse::<Shard>().unwrap(),
+            Shard {
+                index: 3,
+                count: 10
+            }
+        );
+        for bad in ["0/3", "4/3", "3", "a/b", "1/0"] {
+            assert!(bad.parse::<Shard>().is_err(), "{bad}");
+        }
+        for total in [0usize, 1, 5, 17, 100] {
+            for count in 1..=7 {
+                let mut next = 0;
+                for index in 1..=count {
+                    let r = Shard { index, count }.range(total);
+                    assert_eq!(r.start, next);
+                    assert!(r.len() <= total.div_ceil(count));
+                    next = r.end;
+                }
+                assert_eq!(next, total);
+            }
+        }
     }
 
     #[test]

@@ -12,6 +12,7 @@
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -22,11 +23,11 @@ use crate::error::{Error, Result};
 use crate::factor::{factor, lit_seafloor};
 use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::median::{block_median, stack_median};
-use crate::metadata;
 use crate::options::Options;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::scatter::{self, Scatter};
+use crate::source::{FileList, Item, Role, Sink, Source};
 use crate::window::window_range;
 
 fn ms(since: Instant) -> f64 {
@@ -79,23 +80,76 @@ fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
     Ok(())
 }
 
-struct Decoded {
-    entry: Entry,
-    photo: Result<Photo>,
+/// Counts the full-resolution photos alive at once (decoded and not yet written or dropped).
+#[derive(Default)]
+struct LiveCount {
+    now: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+impl LiveCount {
+    fn enter(&self) -> Live<'_> {
+        let v = self.now.fetch_add(1, Ordering::SeqCst) + 1;
+        self.peak.fetch_max(v, Ordering::SeqCst);
+        Live(self)
+    }
+}
+
+/// Held beside each decoded photo; leaving scope marks the photo as freed.
+struct Live<'a>(&'a LiveCount);
+
+impl Drop for Live<'_> {
+    fn drop(&mut self) {
+        self.0.now.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+struct Decoded<'a> {
+    item: Item,
+    photo: Result<(Photo, Live<'a>)>,
     decode_ms: f64,
 }
 
-struct Waiting {
+struct Waiting<'a> {
     seq: usize,
-    entry: Entry,
+    item: Item,
     photo: Photo,
+    _live: Live<'a>,
     decode_ms: f64,
     downsample_ms: f64,
 }
 
-struct WriteJob {
+/// True when `path` holds an output of an earlier run. Outputs are only ever renamed into place once complete,
+/// so existence means complete; the header is read as a cheap check against foreign or damaged files.
+pub fn output_complete(path: &Path) -> bool {
+    image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .ok()
+        .and_then(|r| r.into_dimensions().ok())
+        .is_some_and(|(w, h)| w > 0 && h > 0)
+}
+
+/// Index of the first photo this shard must read: far enough back that `n − 1` usable photos precede its chunk
+/// (a window reaches at most that far), or the start of the survey.
+fn halo_start(entries: &[Entry], chunk_start: usize, n: usize) -> usize {
+    let mut usable = 0;
+    let mut layout = None;
+    let mut i = chunk_start;
+    while i > 0 && usable + 1 < n {
+        i -= 1;
+        if let Ok(p) = decode(&entries[i].path) {
+            if *layout.get_or_insert(p.layout) == p.layout {
+                usable += 1;
+            }
+        }
+    }
+    i
+}
+
+struct WriteJob<'a> {
     photo: Photo,
     frame: FrameReport,
+    _live: Live<'a>,
 }
 
 /// Output path of a survey photo.
@@ -230,12 +284,65 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     }
     let scatter_low = scatter.as_ref().map(|s| s.downsampled(k));
 
-    // --- the survey stream -----------------------------------------------------------------------------------
+    // --- which photos to read and which to write ---------------------------------------------------------------
     let total_files = found.photos.len();
+    let chunk = opts.shard.map_or(0..total_files, |s| s.range(total_files));
+    let first = if chunk.start > 0 {
+        halo_start(&found.photos, chunk.start, n)
+    } else {
+        0
+    };
+    let mut skipped_existing = 0usize;
+    let items: Vec<Item> = found.photos[first..]
+        .iter()
+        .enumerate()
+        .map(|(j, entry)| {
+            let i = first + j;
+            let role = if !chunk.contains(&i) {
+                Role::Halo
+            } else if opts.resume && output_complete(&output_path(out, entry)) {
+                skipped_existing += 1;
+                Role::Done
+            } else {
+                Role::Write
+            };
+            Item {
+                index: j,
+                entry: entry.clone(),
+                role,
+            }
+        })
+        .collect();
+    let total_items = items.len();
+    let source = FileList::new(items);
+    let sink = Sink::Folder;
+    // The stream can stop once every photo of the chunk has been handled.
+    let last_needed = chunk.end.saturating_sub(first);
+    if let Some(s) = opts.shard {
+        progress.stage(&format!(
+            "shard {}/{}: photos {}..{} of {} (reading {} before and up to {} after for the windows)",
+            s.index,
+            s.count,
+            chunk.start + 1,
+            chunk.end,
+            total_files,
+            chunk.start - first,
+            n - 1
+        ));
+    }
+    if skipped_existing > 0 {
+        progress.stage(&format!(
+            "resuming: {skipped_existing} photo(s) already have complete outputs and are read for the windows only"
+        ));
+    }
+
+    // --- the survey stream -----------------------------------------------------------------------------------
+    let to_handle = chunk.len();
     progress.stage(&format!(
-        "correcting {total_files} survey photos (window n = {n}, blocks {k}x{k})"
+        "correcting {} survey photos (window n = {n}, blocks {k}x{k})",
+        to_handle - skipped_existing
     ));
-    progress.start(total_files);
+    progress.start(to_handle);
     let writers = opts
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
@@ -248,40 +355,37 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut totals = CorrectStats::default();
     let mut layout: Option<Layout> = None;
     let mut survey_failed = 0usize;
+    let live = LiveCount::default();
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
-        let (dec_tx, dec_rx) = bounded::<Decoded>(2);
-        let (wr_tx, wr_rx) = bounded::<WriteJob>(writers);
-        let entries = &found.photos;
+        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
+        let (wr_tx, wr_rx) = bounded::<WriteJob<'_>>(writers);
+        let live = &live;
+        let mut source = source;
         scope.spawn(move || {
-            for entry in entries {
-                let t = Instant::now();
-                let photo = decode(&entry.path);
-                if dec_tx
-                    .send(Decoded {
-                        entry: entry.clone(),
-                        photo,
-                        decode_ms: ms(t),
-                    })
-                    .is_err()
-                {
+            while let Some((item, photo, decode_ms)) = source.next_photo() {
+                let d = Decoded {
+                    item,
+                    photo: photo.map(|p| (p, live.enter())),
+                    decode_ms,
+                };
+                if dec_tx.send(d).is_err() {
                     break;
                 }
             }
         });
         for _ in 0..writers {
             let rx = wr_rx.clone();
-            let (done, write_errors) = (&done, &write_errors);
+            let (done, write_errors, sink) = (&done, &write_errors, &sink);
             scope.spawn(move || {
                 for mut job in rx {
                     let t = Instant::now();
                     // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
                     let (input, output) = (&job.frame.input, &job.frame.output);
                     let warn = |m: &str| progress.warn(m);
-                    let r = metadata::write_carrying(&job.photo, input, output, settings, &warn);
+                    let r = sink.write(&job.photo, input, output, settings, &warn);
                     job.frame.encode_ms = ms(t);
-                    let ok = r.is_ok();
-                    progress.photo_done(&job.frame.input, ok);
+                    progress.photo_done(&job.frame.input, r.is_ok());
                     match r {
                         Ok(()) => done.lock().unwrap().push(job.frame),
                         Err(e) => {
@@ -300,7 +404,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         let mut ring: VecDeque<(usize, Raster)> = VecDeque::with_capacity(n + 1);
         let mut waiting: VecDeque<Waiting> = VecDeque::new();
         let mut seq = 0usize;
-        let ctx = Ctx {
+        let mut ctx = Ctx {
             n,
             k,
             opts,
@@ -309,83 +413,96 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scatter_low: scatter_low.as_ref(),
             out,
             work_dir: &work_dir,
+            progress,
         };
-        let mut ctx = ctx;
+        let mut fail = |errors: &mut Vec<FileError>, item: &Item, e: Error| {
+            // A halo photo belongs to another shard, which reports it.
+            if item.role != Role::Halo {
+                progress.file_error(&e);
+                errors.push(FileError::from_error(&item.entry.path, &e));
+                survey_failed += 1;
+                progress.photo_done(&item.entry.path, false);
+            }
+        };
+        let mut reached_end = true;
         for d in dec_rx {
-            let photo = match d.photo {
-                Ok(p) => p,
-                Err(e) => {
-                    progress.file_error(&e);
-                    errors.push(FileError::from_error(&d.entry.path, &e));
-                    survey_failed += 1;
-                    progress.photo_done(&d.entry.path, false);
-                    continue;
-                }
-            };
-            match layout {
-                None => {
-                    if let Some(s) = &scatter {
-                        if s.full.layout() != photo.layout {
-                            return Err(Error::Mismatch {
-                                path: scatter_info.path.clone().unwrap_or_default(),
-                                reason: format!(
-                                    "scatter estimate is {}, but the survey photos are {} ({}): water-column \
-                                     frames and survey photos must come from the same camera",
-                                    s.full.layout(),
-                                    photo.layout,
-                                    d.entry.path.display()
-                                ),
-                            });
+            let path = &d.item.entry.path;
+            let index = d.item.index;
+            match d.photo {
+                Err(e) => fail(&mut errors, &d.item, e),
+                Ok((photo, photo_live)) => {
+                    let mismatch = match layout {
+                        None => {
+                            if let Some(s) = &scatter {
+                                if s.full.layout() != photo.layout {
+                                    return Err(Error::Mismatch {
+                                        path: scatter_info.path.clone().unwrap_or_default(),
+                                        reason: format!(
+                                            "scatter estimate is {}, but the survey photos are {} ({}): \
+                                             water-column frames and survey photos must come from the same camera",
+                                            s.full.layout(),
+                                            photo.layout,
+                                            path.display()
+                                        ),
+                                    });
+                                }
+                            }
+                            layout = Some(photo.layout);
+                            ctx.colour = opts.seafloor_colour.for_channels(photo.layout.channels);
+                            None
                         }
-                    }
-                    layout = Some(photo.layout);
-                    ctx.colour = opts.seafloor_colour.for_channels(photo.layout.channels);
-                }
-                Some(l) if l != photo.layout => {
-                    let e = Error::Mismatch {
-                        path: d.entry.path.clone(),
-                        reason: format!(
-                            "photo is {}, the mission's photos are {}; skipped (split mixed missions into one \
-                             folder per camera setting)",
-                            photo.layout, l
-                        ),
+                        Some(l) if l != photo.layout => Some(Error::Mismatch {
+                            path: path.clone(),
+                            reason: format!(
+                                "photo is {}, the mission's photos are {}; skipped (split mixed missions into \
+                                 one folder per camera setting)",
+                                photo.layout, l
+                            ),
+                        }),
+                        _ => None,
                     };
-                    progress.file_error(&e);
-                    errors.push(FileError::from_error(&d.entry.path, &e));
-                    survey_failed += 1;
-                    progress.photo_done(&d.entry.path, false);
-                    continue;
+                    if let Some(e) = mismatch {
+                        fail(&mut errors, &d.item, e);
+                    } else {
+                        let t = Instant::now();
+                        let l = photo.layout;
+                        let low = match &photo.samples {
+                            Samples::U8(v) => block_median(v, l.width, l.height, l.channels, k),
+                            Samples::U16(v) => block_median(v, l.width, l.height, l.channels, k),
+                        };
+                        ring.push_back((seq, low));
+                        if ring.len() > n {
+                            ring.pop_front();
+                        }
+                        waiting.push_back(Waiting {
+                            seq,
+                            item: d.item,
+                            photo,
+                            _live: photo_live,
+                            decode_ms: d.decode_ms,
+                            downsample_ms: ms(t),
+                        });
+                        seq += 1;
+                        ctx.flush(&mut waiting, &ring, seq, false, &wr_tx, &mut totals)?;
+                    }
                 }
-                _ => {}
             }
-            let t = Instant::now();
-            let l = photo.layout;
-            let low = match &photo.samples {
-                Samples::U8(v) => block_median(v, l.width, l.height, l.channels, k),
-                Samples::U16(v) => block_median(v, l.width, l.height, l.channels, k),
-            };
-            ring.push_back((seq, low));
-            if ring.len() > n {
-                ring.pop_front();
+            // A shard stops reading once every photo of its chunk has been corrected.
+            if index + 1 >= last_needed && waiting.iter().all(|w| w.item.role == Role::Halo) {
+                reached_end = index + 1 == total_items;
+                break;
             }
-            waiting.push_back(Waiting {
-                seq,
-                entry: d.entry,
-                photo,
-                decode_ms: d.decode_ms,
-                downsample_ms: ms(t),
-            });
-            seq += 1;
-            ctx.flush(&mut waiting, &ring, seq, false, &wr_tx, &mut totals)?;
         }
-        ctx.flush(&mut waiting, &ring, seq, true, &wr_tx, &mut totals)?;
-        if seq > 0 && seq < n {
-            let m = format!(
-                "only {seq} usable survey photo(s), fewer than the window n = {n}: every photo's F is the median \
-                 of all of them"
-            );
-            progress.warn(&m);
-            warnings.push(m);
+        if reached_end {
+            ctx.flush(&mut waiting, &ring, seq, true, &wr_tx, &mut totals)?;
+            if seq > 0 && seq < n {
+                let m = format!(
+                    "only {seq} usable survey photo(s), fewer than the window n = {n}: every photo's F is the \
+                     median of all of them"
+                );
+                progress.warn(&m);
+                warnings.push(m);
+            }
         }
         drop(wr_tx);
         Ok(())
@@ -407,6 +524,8 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         scatter: scatter_info,
         survey_photos: total_files,
         corrected: frames.len(),
+        skipped_existing,
+        peak_photos_in_memory: live.peak.load(Ordering::SeqCst),
         failed: survey_failed,
         water_column_failed,
         ignored_files: found.ignored.len(),
@@ -418,7 +537,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         elapsed_s: started.elapsed().as_secs_f64(),
         report_path: None,
     };
-    let report_path = work_dir.join("report.json");
+    let report_path = work_dir.join(match opts.shard {
+        Some(s) => format!("report-shard-{}-of-{}.json", s.index, s.count),
+        None => "report.json".into(),
+    });
     report.report_path = Some(report_path.clone());
     io::write_with(&report_path, |w| {
         serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
@@ -427,6 +549,45 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         })
     })?;
     Ok(report)
+}
+
+/// What [`estimate_scatter_file`] did.
+#[derive(Debug, Clone, Copy)]
+pub struct ScatterRun {
+    pub frames: usize,
+    pub failed: usize,
+}
+
+/// `abysslight scatter`: estimate `S` from a folder of water-column frames and write it as a 16-bit PNG.
+pub fn estimate_scatter_file(
+    water_column: &Path,
+    out: &Path,
+    memory_mib: usize,
+    progress: &dyn Progress,
+) -> Result<ScatterRun> {
+    check_output_folder(out, &[("water-column", water_column)])?;
+    let wc = find_photos(water_column)?;
+    progress.stage(&format!(
+        "estimating scatter S from {} water-column frames in {}",
+        wc.photos.len(),
+        water_column.display()
+    ));
+    let mut failed = 0;
+    let s = scatter::estimate(&wc.photos, memory_mib.max(1) << 20, |e| {
+        progress.file_error(&e);
+        failed += 1;
+    })?
+    .ok_or_else(|| {
+        Error::Usage(format!(
+            "no usable water-column frames in {}",
+            water_column.display()
+        ))
+    })?;
+    io::save_raster_png16(&s.full, out)?;
+    Ok(ScatterRun {
+        frames: s.frames,
+        failed,
+    })
 }
 
 fn error_path(e: &Error) -> &Path {
@@ -450,17 +611,18 @@ struct Ctx<'a> {
     scatter_low: Option<&'a Raster>,
     out: &'a Path,
     work_dir: &'a Path,
+    progress: &'a dyn Progress,
 }
 
 impl Ctx<'_> {
     /// Correct every waiting photo whose window is complete (all of them at the end of the stream).
-    fn flush(
+    fn flush<'l>(
         &self,
-        waiting: &mut VecDeque<Waiting>,
+        waiting: &mut VecDeque<Waiting<'l>>,
         ring: &VecDeque<(usize, Raster)>,
         decoded: usize,
         eof: bool,
-        wr_tx: &crossbeam_channel::Sender<WriteJob>,
+        wr_tx: &crossbeam_channel::Sender<WriteJob<'l>>,
         totals: &mut CorrectStats,
     ) -> Result<()> {
         while let Some(front) = waiting.front() {
@@ -475,6 +637,15 @@ impl Ctx<'_> {
                 break;
             }
             let mut w = waiting.pop_front().unwrap();
+            let entry = &w.item.entry;
+            match w.item.role {
+                Role::Write => {}
+                Role::Halo => continue,
+                Role::Done => {
+                    self.progress.photo_done(&entry.path, true);
+                    continue;
+                }
+            }
             let t = Instant::now();
             let stack: Vec<&Raster> = ring
                 .iter()
@@ -493,7 +664,7 @@ impl Ctx<'_> {
                 let p = self
                     .work_dir
                     .join("factors")
-                    .join(&w.entry.relative)
+                    .join(&entry.relative)
                     .with_extension("png");
                 io::save_raster_png16(&lit_seafloor(&f, &self.colour), &p)?;
             }
@@ -506,8 +677,8 @@ impl Ctx<'_> {
             };
             *totals += stats;
             let frame = FrameReport {
-                output: output_path(self.out, &w.entry),
-                input: w.entry.path,
+                output: output_path(self.out, entry),
+                input: entry.path.clone(),
                 index: i,
                 window: [range.start, range.end - 1],
                 decode_ms: w.decode_ms,
@@ -521,6 +692,7 @@ impl Ctx<'_> {
                 .send(WriteJob {
                     photo: w.photo,
                     frame,
+                    _live: w._live,
                 })
                 .is_err()
             {

@@ -101,6 +101,11 @@ pub struct Report {
     pub survey_photos: usize,
     /// Photos corrected and written.
     pub corrected: usize,
+    /// Photos skipped because `--resume` found their output complete.
+    pub skipped_existing: usize,
+    /// Most full-resolution photos held at once (waiting for their window, queued for decoding or writing).
+    /// Bounded by `n + 3 + 2·threads`, whatever the mission length.
+    pub peak_photos_in_memory: usize,
     /// Photos that failed (decode, mismatch or write errors).
     pub failed: usize,
     /// Water-column frames that failed.

@@ -1,0 +1,246 @@
+//! Transfer curves: how stored sample values relate to light. The model `I = A·F + S` holds for radiance, so a
+//! gamma-encoded photo (most JPEGs) is converted to linear values before estimation and correction, and back
+//! after. Medians commute with these monotonic curves, so the medians are taken on the stored values.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+/// A transfer curve between stored values `v` and linear light `L`, both in `[0, 1]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum Transfer {
+    /// Stored values are linear in light (machine-vision cameras, RAW conversions).
+    Linear,
+    /// The sRGB curve (IEC 61966-2-1), used by almost every JPEG.
+    Srgb,
+    /// A pure power law `L = v^G`.
+    Gamma(f32),
+}
+
+impl Transfer {
+    /// Stored value to linear light.
+    pub fn to_linear(self, v: f32) -> f32 {
+        let v = v.clamp(0.0, 1.0);
+        match self {
+            Transfer::Linear => v,
+            Transfer::Srgb => {
+                if v <= 0.04045 {
+                    v / 12.92
+                } else {
+                    ((v + 0.055) / 1.055).powf(2.4)
+                }
+            }
+            Transfer::Gamma(g) => v.powf(g),
+        }
+    }
+
+    /// Linear light to stored value.
+    pub fn from_linear(self, l: f32) -> f32 {
+        let l = l.clamp(0.0, 1.0);
+        match self {
+            Transfer::Linear => l,
+            Transfer::Srgb => {
+                if l <= 0.003_130_8 {
+                    l * 12.92
+                } else {
+                    1.055 * l.powf(1.0 / 2.4) - 0.055
+                }
+            }
+            Transfer::Gamma(g) => l.powf(1.0 / g),
+        }
+    }
+
+    pub fn is_linear(self) -> bool {
+        self == Transfer::Linear || self == Transfer::Gamma(1.0)
+    }
+}
+
+impl Default for Transfer {
+    fn default() -> Self {
+        Transfer::Linear
+    }
+}
+
+impl FromStr for Transfer {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let t = s.trim().to_ascii_lowercase();
+        match t.as_str() {
+            "linear" => Ok(Transfer::Linear),
+            "srgb" => Ok(Transfer::Srgb),
+            _ => {
+                let g = t
+                    .strip_prefix("gamma:")
+                    .and_then(|g| g.parse::<f32>().ok())
+                    .filter(|g| *g > 0.0 && g.is_finite() && *g <= 10.0)
+                    .ok_or_else(|| {
+                        format!("invalid transfer {s:?}: expected srgb, linear or gamma:G (e.g. gamma:2.2)")
+                    })?;
+                Ok(Transfer::Gamma(g))
+            }
+        }
+    }
+}
+
+impl TryFrom<String> for Transfer {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<Transfer> for String {
+    fn from(t: Transfer) -> String {
+        t.to_string()
+    }
+}
+
+impl fmt::Display for Transfer {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Transfer::Linear => write!(f, "linear"),
+            Transfer::Srgb => write!(f, "srgb"),
+            Transfer::Gamma(g) => write!(f, "gamma:{g}"),
+        }
+    }
+}
+
+/// Tables for one transfer curve and one sample depth (`levels` = 256 or 65536): stored code → linear light, and
+/// linear light → nearest stored code.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    transfer: Transfer,
+    max: f32,
+    to_lin: Vec<f32>,
+    /// `thresholds[k]`: linear light at the boundary between codes `k` and `k + 1` (empty when linear).
+    thresholds: Vec<f32>,
+}
+
+impl Curve {
+    pub fn new(transfer: Transfer, levels: usize) -> Curve {
+        let max = (levels - 1) as f32;
+        let linear = transfer.is_linear();
+        let to_lin = if linear {
+            Vec::new()
+        } else {
+            (0..levels)
+                .map(|i| transfer.to_linear(i as f32 / max))
+                .collect()
+        };
+        let thresholds = if linear {
+            Vec::new()
+        } else {
+            (0..levels - 1)
+                .map(|k| transfer.to_linear((k as f32 + 0.5) / max))
+                .collect()
+        };
+        Curve {
+            transfer,
+            max,
+            to_lin,
+            thresholds,
+        }
+    }
+
+    pub fn transfer(&self) -> Transfer {
+        self.transfer
+    }
+
+    /// Linear light of a stored code.
+    #[inline]
+    pub fn linear(&self, code: u16) -> f32 {
+        if self.to_lin.is_empty() {
+            code as f32 / self.max
+        } else {
+            self.to_lin[code as usize]
+        }
+    }
+
+    /// Linear light of a stored value given in `[0, 1]` (e.g. a median between two codes).
+    #[inline]
+    pub fn linear_of_value(&self, v: f32) -> f32 {
+        if self.to_lin.is_empty() {
+            v
+        } else {
+            self.transfer.to_linear(v)
+        }
+    }
+
+    /// The stored code nearest (in stored values) to linear light `l`, clamped to the code range.
+    #[inline]
+    pub fn code(&self, l: f32) -> u16 {
+        if self.thresholds.is_empty() {
+            let v = l * self.max + 0.5;
+            return v.clamp(0.0, self.max) as u16;
+        }
+        // Number of thresholds at or below l: a binary search over a monotonic table.
+        self.thresholds.partition_point(|&t| t <= l) as u16
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_known_values_and_round_trip() {
+        let s = Transfer::Srgb;
+        assert!((s.to_linear(0.5) - 0.214_041).abs() < 1e-5);
+        assert!((s.to_linear(1.0) - 1.0).abs() < 1e-6);
+        assert!((s.from_linear(0.18) - 0.461_356).abs() < 1e-5);
+        for t in [
+            Transfer::Srgb,
+            Transfer::Gamma(2.2),
+            Transfer::Linear,
+            Transfer::Gamma(0.8),
+        ] {
+            for i in 0..=1000 {
+                let v = i as f32 / 1000.0;
+                assert!((t.from_linear(t.to_linear(v)) - v).abs() < 2e-5, "{t} {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn curve_codes_round_trip_exactly_for_8_and_16_bit() {
+        for t in [Transfer::Srgb, Transfer::Gamma(2.2), Transfer::Linear] {
+            for levels in [256usize, 65536] {
+                let c = Curve::new(t, levels);
+                let step = if levels == 256 { 1 } else { 97 };
+                for code in (0..levels).step_by(step) {
+                    assert_eq!(c.code(c.linear(code as u16)) as usize, code, "{t} {levels}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn curve_code_is_the_nearest_stored_value() {
+        let c = Curve::new(Transfer::Srgb, 256);
+        for i in 0..=2000 {
+            let l = i as f32 / 2000.0;
+            let expect = (Transfer::Srgb.from_linear(l) * 255.0).round();
+            let got = c.code(l) as f32;
+            // Ties can fall either way within float error.
+            assert!((got - expect).abs() <= 1.0, "{l}: {got} vs {expect}");
+            let v = Transfer::Srgb.from_linear(l) * 255.0;
+            assert!((got - v).abs() <= 0.5 + 1e-3, "{l}: {got} vs {v}");
+        }
+        assert_eq!(c.code(-1.0), 0);
+        assert_eq!(c.code(2.0), 255);
+    }
+
+    #[test]
+    fn parse() {
+        assert_eq!("sRGB".parse::<Transfer>().unwrap(), Transfer::Srgb);
+        assert_eq!(
+            "gamma:2.2".parse::<Transfer>().unwrap(),
+            Transfer::Gamma(2.2)
+        );
+        for bad in ["", "gamma", "gamma:-1", "log"] {
+            assert!(bad.parse::<Transfer>().is_err(), "{bad}");
+        }
+    }
+}
