@@ -53,7 +53,7 @@ use crate::error::{Error, Result};
 use crate::io::{self, EncodeSettings};
 use crate::raster::Photo;
 
-pub use ifd::Order;
+use ifd::Order;
 
 /// A text entry: a PNG text chunk, or a JPEG comment (keyword `Comment`).
 #[derive(Debug, Clone, PartialEq, Eq)]
