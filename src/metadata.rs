@@ -53,8 +53,6 @@ use crate::error::{Error, Result};
 use crate::io::{self, EncodeSettings};
 use crate::raster::Photo;
 
-use ifd::Order;
-
 /// A text entry: a PNG text chunk, or a JPEG comment (keyword `Comment`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Text {
@@ -298,7 +296,7 @@ pub fn write_carrying(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ifd::{Entry, Ifd};
+    use ifd::{Entry, Ifd, Order};
 
     /// An EXIF block with IFD0 (Model), IFD1 and a thumbnail at its end, laid out as cameras do.
     fn exif_with_thumbnail(order: Order) -> (Vec<u8>, usize) {

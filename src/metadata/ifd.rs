@@ -64,6 +64,7 @@ impl Order {
     }
 
     /// The native order of this machine (the order the `tiff` crate writes).
+    #[cfg(test)]
     pub fn native() -> Order {
         if cfg!(target_endian = "big") {
             Order::Big

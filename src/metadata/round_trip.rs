@@ -8,6 +8,7 @@ use std::io::Cursor;
 use exif::{Field, In, Rational, Tag, Value};
 use image::ImageDecoder;
 
+use super::ifd::Order;
 use super::*;
 use crate::raster::{Layout, Samples};
 
