@@ -330,6 +330,33 @@ pub fn write_atomic(photo: &Photo, path: &Path, settings: EncodeSettings) -> Res
     })
 }
 
+/// Like [`write_atomic`], and carries `meta` into the output as far as its format allows (see
+/// [`crate::metadata`]). Returns what could not be carried, each a short sentence; that never fails the write.
+pub fn write_atomic_with_metadata(
+    photo: &Photo,
+    path: &Path,
+    settings: EncodeSettings,
+    meta: &crate::metadata::Metadata,
+) -> Result<Vec<String>> {
+    if meta.is_empty() {
+        return write_atomic(photo, path, settings).map(|()| Vec::new());
+    }
+    let format = format_of(path).ok_or_else(|| Error::Encode {
+        path: path.to_owned(),
+        reason: "unknown output format (file name extension)".into(),
+    })?;
+    let mut encoded = Vec::new();
+    encode_to(photo, format, settings, &mut encoded).map_err(|reason| Error::Encode {
+        path: path.to_owned(),
+        reason,
+    })?;
+    let (bytes, dropped) = meta.embed(format, encoded);
+    write_with(path, |w| {
+        w.write_all(&bytes).map_err(|e| Error::io(path, e))
+    })?;
+    Ok(dropped)
+}
+
 /// Atomically create `path` from what `fill` writes: temp file in the same folder, sync, rename.
 pub fn write_with(
     path: &Path,

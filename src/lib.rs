@@ -30,6 +30,7 @@ pub mod factor;
 pub mod io;
 pub mod mask;
 pub mod median;
+pub mod metadata;
 pub mod monitor;
 pub mod options;
 pub mod pipeline;
@@ -41,6 +42,7 @@ pub mod transfer;
 pub mod window;
 
 pub use error::{Error, Result};
+pub use metadata::Metadata;
 pub use options::{Options, SeafloorColour, Shard};
 pub use pipeline::correct_mission;
 pub use raster::{Photo, Raster};

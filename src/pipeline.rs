@@ -493,7 +493,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scope.spawn(move || {
                 for mut job in rx {
                     let t = Instant::now();
-                    let r = sink.write(&job.photo, &job.frame.output, settings);
+                    // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
+                    let (input, output) = (&job.frame.input, &job.frame.output);
+                    let warn = |m: &str| progress.warn(m);
+                    let r = sink.write(&job.photo, input, output, settings, &warn);
                     job.frame.encode_ms = ms(t);
                     progress.photo_done(&job.frame.input, r.is_ok());
                     match r {

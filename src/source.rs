@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::io::{decode, write_atomic, EncodeSettings, Entry};
+use crate::io::{decode, EncodeSettings, Entry};
 use crate::raster::Photo;
 
 /// What to do with a survey photo the stream reads.
@@ -66,10 +66,18 @@ pub enum Sink {
 }
 
 impl Sink {
-    /// Write one corrected photo.
-    pub fn write(&self, photo: &Photo, output: &Path, settings: EncodeSettings) -> Result<()> {
+    /// Write one corrected photo, with the metadata (EXIF, XMP, ICC, ...) of the file `input` it was corrected
+    /// from; `warn` hears what of it could not be read or carried (see [`crate::metadata`]).
+    pub fn write(
+        &self,
+        photo: &Photo,
+        input: &Path,
+        output: &Path,
+        settings: EncodeSettings,
+        warn: &dyn Fn(&str),
+    ) -> Result<()> {
         match self {
-            Sink::Folder => write_atomic(photo, output, settings),
+            Sink::Folder => crate::metadata::write_carrying(photo, input, output, settings, warn),
         }
     }
 }
