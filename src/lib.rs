@@ -25,6 +25,7 @@
 //! ```
 
 pub mod correct;
+pub mod draw;
 pub mod error;
 pub mod factor;
 pub mod io;
@@ -33,6 +34,7 @@ pub mod median;
 pub mod metadata;
 pub mod monitor;
 pub mod options;
+pub mod overview;
 pub mod pipeline;
 pub mod raster;
 pub mod report;

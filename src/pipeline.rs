@@ -26,6 +26,7 @@ use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettin
 use crate::median::{block_median, stack_median};
 use crate::monitor::{contamination, Monitor, Summary, Thresholds};
 use crate::options::Options;
+use crate::overview;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::scatter::{self, Scatter};
@@ -157,13 +158,18 @@ struct WriteJob<'a> {
 
 /// Up to `most` entries spread evenly over `entries` (first and last included).
 fn spread(entries: &[Entry], most: usize) -> Vec<Entry> {
-    let n = entries.len();
-    if n <= most {
-        return entries.to_vec();
-    }
-    (0..most)
-        .map(|i| entries[i * (n - 1) / (most - 1)].clone())
+    spread_indices(entries.len(), most)
+        .into_iter()
+        .map(|i| entries[i].clone())
         .collect()
+}
+
+/// Up to `most` indices spread evenly over `0..n` (first and last included).
+fn spread_indices(n: usize, most: usize) -> Vec<usize> {
+    if n <= most {
+        return (0..n).collect();
+    }
+    (0..most).map(|i| i * (n - 1) / (most - 1).max(1)).collect()
 }
 
 /// Output path of a survey photo.
@@ -469,6 +475,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut layout: Option<Layout> = None;
     let mut survey_failed = 0usize;
     let live = LiveCount::default();
+    let mut flagged_lit: Vec<(usize, Raster)> = Vec::new();
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
         let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
@@ -527,6 +534,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             mask: mask.as_ref(),
             curves: &curves,
             monitor: Monitor::new(Thresholds::default()),
+            flagged_lit: Vec::new(),
             out,
             work_dir: &work_dir,
             progress,
@@ -643,6 +651,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             }
         }
         drop(wr_tx);
+        flagged_lit = std::mem::take(&mut ctx.flagged_lit);
         Ok(())
     });
     progress.finish();
@@ -653,6 +662,31 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut monitor = Summary::default();
     for f in &frames {
         monitor.add(&f.health.flags);
+    }
+    if !frames.is_empty() {
+        let name = match opts.shard {
+            Some(s) => format!("overview-shard-{}-of-{}.png", s.index, s.count),
+            None => "overview.png".into(),
+        };
+        overview::save_png(
+            &overview::overview(&frames, &Thresholds::default()),
+            &work_dir.join(name),
+        )?;
+        let picks = spread_indices(flagged_lit.len(), 6);
+        let rows: Vec<(&FrameReport, &Raster)> = picks
+            .iter()
+            .filter_map(|&j| {
+                let (index, lit) = &flagged_lit[j];
+                frames.iter().find(|f| f.index == *index).map(|f| (f, lit))
+            })
+            .collect();
+        if let Some(sheet) = overview::flagged_sheet(&rows, 320) {
+            let name = match opts.shard {
+                Some(s) => format!("flagged-shard-{}-of-{}.png", s.index, s.count),
+                None => "flagged.png".into(),
+            };
+            overview::save_png(&sheet, &work_dir.join(name))?;
+        }
     }
     let write_errors = write_errors.into_inner().unwrap();
     survey_failed += write_errors.len();
@@ -759,7 +793,12 @@ struct Ctx<'a> {
     /// Transfer tables for 8- and 16-bit photos.
     curves: &'a (Curve, Curve),
     monitor: Monitor,
+    /// `F·C` of flagged photos (at most [`FLAGGED_KEPT`]), for the contact sheet.
+    flagged_lit: Vec<(usize, Raster)>,
 }
+
+/// Flagged photos whose `F·C` is kept for the contact sheet (a few KB each).
+const FLAGGED_KEPT: usize = 200;
 
 impl Ctx<'_> {
     /// Correct every waiting photo whose window is complete (all of them at the end of the stream).
@@ -827,6 +866,9 @@ impl Ctx<'_> {
                     "only {decoded} photos in the mission, fewer than the window n = {}",
                     self.n
                 ));
+            }
+            if !health.flags.is_empty() && self.flagged_lit.len() < FLAGGED_KEPT {
+                self.flagged_lit.push((i, lit.clone()));
             }
             let estimate_ms = w.downsample_ms + ms(t);
             if self.opts.save_factors {

@@ -238,6 +238,11 @@ fn seafloor_colour_change_half_way_is_flagged() {
         r.frames[25].health.flags
     );
     assert!(r.monitor.colour_shift >= 11, "{:?}", r.monitor);
+    // The user sees it: an overview plot and a contact sheet of flagged photos with their F.
+    let overview = image::open(d.path().join("out/_abysslight/overview.png")).unwrap();
+    assert!(overview.width() >= 600 && overview.height() >= 400);
+    let sheet = image::open(d.path().join("out/_abysslight/flagged.png")).unwrap();
+    assert!(sheet.height() > 6 * 48, "six flagged photos in rows");
     // A dive without a change is not flagged.
     let steady = dive_with(64, 48, frames, 0, 0.2, false, 23, |_| SEDIMENT);
     write_all(&steady.photos, &d.path().join("steady"), "img", "png");

@@ -1,0 +1,214 @@
+//! Pictures for the user to see where to distrust the output: a mission overview plot of the monitoring series
+//! with flagged photos marked (`_abysslight/overview.png`), and a contact sheet of flagged photos beside their
+//! lit-seafloor image `F·C` (`_abysslight/flagged.png`).
+
+use std::path::Path;
+
+use image::RgbImage;
+
+use crate::draw::{self, BLACK, BLUE, GREY, RED, WHITE};
+use crate::error::{Error, Result};
+use crate::monitor::Thresholds;
+use crate::raster::Raster;
+use crate::report::FrameReport;
+
+/// One plotted series.
+struct Series<'a> {
+    title: &'a str,
+    values: Vec<f32>,
+    threshold: f32,
+}
+
+/// Draw the mission overview: contamination, change of F, colour shift of F, per photo; flagged photos in red.
+pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
+    let series = [
+        Series {
+            title: "contamination (share of blocks off the seafloor colour)",
+            values: frames.iter().map(|f| f.health.contamination).collect(),
+            threshold: t.contamination,
+        },
+        Series {
+            title: "change of F from the previous photo",
+            values: frames.iter().map(|f| f.health.factor_change).collect(),
+            threshold: t.factor_change,
+        },
+        Series {
+            title: "colour shift of F against the mission start",
+            values: frames.iter().map(|f| f.health.colour_shift).collect(),
+            threshold: t.colour_shift,
+        },
+    ];
+    let n = frames.len().max(1);
+    let (left, right, panel_h, title_h, gap) = (70i64, 20i64, 130i64, 22i64, 14i64);
+    let plot_w = (n as i64 * 3).clamp(600, 1600);
+    let width = (left + plot_w + right) as u32;
+    let height = (40 + series.len() as i64 * (title_h + panel_h + gap) + 30) as u32;
+    let mut img = RgbImage::from_pixel(width, height, WHITE);
+    let flagged = frames.iter().filter(|f| !f.health.flags.is_empty()).count();
+    let title = format!(
+        "abysslight: {} photos, {} flagged (red)",
+        frames.len(),
+        flagged
+    );
+    let scale = if draw::text_width(&title, 2) as i64 + left < width as i64 {
+        2
+    } else {
+        1
+    };
+    draw::text(&mut img, left, 10, &title, scale, BLACK);
+    let x_of = |i: usize| {
+        left + if n > 1 {
+            i as i64 * (plot_w - 1) / (n as i64 - 1)
+        } else {
+            plot_w / 2
+        }
+    };
+    let mut top = 40i64;
+    for s in &series {
+        draw::text(&mut img, left, top + 4, s.title, 1, BLACK);
+        let y0 = top + title_h;
+        let vmax = s
+            .values
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(s.threshold * 1.5, f32::max);
+        let y_of =
+            |v: f32| y0 + panel_h - 1 - ((v / vmax).clamp(0.0, 1.0) * (panel_h - 1) as f32) as i64;
+        // Flagged photos: red bands behind the series.
+        for (i, f) in frames.iter().enumerate() {
+            if !f.health.flags.is_empty() {
+                draw::fill_rect(
+                    &mut img,
+                    x_of(i) - 1,
+                    y0,
+                    3,
+                    panel_h as u32,
+                    image::Rgb([255, 200, 200]),
+                );
+            }
+        }
+        // Frame, threshold, axis labels.
+        draw::line(&mut img, (left, y0), (left, y0 + panel_h - 1), BLACK);
+        draw::line(
+            &mut img,
+            (left, y0 + panel_h - 1),
+            (left + plot_w - 1, y0 + panel_h - 1),
+            BLACK,
+        );
+        let ty = y_of(s.threshold);
+        for x in (left..left + plot_w).step_by(6) {
+            draw::line(&mut img, (x, ty), (x + 2, ty), RED);
+        }
+        draw::text(&mut img, 4, y0 - 4, &format!("{vmax:.2}"), 1, GREY);
+        draw::text(&mut img, 4, ty - 4, &format!("{:.2}", s.threshold), 1, RED);
+        draw::text(&mut img, 4, y0 + panel_h - 8, "0", 1, GREY);
+        // The series.
+        let mut prev: Option<(i64, i64)> = None;
+        for (i, v) in s.values.iter().enumerate() {
+            let p = (x_of(i), y_of(*v));
+            if let Some(q) = prev {
+                draw::line(&mut img, q, p, BLUE);
+            }
+            draw::fill_rect(&mut img, p.0 - 1, p.1 - 1, 3, 3, BLUE);
+            prev = Some(p);
+        }
+        top += title_h + panel_h + gap;
+    }
+    draw::text(&mut img, left, top, "photo 1", 1, BLACK);
+    let last = format!("photo {}", frames.len());
+    draw::text(
+        &mut img,
+        left + plot_w - draw::text_width(&last, 1) as i64,
+        top,
+        &last,
+        1,
+        BLACK,
+    );
+    img
+}
+
+/// A contact sheet of flagged photos: corrected photo | `F·C`, with the photo's name and first reason.
+pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<RgbImage> {
+    if rows.is_empty() {
+        return None;
+    }
+    let gap = 6u32;
+    let label_h = 40u32;
+    let mut tiles = Vec::new();
+    for (frame, lit) in rows {
+        let corrected = image::open(&frame.output).ok()?.to_rgb8();
+        let a = draw::tile(&corrected, tile_w, true);
+        let f = draw::tile(&raster_rgb(lit), tile_w, false);
+        tiles.push((frame, a, f));
+    }
+    let h: u32 = tiles
+        .iter()
+        .map(|(_, a, f)| a.height().max(f.height()) + label_h + gap)
+        .sum::<u32>()
+        + gap;
+    let mut img = RgbImage::from_pixel(2 * tile_w + 3 * gap, h, WHITE);
+    let mut y = gap as i64;
+    for (frame, a, f) in &tiles {
+        let name = frame
+            .input
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        draw::text(
+            &mut img,
+            gap as i64,
+            y,
+            &format!("#{} {name}", frame.index + 1),
+            1,
+            BLACK,
+        );
+        let reason: Vec<char> = frame
+            .health
+            .flags
+            .first()
+            .map_or(Vec::new(), |r| r.chars().collect());
+        let max_chars = ((2 * tile_w + gap) / 8) as usize;
+        for (line, chunk) in reason.chunks(max_chars).take(2).enumerate() {
+            let text: String = chunk.iter().collect();
+            draw::text(
+                &mut img,
+                gap as i64,
+                y + 12 + 11 * line as i64,
+                &text,
+                1,
+                RED,
+            );
+        }
+        y += label_h as i64;
+        image::imageops::replace(&mut img, a, gap as i64, y);
+        image::imageops::replace(&mut img, f, (2 * gap + tile_w) as i64, y);
+        y += (a.height().max(f.height()) + gap) as i64;
+    }
+    Some(img)
+}
+
+/// A raster in `[0, 1]` as an 8-bit RGB image (grey rasters replicated), scaled so its 99th percentile is white.
+fn raster_rgb(r: &Raster) -> RgbImage {
+    let mut v: Vec<f32> = r.data.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f32::total_cmp);
+    let top = v.get(v.len() * 99 / 100).copied().unwrap_or(1.0).max(1e-6);
+    RgbImage::from_fn(r.width as u32, r.height as u32, |x, y| {
+        let px = |c: usize| {
+            let ch = if r.channels == 3 { c } else { 0 };
+            ((r.get(x as usize, y as usize, ch) / top).clamp(0.0, 1.0) * 255.0) as u8
+        };
+        image::Rgb([px(0), px(1), px(2)])
+    })
+}
+
+/// Save an RGB picture atomically as PNG.
+pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
+    crate::io::write_with(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(|e| Error::Encode {
+                path: path.to_owned(),
+                reason: e.to_string(),
+            })
+    })
+}
