@@ -151,7 +151,8 @@ fn monomials(degree: usize) -> Vec<(i32, i32)> {
 fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     let n = b.len();
     for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
+        let piv =
+            (col..n).max_by(|&i, &j| a[i * n + col].abs().total_cmp(&a[j * n + col].abs()))?;
         if a[piv * n + col].abs() < 1e-12 {
             return None;
         }
@@ -211,7 +212,11 @@ pub fn robust_poly_fit(points: &[(f64, f64)], values: &[f64], degree: usize) -> 
         for (f, row) in fit.iter_mut().zip(&basis) {
             *f = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
         }
-        let mut res: Vec<f64> = values.iter().zip(&fit).map(|(v, f)| (v - f).abs()).collect();
+        let mut res: Vec<f64> = values
+            .iter()
+            .zip(&fit)
+            .map(|(v, f)| (v - f).abs())
+            .collect();
         let mut sorted = res.clone();
         sorted.sort_by(f64::total_cmp);
         let mad = 1.4826 * sorted[sorted.len() / 2];

@@ -523,7 +523,10 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         ..Default::default()
     };
     if !(a.cell > 0.0 && a.cell.is_finite()) {
-        return Err(Error::Usage(format!("--cell must be above 0, got {}", a.cell)));
+        return Err(Error::Usage(format!(
+            "--cell must be above 0, got {}",
+            a.cell
+        )));
     }
     let ev = abysslight::evaluate::evaluate(
         &sets,

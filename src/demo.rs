@@ -163,7 +163,14 @@ fn sheet(
         sim.frames,
         100.0 * sim.contamination
     );
-    draw::text(&mut img, margin, 10, &title, 2.min(fit_scale(&title, width - 24)), BLACK);
+    draw::text(
+        &mut img,
+        margin,
+        10,
+        &title,
+        2.min(fit_scale(&title, width - 24)),
+        BLACK,
+    );
     for (j, (label, score)) in labels.iter().zip(scores).enumerate() {
         let x = margin + j as i64 * (tile_w as i64 + gap);
         draw::text(&mut img, x, title_h, label, 2, BLACK);
@@ -176,11 +183,25 @@ fn sheet(
             let small = draw::tile(t, tile_w, true);
             image::imageops::replace(&mut img, &small, x, y);
         }
-        draw::fill_rect(&mut img, margin + 2, y + 2, draw::text_width(name, 1) + 4, 12, BLACK);
+        draw::fill_rect(
+            &mut img,
+            margin + 2,
+            y + 2,
+            draw::text_width(name, 1) + 4,
+            12,
+            BLACK,
+        );
         draw::text(&mut img, margin + 4, y + 4, name, 1, WHITE);
     }
     let foot = "raw: as recorded; mean / polynomial: baselines; paper: Koser et al.; truth: simulated albedo";
-    draw::text(&mut img, margin, height as i64 - 14, foot, 1, Rgb([70, 70, 70]));
+    draw::text(
+        &mut img,
+        margin,
+        height as i64 - 14,
+        foot,
+        1,
+        Rgb([70, 70, 70]),
+    );
     img
 }
 

@@ -3,8 +3,8 @@
 //! - With ground truth (a simulated dive): the **albedo error** after one global per-channel scale `s_c` (least
 //!   squares, since white balance is a free choice of each method): `Σ|g − s_c·t| / Σ s_c·t` over all samples of all
 //!   photos, in linear light; and the **residual lighting pattern**: the image frame is cut into a coarse grid, the
-//!   median of `g / (s_c·t)` is taken per cell over all photos, and the spread (standard deviation divided by the
-//!   mean) of those cell medians is reported, averaged over channels. A perfect correction scores 0 on both.
+//!   median of `g / (s_c·t)` is taken per cell over all photos, and the robust spread of those cell medians
+//!   (1.4826·median absolute deviation divided by the median, i.e. a robust coefficient of variation) is reported, averaged over channels. A perfect correction scores 0 on both.
 //! - Without ground truth: the **consistency** metric of Köser et al. over overlapping photos, given their
 //!   placement in a mosaic: each photo's mean value per mosaic cell (cells it covers completely), the RMS
 //!   difference of those to the per-cell mean over cells seen by at least two photos, divided by the standard
@@ -109,7 +109,10 @@ fn channel_scales(got: &[Raster], truth: &[Raster]) -> Vec<f64> {
             den[i % c] += tv as f64 * tv as f64;
         }
     }
-    num.iter().zip(&den).map(|(n, d)| n / d.max(1e-30)).collect()
+    num.iter()
+        .zip(&den)
+        .map(|(n, d)| n / d.max(1e-30))
+        .collect()
 }
 
 fn check_pairs(got: &[Raster], truth: &[Raster]) {
@@ -146,7 +149,7 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
-/// Residual lighting pattern: spread (std / mean) of the per-cell medians of `g / (s_c·t)` over a `gx`×`gy` grid
+/// Residual lighting pattern: robust spread (1.4826·MAD / median) of the per-cell medians of `g / (s_c·t)` over a `gx`×`gy` grid
 /// of the image frame (pooled over photos), averaged over channels. Samples with `t` below 0.02 are skipped.
 pub fn residual_pattern(got: &[Raster], truth: &[Raster], grid: (usize, usize)) -> f64 {
     check_pairs(got, truth);
@@ -173,10 +176,10 @@ pub fn residual_pattern(got: &[Raster], truth: &[Raster], grid: (usize, usize)) 
             .filter(|v| !v.is_empty())
             .map(|v| median(v))
             .collect();
-        let n = meds.len().max(1) as f64;
-        let mean = meds.iter().sum::<f64>() / n;
-        let var = meds.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / n;
-        total += var.sqrt() / mean.abs().max(1e-30);
+        let mut meds = meds;
+        let mid = median(&mut meds);
+        let mut dev: Vec<f64> = meds.iter().map(|m| (m - mid).abs()).collect();
+        total += 1.4826 * median(&mut dev) / mid.abs().max(1e-30);
     }
     total / c as f64
 }
@@ -211,17 +214,28 @@ pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> 
             let (w, hh) = (p.width as f64, p.height as f64);
             let corners = [(0.0, 0.0), (w, 0.0), (0.0, hh), (w, hh)].map(|(u, v)| apply_h(h, u, v));
             let lo_x = corners.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
-            let hi_x = corners.iter().map(|c| c.0).fold(f64::NEG_INFINITY, f64::max);
+            let hi_x = corners
+                .iter()
+                .map(|c| c.0)
+                .fold(f64::NEG_INFINITY, f64::max);
             let lo_y = corners.iter().map(|c| c.1).fold(f64::INFINITY, f64::min);
-            let hi_y = corners.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max);
+            let hi_y = corners
+                .iter()
+                .map(|c| c.1)
+                .fold(f64::NEG_INFINITY, f64::max);
             let inside = |(u, v): (f64, f64)| u >= 0.0 && v >= 0.0 && u <= w && v <= hh;
             let mut out = Vec::new();
             for cy in (lo_y / cell).floor() as i64..=(hi_y / cell).floor() as i64 {
                 for cx in (lo_x / cell).floor() as i64..=(hi_x / cell).floor() as i64 {
                     let (x0, y0) = (cx as f64 * cell, cy as f64 * cell);
-                    let covered = [(x0, y0), (x0 + cell, y0), (x0, y0 + cell), (x0 + cell, y0 + cell)]
-                        .into_iter()
-                        .all(|(x, y)| inside(apply_h(&inv, x, y)));
+                    let covered = [
+                        (x0, y0),
+                        (x0 + cell, y0),
+                        (x0, y0 + cell),
+                        (x0 + cell, y0 + cell),
+                    ]
+                    .into_iter()
+                    .all(|(x, y)| inside(apply_h(&inv, x, y)));
                     if !covered {
                         continue;
                     }
@@ -362,7 +376,9 @@ pub fn evaluate(
     settings: &EvalSettings,
 ) -> Result<Evaluation> {
     if sets.is_empty() {
-        return Err(Error::Usage("give at least one folder of photos to evaluate".into()));
+        return Err(Error::Usage(
+            "give at least one folder of photos to evaluate".into(),
+        ));
     }
     let truth_path = truth.map(truth_file);
     let truth = truth_path.as_deref().map(load_truth).transpose()?;
@@ -383,7 +399,8 @@ pub fn evaluate(
     };
     if truth.is_none() && placed.is_none() {
         return Err(Error::Usage(
-            "nothing to score against: give --truth (a simulated dive) and/or --placements FILE".into(),
+            "nothing to score against: give --truth (a simulated dive) and/or --placements FILE"
+                .into(),
         ));
     }
     let transfer = settings
@@ -418,7 +435,11 @@ pub fn evaluate(
                 if p.layout() != t.layout() {
                     return Err(Error::Mismatch {
                         path: folder.join(n),
-                        reason: format!("photo is {}, its true albedo is {}", p.layout(), t.layout()),
+                        reason: format!(
+                            "photo is {}, its true albedo is {}",
+                            p.layout(),
+                            t.layout()
+                        ),
                     });
                 }
             }

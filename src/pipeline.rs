@@ -404,7 +404,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
     // Baseline `--method mean` needs the whole mission's mean before the stream.
     let mission_mean = match opts.method {
-        Method::Mean => Some(crate::baseline::mission_mean(&found.photos, k, transfer, progress)?),
+        Method::Mean => Some(crate::baseline::mission_mean(
+            &found.photos,
+            k,
+            transfer,
+            progress,
+        )?),
         _ => None,
     };
 

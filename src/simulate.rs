@@ -59,7 +59,8 @@ pub struct Light {
     pub axis: [f32; 3],
     /// Relative power.
     pub power: f32,
-    /// Gaussian angular fall-off: power · exp(−θ²/(2σ²)), σ in degrees.
+    /// Angular fall-off of an LED behind a reflector: power · exp(−(θ/σ)⁶/2), flat in the middle with a soft but
+    /// steeper edge than a Gaussian; σ in degrees.
     pub sigma_deg: f32,
 }
 
@@ -71,7 +72,7 @@ impl Rig {
                 position: [x, y, z],
                 axis: [ax / n, ay / n, 1.0 / n],
                 power,
-                sigma_deg: 28.0,
+                sigma_deg: 36.0,
             }
         };
         match self {
@@ -185,7 +186,7 @@ pub struct Truth {
     pub water: Vec<String>,
 }
 
-const ETA: [f32; 3] = [0.42, 0.10, 0.13];
+const ETA: [f32; 3] = [0.25, 0.07, 0.09];
 /// Scattering coefficient (1/m) per channel and Henyey–Greenstein asymmetry.
 const SCATTER_B: [f32; 3] = [0.03, 0.04, 0.045];
 const HG_G: f32 = 0.6;
@@ -266,7 +267,10 @@ impl Floor {
     fn albedo(&self, x: f32, y: f32) -> [f32; 3] {
         let s = self.seed;
         // Bright objects (holothurians, sponges): ellipses on a coarse grid, one in ~7 cells.
-        let (gx, gy) = ((x / OBJECT_CELL).floor() as i64, (y / OBJECT_CELL).floor() as i64);
+        let (gx, gy) = (
+            (x / OBJECT_CELL).floor() as i64,
+            (y / OBJECT_CELL).floor() as i64,
+        );
         for cy in gy - 1..=gy + 1 {
             for cx in gx - 1..=gx + 1 {
                 let h = hash3(s ^ 0x0B7E, cx, cy);
@@ -290,10 +294,19 @@ impl Floor {
             }
         }
         // Nodules: a Poisson number per cell, discs of random radius.
-        let (gx, gy) = ((x / NODULE_CELL).floor() as i64, (y / NODULE_CELL).floor() as i64);
-        let mean = self.nodule_density * NODULE_CELL * NODULE_CELL;
+        let (gx, gy) = (
+            (x / NODULE_CELL).floor() as i64,
+            (y / NODULE_CELL).floor() as i64,
+        );
         for cy in gy - 1..=gy + 1 {
             for cx in gx - 1..=gx + 1 {
+                // Nodule fields are patchy: the density varies over a few metres (mean factor 1).
+                let patch = value_noise(
+                    s ^ 0x9A7,
+                    cx as f32 * NODULE_CELL / 2.5,
+                    cy as f32 * NODULE_CELL / 2.5,
+                );
+                let mean = self.nodule_density * NODULE_CELL * NODULE_CELL * (0.3 + 1.4 * patch);
                 let mut rng = Rng(hash3(s ^ 0x90D, cx, cy));
                 // Poisson by inversion.
                 let u = rng.f32();
@@ -343,7 +356,8 @@ fn norm(a: V3) -> V3 {
     [a[0] / l, a[1] / l, a[2] / l]
 }
 fn mat_vec(r: &[f64; 9], v: V3) -> V3 {
-    let f = |i: usize| (r[i] * v[0] as f64 + r[i + 1] * v[1] as f64 + r[i + 2] * v[2] as f64) as f32;
+    let f =
+        |i: usize| (r[i] * v[0] as f64 + r[i + 1] * v[1] as f64 + r[i + 2] * v[2] as f64) as f32;
     [f(0), f(3), f(6)]
 }
 fn mat_mul(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
@@ -424,7 +438,7 @@ struct WorldLight {
     pos: V3,
     axis: V3,
     power: f32,
-    inv2s2: f32,
+    inv_sigma: f32,
 }
 
 fn world_lights(lights: &[Light], r: &[f64; 9], c: V3) -> Vec<WorldLight> {
@@ -436,7 +450,7 @@ fn world_lights(lights: &[Light], r: &[f64; 9], c: V3) -> Vec<WorldLight> {
                 pos: [c[0] + p[0], c[1] + p[1], c[2] + p[2]],
                 axis: norm(mat_vec(r, l.axis)),
                 power: l.power,
-                inv2s2: 1.0 / (2.0 * l.sigma_deg.to_radians().powi(2)),
+                inv_sigma: 1.0 / l.sigma_deg.to_radians(),
             }
         })
         .collect()
@@ -450,7 +464,7 @@ impl WorldLight {
         let d = dot(v, v).sqrt().max(0.15);
         let dir = [v[0] / d, v[1] / d, v[2] / d];
         let th = dot(dir, self.axis).clamp(-1.0, 1.0).acos();
-        let base = self.power * (-th * th * self.inv2s2).exp() / (d * d);
+        let base = self.power * (-0.5 * (th * self.inv_sigma).powi(6)).exp() / (d * d);
         (
             [
                 base * (-ETA[0] * d).exp(),
@@ -558,9 +572,8 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
                 let cos_cam = dot(d, mat_vec(&view.r, [0.0, 0.0, 1.0])).max(0.0);
                 let vignette = cos_cam.powi(4);
                 for ch in 0..3 {
-                    px[ch] += a[ch] * e[ch] / std::f32::consts::PI
-                        * (-ETA[ch] * t).exp()
-                        * vignette;
+                    px[ch] +=
+                        a[ch] * e[ch] / std::f32::consts::PI * (-ETA[ch] * t).exp() * vignette;
                 }
                 if let Some(ar) = arow.as_deref_mut() {
                     ar[x * 3..x * 3 + 3].copy_from_slice(&a);
@@ -576,9 +589,7 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
             .zip(a.data.par_chunks_mut(w * 3))
             .enumerate()
             .for_each(|(y, (row, arow))| body(y, row, Some(arow))),
-        None => rows_img
-            .enumerate()
-            .for_each(|(y, row)| body(y, row, None)),
+        None => rows_img.enumerate().for_each(|(y, row)| body(y, row, None)),
     }
     (img, alb)
 }
@@ -684,7 +695,10 @@ impl Simulation {
             ));
         }
         if !(20.0..150.0).contains(&self.fov_deg) {
-            return bad(format!("--fov must be 20 to 150 degrees, got {}", self.fov_deg));
+            return bad(format!(
+                "--fov must be 20 to 150 degrees, got {}",
+                self.fov_deg
+            ));
         }
         Ok(())
     }
@@ -715,7 +729,7 @@ impl Simulation {
         let ppm = cam.fy / alt;
         let pose = |i: usize| {
             let t = i as f64;
-            let z = alt * (1.0 + 0.08 * (0.21 * t + phase[0]).sin());
+            let z = alt * (1.0 + 0.05 * (0.1 * t + phase[0]).sin());
             let roll = 3.0 * (0.17 * t + phase[1]).sin();
             let pitch = 3.0 * (0.13 * t + phase[2]).sin();
             let yaw = 2.0 * (0.09 * t + phase[3]).sin();
@@ -756,12 +770,20 @@ impl Simulation {
         let view = |p: &Pose, with_floor: bool| View {
             cam,
             r: p.rotation,
-            c: [p.position[0] as f32, p.position[1] as f32, p.position[2] as f32],
-            lights: world_lights(&lights, &p.rotation, [
+            c: [
                 p.position[0] as f32,
                 p.position[1] as f32,
                 p.position[2] as f32,
-            ]),
+            ],
+            lights: world_lights(
+                &lights,
+                &p.rotation,
+                [
+                    p.position[0] as f32,
+                    p.position[1] as f32,
+                    p.position[2] as f32,
+                ],
+            ),
             floor: if with_floor { Some(&floor) } else { None },
         };
         // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
@@ -783,7 +805,7 @@ impl Simulation {
                     r[1] * (-dir[2]).max(0.0)
                 })
                 .sum();
-            0.55 / (floor.sediment[1] * e / std::f32::consts::PI * (-ETA[1] * t).exp())
+            0.7 / (floor.sediment[1] * e / std::f32::consts::PI * (-ETA[1] * t).exp())
         };
         let bits = self.bit_depth;
         let mut survey = Vec::with_capacity(self.frames);
