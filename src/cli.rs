@@ -64,7 +64,7 @@ struct CorrectArgs {
     survey: Option<PathBuf>,
 
     /// Output folder: mirrors the survey tree (same names, format and bit depth); run files go to _abysslight/.
-    /// - writes the corrected frames to stdout in order, in the format they came in (log on stderr, report
+    /// With "-" the corrected frames go to stdout in order, in the format they came in (log on stderr, report
     /// only with --report).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
