@@ -322,6 +322,15 @@ impl Progress for Console {
     fn start(&self, total: usize) {
         *self.count.lock().unwrap() = (0, total);
         if let Some(b) = &self.bar {
+            if total == 0 {
+                // A watch or a stream: no total to show a bar against.
+                b.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} [{elapsed_precise}] {pos} photos ({per_sec}) {msg}",
+                    )
+                    .unwrap(),
+                );
+            }
             b.set_length(total as u64);
         }
     }

@@ -585,6 +585,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                                 .lock()
                                 .unwrap()
                                 .push(FileError::from_error(&job.frame.input, &e));
+                            // Nobody reads stdout any more (e.g. the downstream ffmpeg ended): stop the run
+                            // instead of failing every remaining frame.
+                            if matches!(sink, Sink::Stdout) && matches!(e, Error::Io { .. }) {
+                                break;
+                            }
                         }
                     }
                 }
@@ -987,7 +992,11 @@ impl Ctx<'_> {
                 })
                 .is_err()
             {
-                return Err(Error::Usage("all output writers stopped".into()));
+                return Err(Error::Usage(if self.out == Path::new("-") {
+                    "stdout was closed (is the program reading the frames still running?)".into()
+                } else {
+                    "all output writers stopped".into()
+                }));
             }
         }
         Ok(())

@@ -101,7 +101,10 @@ impl Sink {
                 let mut out = std::io::stdout().lock();
                 out.write_all(&bytes)
                     .and_then(|()| out.flush())
-                    .map_err(|e| Error::io(output, e))
+                    .map_err(|e| {
+                        let name = output.file_name().unwrap_or_default().to_string_lossy();
+                        Error::io(format!("stdout ({name})"), e)
+                    })
             }
         }
     }

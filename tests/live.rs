@@ -407,3 +407,32 @@ fn watch_refuses_what_needs_the_whole_mission() {
     );
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn closed_stdout_stops_the_run() {
+    let dive = dive(64, 48, 40, 0, 0.1, false, 17);
+    let d = tempfile::tempdir().unwrap();
+    let input: Vec<u8> = dive.photos.iter().flat_map(pnm).collect();
+    let mut child = bin()
+        .args(["correct", "--survey", "-", "--out", "-", "--window", "3"])
+        .current_dir(d.path())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let mut stdin = child.stdin.take().unwrap();
+    let feeder = std::thread::spawn(move || {
+        let _ = stdin.write_all(&input);
+    });
+    let o = wait_exit(child, Duration::from_secs(30));
+    feeder.join().unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("stdout was closed"), "{err}");
+    assert!(
+        err.matches("error:").count() <= 3,
+        "one error per frame: {err}"
+    );
+}
