@@ -40,7 +40,9 @@ pub mod raster;
 pub mod report;
 pub mod scatter;
 pub mod source;
+pub mod stream;
 pub mod transfer;
+pub mod watch;
 pub mod window;
 
 pub use error::{Error, Result};
