@@ -152,13 +152,35 @@ struct CorrectArgs {
     #[arg(long, value_name = "FILE", conflicts_with = "water_column")]
     scatter: Option<PathBuf>,
 
-    /// Folder of survey photos, searched recursively, processed in natural file-name order.
+    /// Folder of survey photos, searched recursively, processed in natural file-name order; - reads frames
+    /// (binary PPM/PGM or PNG, back to back, e.g. from ffmpeg -f image2pipe) from stdin.
     #[arg(long, value_name = "DIR")]
     survey: Option<PathBuf>,
 
     /// Output folder: mirrors the survey tree (same names, format and bit depth); run files go to _abysslight/.
+    /// With "-" the corrected frames go to stdout in order, in the format they came in (log on stderr, report
+    /// only with --report).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+
+    /// Watch the survey folder during a dive: correct photos as they arrive (each once the n/2 photos after it
+    /// are complete), until Ctrl-C/SIGTERM or --idle-timeout; then finish the last photos and write the report.
+    /// A file is taken once its size and mtime are unchanged over two scans: writers should rename files into
+    /// place.
+    #[arg(long)]
+    watch: bool,
+
+    /// With --watch: stop after SECS seconds without a new or changed file [default: never].
+    #[arg(long, value_name = "SECS")]
+    idle_timeout: Option<f64>,
+
+    /// With --watch: milliseconds between two scans of the survey folder [default: 500].
+    #[arg(long, value_name = "MS")]
+    poll_interval: Option<u64>,
+
+    /// Write the run report (JSON) here instead of <out>/_abysslight/report.json (with --out -, the only report).
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
 
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     #[arg(long, value_name = "N", conflicts_with = "contamination")]
@@ -281,7 +303,20 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     macro_rules! set {
         ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
     }
-    set!(water_column, scatter, survey, out, threads, mask);
+    set!(
+        water_column,
+        scatter,
+        survey,
+        out,
+        threads,
+        mask,
+        idle_timeout,
+        report
+    );
+    o.watch |= args.watch;
+    if let Some(v) = args.poll_interval {
+        o.poll_interval = v;
+    }
     if let Some(t) = args.transfer {
         o.transfer = t;
     }
@@ -396,6 +431,15 @@ impl Progress for Console {
     fn start(&self, total: usize) {
         *self.count.lock().unwrap() = (0, total);
         if let Some(b) = &self.bar {
+            if total == 0 {
+                // A watch or a stream: no total to show a bar against.
+                b.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} [{elapsed_precise}] {pos} photos ({per_sec}) {msg}",
+                    )
+                    .unwrap(),
+                );
+            }
             b.set_length(total as u64);
         }
     }
@@ -409,7 +453,12 @@ impl Progress for Console {
             b.inc(1);
         } else if self.plain {
             let status = if ok { "done" } else { "FAILED" };
-            eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+            if n == 0 {
+                // A watch or a stream: the total is not known.
+                eprintln!("abysslight: [{i}] {status} {}", input.display());
+            } else {
+                eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+            }
         }
     }
     fn finish(&self) {
@@ -421,6 +470,17 @@ impl Progress for Console {
 
 fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
     let opts = options_from(&args)?;
+    if opts.watch {
+        // Ctrl-C or SIGTERM ends the watch cleanly (the last photos are finished, the report is written); a
+        // second one kills at once. signal-hook rather than raw libc: its handlers only set an atomic flag, which
+        // is what is safe in a signal handler, and it keeps unsafe code out of abysslight.
+        let stop = abysslight::watch::stop_flag();
+        for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register_conditional_shutdown(sig, 1, stop.clone())
+                .and_then(|_| signal_hook::flag::register(sig, stop.clone()))
+                .map_err(|e| Error::Usage(format!("cannot install the signal handler: {e}")))?;
+        }
+    }
     let console = Console::new(args.quiet);
     let report = abysslight::correct_mission(&opts, &console)?;
     if !args.quiet {

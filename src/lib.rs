@@ -44,7 +44,9 @@ pub mod report;
 pub mod scatter;
 pub mod simulate;
 pub mod source;
+pub mod stream;
 pub mod transfer;
+pub mod watch;
 pub mod window;
 
 pub use error::{Error, Result};
