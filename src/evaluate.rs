@@ -197,6 +197,11 @@ fn sample(r: &Raster, u: f64, v: f64, ch: usize) -> f64 {
     a + (b - a) * ty
 }
 
+/// A photo's mean over one mosaic cell: (cell index, per-channel mean).
+type CellObservation = ((i64, i64), Vec<f64>);
+/// Per mosaic cell: photos seen, per-channel sum and sum of squares of their cell means.
+type CellSums = (usize, Vec<f64>, Vec<f64>);
+
 /// Sample points per cell side when a photo's mean over a mosaic cell is taken.
 const CELL_SAMPLES: usize = 4;
 
@@ -206,7 +211,7 @@ pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> 
     assert_eq!(photos.len(), h.len(), "one placement per photo");
     let c = photos.first()?.channels;
     // Per photo: (cell, per-channel mean) of the cells it covers completely.
-    let per_photo: Vec<Vec<((i64, i64), Vec<f64>)>> = photos
+    let per_photo: Vec<Vec<CellObservation>> = photos
         .par_iter()
         .zip(h)
         .map(|(p, h)| {
@@ -259,7 +264,7 @@ pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> 
             out
         })
         .collect();
-    let mut cells: std::collections::HashMap<(i64, i64), (usize, Vec<f64>, Vec<f64>)> =
+    let mut cells: std::collections::HashMap<(i64, i64), CellSums> =
         std::collections::HashMap::new();
     for obs in per_photo.iter().flatten() {
         let e = cells

@@ -725,7 +725,9 @@ impl Simulation {
         let footprint = alt * self.height as f64 / cam.fy;
         let step = footprint * (1.0 - self.overlap as f64);
         let mut rng = Rng(mix(self.seed ^ 0xD1E));
-        let phase: Vec<f64> = (0..6).map(|_| rng.f32() as f64 * 6.283).collect();
+        let phase: Vec<f64> = (0..6)
+            .map(|_| rng.f32() as f64 * std::f64::consts::TAU)
+            .collect();
         let ppm = cam.fy / alt;
         let pose = |i: usize| {
             let t = i as f64;
@@ -982,9 +984,9 @@ mod tests {
         let m = [2.0, 1.0, 0.0, 0.5, 3.0, 1.0, 0.0, 0.2, 1.0];
         let inv = invert3(&m).unwrap();
         let id = mat_mul(&m, &inv);
-        for i in 0..9 {
+        for (i, v) in id.iter().enumerate() {
             let e = if i % 4 == 0 { 1.0 } else { 0.0 };
-            assert!((id[i] - e).abs() < 1e-12);
+            assert!((v - e).abs() < 1e-12);
         }
     }
 }
