@@ -5,7 +5,7 @@
 //!   light, averaged over every photo of the mission). Rescaled to the seafloor colour by `F = (M − S)/C`.
 //! - `polynomial` (Singh et al. 2007): per photo, a 2-D polynomial of degree `d` (default 4) in the normalised image
 //!   coordinates is fitted to `log(I − S)` per channel on the photo's block-median image, robustly (Tukey biweight,
-//!   iteratively reweighted least squares), and `M = exp(fit) + S`.
+//!   iteratively reweighted least squares started from a least-absolute-deviations fit), and `M = exp(fit) + S`.
 
 use std::fmt;
 use std::str::FromStr;
@@ -181,7 +181,8 @@ fn solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Option<Vec<f64>> {
 }
 
 /// Robust fit of a 2-D polynomial of `degree` to `values` at points `(x, y)` (normalised to `[-1, 1]`); returns
-/// the fitted values at the same points. Tukey biweight IRLS, scale from the MAD of the residuals.
+/// the fitted values at the same points. Least absolute deviations (IRLS), then Tukey biweight IRLS with the scale
+/// from the MAD of the residuals.
 pub fn robust_poly_fit(points: &[(f64, f64)], values: &[f64], degree: usize) -> Vec<f64> {
     let terms = monomials(degree);
     let basis: Vec<Vec<f64>> = points
@@ -191,7 +192,10 @@ pub fn robust_poly_fit(points: &[(f64, f64)], values: &[f64], degree: usize) -> 
     let m = terms.len();
     let mut w = vec![1.0f64; values.len()];
     let mut fit = vec![0.0f64; values.len()];
-    for _ in 0..8 {
+    // Least absolute deviations first (IRLS with weights 1/|r|), which a large share of one-sided outliers
+    // cannot drag far, then Tukey's biweight with the scale from the MAD of the residuals.
+    const L1_ROUNDS: usize = 8;
+    for round in 0..L1_ROUNDS + 8 {
         let mut ata = vec![0.0f64; m * m];
         let mut atb = vec![0.0f64; m];
         for ((row, &v), &wi) in basis.iter().zip(values).zip(&w) {
@@ -212,7 +216,7 @@ pub fn robust_poly_fit(points: &[(f64, f64)], values: &[f64], degree: usize) -> 
         for (f, row) in fit.iter_mut().zip(&basis) {
             *f = row.iter().zip(&coef).map(|(a, b)| a * b).sum();
         }
-        let mut res: Vec<f64> = values
+        let res: Vec<f64> = values
             .iter()
             .zip(&fit)
             .map(|(v, f)| (v - f).abs())
@@ -220,10 +224,17 @@ pub fn robust_poly_fit(points: &[(f64, f64)], values: &[f64], degree: usize) -> 
         let mut sorted = res.clone();
         sorted.sort_by(f64::total_cmp);
         let mad = 1.4826 * sorted[sorted.len() / 2];
-        let cutoff = 4.685 * mad.max(1e-6);
-        for (wi, r) in w.iter_mut().zip(res.iter_mut()) {
-            let u = *r / cutoff;
-            *wi = if u < 1.0 { (1.0 - u * u).powi(2) } else { 0.0 };
+        if round + 1 < L1_ROUNDS {
+            let eps = 1e-3 * mad.max(1e-9);
+            for (wi, r) in w.iter_mut().zip(&res) {
+                *wi = 1.0 / r.max(eps);
+            }
+        } else {
+            let cutoff = 4.685 * mad.max(1e-6);
+            for (wi, r) in w.iter_mut().zip(&res) {
+                let u = *r / cutoff;
+                *wi = if u < 1.0 { (1.0 - u * u).powi(2) } else { 0.0 };
+            }
         }
     }
     fit
