@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
-use abysslight::options::Transfer;
+use abysslight::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -45,6 +45,100 @@ enum Command {
     /// Estimate the backscatter S from water-column frames once, for --scatter (e.g. before sharded runs).
     #[command(after_help = EXIT_HELP)]
     Scatter(ScatterArgs),
+    /// Render a simulated dive with known albedo (water/, survey/, truth/) for testing and evaluation.
+    Simulate(SimulateArgs),
+    /// Score corrected photos: against a simulated dive's truth, and/or by consistency over overlapping photos.
+    Evaluate(EvaluateArgs),
+    /// Simulate a small dive, correct it with every method, score them and draw a contact sheet.
+    Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+struct SimulateArgs {
+    /// Output folder (water/, survey/, truth/ are written below it).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Survey photos.
+    #[arg(long, value_name = "N", default_value_t = 30)]
+    frames: usize,
+    /// Water-column frames.
+    #[arg(long, value_name = "B", default_value_t = 15)]
+    water_column: usize,
+    /// Photo size.
+    #[arg(long, value_name = "WxH", default_value = "320x240", value_parser = parse_size)]
+    size: (usize, usize),
+    /// Random seed (the same seed renders the same dive).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Share of the seafloor covered by dark nodules.
+    #[arg(long, value_name = "C", default_value_t = 0.2)]
+    contamination: f64,
+    /// Bits per sample of the PNGs written.
+    #[arg(long, value_name = "8|16", default_value_t = 8)]
+    bit_depth: u32,
+    /// Curve applied before quantisation: linear or srgb (what a JPEG camera does).
+    #[arg(long, value_name = "CURVE", default_value = "linear")]
+    encode: Transfer,
+    /// Light rig: two (beside the camera), three (two beside, one behind) or four (ring).
+    #[arg(long, value_name = "RIG", default_value = "three")]
+    rig: abysslight::simulate::Rig,
+    /// Mean altitude above the seafloor, metres.
+    #[arg(long, value_name = "M", default_value_t = 3.0)]
+    altitude: f32,
+    /// Share of a photo's along-track extent that the next photo sees again.
+    #[arg(long, value_name = "O", default_value_t = 0.6)]
+    overlap: f32,
+    /// Horizontal field of view, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 75.0)]
+    fov: f32,
+    /// Sensor noise multiplier (0: none).
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    noise: f32,
+}
+
+#[derive(Args, Debug)]
+struct EvaluateArgs {
+    /// Folders of photos to score, as LABEL=DIR or DIR (label = folder name). Photos are matched by file name.
+    #[arg(value_name = "[LABEL=]DIR", required = true)]
+    sets: Vec<String>,
+    /// A simulated dive (the folder given to simulate --out): scores albedo error and residual lighting pattern.
+    #[arg(long, value_name = "DIR")]
+    truth: Option<PathBuf>,
+    /// Placement of each photo in a mosaic (see docs/evaluation.md), for the consistency metric
+    /// [default with --truth: the simulator's poses].
+    #[arg(long, value_name = "FILE")]
+    placements: Option<PathBuf>,
+    /// Mosaic cell size of the consistency metric, in mosaic units.
+    #[arg(long, value_name = "UNITS", default_value_t = 8.0)]
+    cell: f64,
+    /// How the photos' values relate to light [default: the simulated dive's encoding, else linear].
+    #[arg(long, value_name = "CURVE")]
+    transfer: Option<Transfer>,
+    /// Where to write the scores as JSON.
+    #[arg(long, value_name = "FILE.json", default_value = "evaluation.json")]
+    json: PathBuf,
+}
+
+#[derive(Args, Debug)]
+struct DemoArgs {
+    /// Output folder.
+    #[arg(long, value_name = "DIR", default_value = "abysslight-demo")]
+    out: PathBuf,
+    /// Random seed of the simulated dive.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Curve the simulated camera applies: linear or srgb (the correction is told the same).
+    #[arg(long, value_name = "CURVE", default_value = "linear")]
+    encode: Transfer,
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("invalid size {s:?}: expected WIDTHxHEIGHT, e.g. 320x240");
+    let (w, h) = s.trim().split_once(['x', 'X']).ok_or_else(bad)?;
+    Ok((
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    ))
 }
 
 #[derive(Args, Debug)]
@@ -135,6 +229,15 @@ struct CorrectArgs {
     #[arg(long, value_name = "CURVE")]
     transfer: Option<Transfer>,
 
+    /// How the lighting is estimated: paper (Köser et al.), or the baselines mean (divide by the mission's mean
+    /// image) and polynomial (per-photo robust polynomial fit of log intensity) [default: paper].
+    #[arg(long, value_name = "METHOD")]
+    method: Option<Method>,
+
+    /// Degree of the polynomial of --method polynomial [default: 4].
+    #[arg(long, value_name = "D")]
+    degree: Option<usize>,
+
     /// Mask image the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of
     /// every median and copied unchanged to the output.
     #[arg(long, value_name = "FILE")]
@@ -216,6 +319,12 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if let Some(t) = args.transfer {
         o.transfer = t;
+    }
+    if let Some(m) = args.method {
+        o.method = m;
+    }
+    if let Some(d) = args.degree {
+        o.degree = d;
     }
     o.mask_auto |= args.mask_auto;
     if args.water_column.is_some() {
@@ -425,6 +534,90 @@ fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
     }))
 }
 
+fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
+    let sim = abysslight::simulate::Simulation {
+        frames: a.frames,
+        water_column: a.water_column,
+        width: a.size.0,
+        height: a.size.1,
+        seed: a.seed,
+        contamination: a.contamination,
+        bit_depth: a.bit_depth,
+        encode: a.encode,
+        rig: a.rig,
+        altitude: a.altitude,
+        overlap: a.overlap,
+        fov_deg: a.fov,
+        noise: a.noise,
+    };
+    let t = std::time::Instant::now();
+    sim.write(&a.out)?;
+    eprintln!(
+        "abysslight: simulated {} survey photos and {} water-column frames in {:.1} s into {}",
+        sim.frames,
+        sim.water_column,
+        t.elapsed().as_secs_f64(),
+        a.out.display()
+    );
+    Ok(ExitCode::from(EXIT_OK))
+}
+
+fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
+    let sets: Vec<(String, PathBuf)> = a
+        .sets
+        .iter()
+        .map(|s| match s.split_once('=') {
+            Some((l, d)) => (l.to_string(), PathBuf::from(d)),
+            None => {
+                let p = PathBuf::from(s);
+                let label = p
+                    .file_name()
+                    .map_or_else(|| s.clone(), |n| n.to_string_lossy().into_owned());
+                (label, p)
+            }
+        })
+        .collect();
+    let settings = abysslight::evaluate::EvalSettings {
+        cell: a.cell,
+        transfer: a.transfer,
+        ..Default::default()
+    };
+    if !(a.cell > 0.0 && a.cell.is_finite()) {
+        return Err(Error::Usage(format!(
+            "--cell must be above 0, got {}",
+            a.cell
+        )));
+    }
+    let ev = abysslight::evaluate::evaluate(
+        &sets,
+        a.truth.as_deref(),
+        a.placements.as_deref(),
+        &settings,
+    )?;
+    print!("{}", ev.table());
+    ev.save_json(&a.json)?;
+    eprintln!("abysslight: scores written to {}", a.json.display());
+    Ok(ExitCode::from(EXIT_OK))
+}
+
+fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
+    let sim = abysslight::simulate::Simulation {
+        seed: a.seed,
+        encode: a.encode,
+        ..abysslight::demo::demo_simulation()
+    };
+    let console = Console::new(false);
+    let r = abysslight::demo::run_demo(&a.out, &sim, &console)?;
+    print!("{}", r.evaluation.table());
+    eprintln!(
+        "abysslight: demo done in {:.1} s: contact sheet {}, scores {}",
+        r.seconds,
+        r.sheet.display(),
+        r.scores_md.display()
+    );
+    Ok(ExitCode::from(EXIT_OK))
+}
+
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     let w = choose_window(args.contamination, args.risk)?;
     println!("n = {}", w.n);
@@ -445,6 +638,9 @@ pub fn run() -> ExitCode {
         Command::Correct(a) => correct(*a),
         Command::Window(a) => window(a),
         Command::Scatter(a) => scatter(a),
+        Command::Simulate(a) => simulate(a),
+        Command::Evaluate(a) => evaluate(a),
+        Command::Demo(a) => demo(a),
     };
     match result {
         Ok(code) => code,

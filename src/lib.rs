@@ -24,9 +24,12 @@
 //! # Ok::<(), abysslight::Error>(())
 //! ```
 
+pub mod baseline;
 pub mod correct;
+pub mod demo;
 pub mod draw;
 pub mod error;
+pub mod evaluate;
 pub mod factor;
 pub mod io;
 pub mod mask;
@@ -39,6 +42,7 @@ pub mod pipeline;
 pub mod raster;
 pub mod report;
 pub mod scatter;
+pub mod simulate;
 pub mod source;
 pub mod stream;
 pub mod transfer;

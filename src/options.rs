@@ -6,6 +6,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::baseline::Method;
 use crate::error::Error;
 pub use crate::transfer::Transfer;
 use crate::window::{choose_window, p_half, WindowChoice};
@@ -213,6 +214,11 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
+    /// How the lighting is estimated: `paper` (Köser et al.), or the baselines `mean` (mission mean image,
+    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: paper.
+    pub method: Method,
+    /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
+    pub degree: usize,
     /// Watch the survey folder during a dive: correct photos as they arrive (each once the `n/2` photos after it
     /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See [`crate::watch`].
     /// Default: false.
@@ -248,6 +254,8 @@ impl Default for Options {
             transfer: Transfer::default(),
             mask: None,
             mask_auto: false,
+            method: Method::default(),
+            degree: 4,
             watch: false,
             idle_timeout: None,
             poll_interval: 500,
@@ -332,6 +340,9 @@ impl Options {
                 "--jpeg-quality must be 1 to 100, got {}",
                 self.jpeg_quality
             ));
+        }
+        if self.method == Method::Polynomial && !(1..=8).contains(&self.degree) {
+            return usage(format!("--degree must be 1 to 8, got {}", self.degree));
         }
         if self.threads == Some(0) {
             return usage("--threads must be at least 1".into());

@@ -25,7 +25,7 @@ use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettings, Mask};
 use crate::median::{block_median, stack_median};
 use crate::monitor::{contamination, Monitor, Summary, Thresholds};
-use crate::options::Options;
+use crate::options::{Method, Options};
 use crate::overview;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
@@ -431,6 +431,23 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     });
     drop(scatter);
     let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
+    // Baseline `--method mean` needs the whole mission's mean before the stream.
+    if streaming && opts.method == Method::Mean {
+        return Err(Error::Usage(
+            "--method mean needs every photo of the mission before it corrects the first; it cannot be used with \
+             --watch or --survey -"
+                .into(),
+        ));
+    }
+    let mission_mean = match opts.method {
+        Method::Mean => Some(crate::baseline::mission_mean(
+            &found.photos,
+            k,
+            transfer,
+            progress,
+        )?),
+        _ => None,
+    };
 
     // --- which photos to read and which to write ---------------------------------------------------------------
     let total_files = found.photos.len();
@@ -609,6 +626,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scatter_low: scatter_low.as_ref(),
             mask: mask.as_ref(),
             curves: &curves,
+            mission_mean: mission_mean.as_ref(),
             monitor: Monitor::new(Thresholds::default()),
             flagged_lit: Vec::new(),
             out,
@@ -876,6 +894,8 @@ struct Ctx<'a> {
     mask: Option<&'a Mask>,
     /// Transfer tables for 8- and 16-bit photos.
     curves: &'a (Curve, Curve),
+    /// `M` of `--method mean` (block resolution, linear light).
+    mission_mean: Option<&'a Raster>,
     monitor: Monitor,
     /// `F·C` of flagged photos (at most [`FLAGGED_KEPT`]), for the contact sheet.
     flagged_lit: Vec<(usize, Raster)>,
@@ -927,17 +947,23 @@ impl Ctx<'_> {
                 range.len(),
                 "ring buffer lost a frame of the window"
             );
-            let m = stack_median(&stack);
-            let mut f = factor(&m, self.scatter_low, &self.colour);
-            if self.mask.is_some() {
-                fill_missing(&mut f);
-            }
-            let lit = lit_seafloor(&f, &self.colour);
             let own = ring
                 .iter()
                 .find(|(s, _)| *s == i)
                 .map(|(_, r)| r)
                 .expect("a photo's own low-resolution image is in its window");
+            let m = match (self.opts.method, self.mission_mean) {
+                (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
+                (Method::Polynomial, _) => {
+                    crate::baseline::polynomial_m(own, self.scatter_low, self.opts.degree)
+                }
+                _ => stack_median(&stack),
+            };
+            let mut f = factor(&m, self.scatter_low, &self.colour);
+            if self.mask.is_some() {
+                fill_missing(&mut f);
+            }
+            let lit = lit_seafloor(&f, &self.colour);
             let contaminated = contamination(
                 own,
                 &lit,
