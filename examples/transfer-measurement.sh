@@ -1,7 +1,7 @@
 #!/bin/sh
 # Measure which --transfer default suits which camera: simulate dives rendered linear and with an sRGB curve,
 # correct each with --transfer linear and --transfer srgb (method paper), and score them against the true albedo.
-# Usage: scripts/transfer-measurement.sh [WORK_DIR] [SEED...]   (needs a release build: cargo build --release)
+# Usage: examples/transfer-measurement.sh [WORK_DIR] [SEED...]   (needs a release build: cargo build --release)
 set -eu
 B=${ABYSSLIGHT:-target/release/abysslight}
 W=${1:-transfer-measurement}
