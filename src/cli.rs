@@ -91,6 +91,9 @@ struct SimulateArgs {
     /// Horizontal field of view, degrees.
     #[arg(long, value_name = "DEG", default_value_t = 75.0)]
     fov: f32,
+    /// Beam width of the lights, degrees (σ of the fall-off); narrower beams put the cone edges into the frame.
+    #[arg(long, value_name = "DEG", default_value_t = 36.0)]
+    beam: f32,
     /// Sensor noise multiplier (0: none).
     #[arg(long, value_name = "X", default_value_t = 1.0)]
     noise: f32,
@@ -549,6 +552,7 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         overlap: a.overlap,
         fov_deg: a.fov,
         noise: a.noise,
+        beam_deg: a.beam,
     };
     let t = std::time::Instant::now();
     sim.write(&a.out)?;

@@ -65,14 +65,15 @@ pub struct Light {
 }
 
 impl Rig {
-    pub fn lights(self) -> Vec<Light> {
+    /// The rig's lights, each with beam half-width `beam_deg` (σ of the fall-off, degrees).
+    pub fn lights(self, beam_deg: f32) -> Vec<Light> {
         let l = |x: f32, y: f32, z: f32, ax: f32, ay: f32, power: f32| {
             let n = (ax * ax + ay * ay + 1.0).sqrt();
             Light {
                 position: [x, y, z],
                 axis: [ax / n, ay / n, 1.0 / n],
                 power,
-                sigma_deg: 36.0,
+                sigma_deg: beam_deg,
             }
         };
         match self {
@@ -121,6 +122,9 @@ pub struct Simulation {
     pub fov_deg: f32,
     /// Sensor noise multiplier (1 = default shot and read noise, 0 = none).
     pub noise: f32,
+    /// Beam width of the lights (σ of the fall-off, degrees): 36 lights the whole frame evenly in the middle; with
+    /// narrower beams the edges of the light cones come into the frame, as on many real rigs. Default: 36.
+    pub beam_deg: f32,
 }
 
 impl Default for Simulation {
@@ -139,6 +143,7 @@ impl Default for Simulation {
             overlap: 0.6,
             fov_deg: 75.0,
             noise: 1.0,
+            beam_deg: 36.0,
         }
     }
 }
@@ -720,7 +725,7 @@ impl Simulation {
         self.validate()?;
         let cam = self.camera();
         let floor = Floor::new(self.seed, self.contamination);
-        let lights = self.rig.lights();
+        let lights = self.rig.lights(self.beam_deg);
         let alt = self.altitude as f64;
         let footprint = alt * self.height as f64 / cam.fy;
         let step = footprint * (1.0 - self.overlap as f64);
