@@ -45,6 +45,41 @@ enum Command {
     /// Estimate the backscatter S from water-column frames once, for --scatter (e.g. before sharded runs).
     #[command(after_help = EXIT_HELP)]
     Scatter(ScatterArgs),
+    /// Benchmark: generate a 12 MP JPEG mission in a temp folder and measure correct against decode + encode.
+    Bench(BenchArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchArgs {
+    /// Photo size WIDTHxHEIGHT.
+    #[arg(long, default_value = "4000x3000", value_name = "WxH")]
+    size: String,
+    /// Survey photos of the short mission (the long one has 10x as many).
+    #[arg(long, default_value_t = 20)]
+    photos: usize,
+    /// How many times longer the long mission is.
+    #[arg(long, default_value_t = 10)]
+    long_factor: usize,
+    /// Worker threads of correct and of the floor.
+    #[arg(long, short = 'j', default_value_t = 2)]
+    threads: usize,
+    /// Sliding window n.
+    #[arg(long, default_value_t = 7)]
+    window: usize,
+    /// JPEG output quality.
+    #[arg(long, default_value_t = 95)]
+    jpeg_quality: u8,
+    /// Generate the mission here instead of in a temporary folder.
+    #[arg(long, value_name = "DIR")]
+    dir: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child: bool,
+    #[arg(long, hide = true)]
+    child_water_column: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child_survey: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child_out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -365,6 +400,51 @@ fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
     }))
 }
 
+fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
+    use abysslight::bench;
+    if a.child {
+        let need = |p: &Option<PathBuf>| {
+            p.clone()
+                .ok_or_else(|| Error::Usage("bench --child needs its folders".into()))
+        };
+        let r = bench::child(
+            &need(&a.child_water_column)?,
+            &need(&a.child_survey)?,
+            &need(&a.child_out)?,
+            a.threads,
+            a.window,
+            a.jpeg_quality,
+        )?;
+        println!(
+            "{}{}",
+            bench::CHILD_LINE,
+            serde_json::to_string(&r).unwrap_or_default()
+        );
+        return Ok(ExitCode::from(EXIT_OK));
+    }
+    let (w, h) = a
+        .size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .ok_or_else(|| Error::Usage(format!("--size {}: expected WIDTHxHEIGHT", a.size)))?;
+    let o = bench::BenchOptions {
+        width: w,
+        height: h,
+        photos: a.photos,
+        long_factor: a.long_factor,
+        threads: a.threads,
+        window: a.window,
+        jpeg_quality: a.jpeg_quality,
+        dir: a.dir,
+        ..bench::BenchOptions::default()
+    };
+    let exe = std::env::current_exe()
+        .map_err(|e| Error::Usage(format!("cannot find the abysslight binary: {e}")))?;
+    let r = bench::run(&exe, &o, &|m| eprintln!("abysslight bench: {m}"))?;
+    println!("{}", r.table());
+    Ok(ExitCode::from(EXIT_OK))
+}
+
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     let w = choose_window(args.contamination, args.risk)?;
     println!("n = {}", w.n);
@@ -385,6 +465,7 @@ pub fn run() -> ExitCode {
         Command::Correct(a) => correct(*a),
         Command::Window(a) => window(a),
         Command::Scatter(a) => scatter(a),
+        Command::Bench(a) => bench(a),
     };
     match result {
         Ok(code) => code,

@@ -24,6 +24,7 @@
 //! # Ok::<(), abysslight::Error>(())
 //! ```
 
+pub mod bench;
 pub mod correct;
 pub mod draw;
 pub mod error;
