@@ -58,48 +58,84 @@ pub fn correct_in_place<T: Sample>(
     }
     let tx = taps(width, k);
     let ty = taps(height, k);
-    let max = T::MAX as u16;
     samples
         .par_chunks_mut(row_len)
         .enumerate()
-        .map(|(y, row)| {
-            let t = ty[y];
-            let mut frow = vec![0.0f32; factor_low.width * c];
-            lerp_rows(
-                factor_low.row(t.i0 as usize),
-                factor_low.row(t.i1 as usize),
-                t.t,
-                &mut frow,
-            );
-            let srow = scatter.map(|s| s.row(y));
-            let mut stats = CorrectStats::default();
-            for (x, tp) in tx.iter().enumerate() {
-                let mut floored = false;
-                for ch in 0..c {
-                    let a = frow[tp.i0 as usize * c + ch];
-                    let b = frow[tp.i1 as usize * c + ch];
-                    let mut f = a + (b - a) * tp.t;
-                    if f < floor || f.is_nan() {
-                        f = floor;
-                        floored = true;
+        .map_init(
+            || (vec![0.0f32; factor_low.width * c], vec![0.0f32; row_len]),
+            |(frow, fx), (y, row)| {
+                let t = ty[y];
+                lerp_rows(
+                    factor_low.row(t.i0 as usize),
+                    factor_low.row(t.i1 as usize),
+                    t.t,
+                    frow,
+                );
+                // F of this row at full resolution, floored (one row: the full-size F never exists).
+                let mut floored_pixels = 0u64;
+                for (tp, fpx) in tx.iter().zip(fx.chunks_exact_mut(c)) {
+                    let (i0, i1) = (tp.i0 as usize * c, tp.i1 as usize * c);
+                    let mut floored = false;
+                    for (ch, out) in fpx.iter_mut().enumerate() {
+                        let (a, b) = (frow[i0 + ch], frow[i1 + ch]);
+                        let mut f = a + (b - a) * tp.t;
+                        if f < floor || f.is_nan() {
+                            f = floor;
+                            floored = true;
+                        }
+                        *out = f;
                     }
-                    let i = x * c + ch;
-                    let s = srow.map_or(0.0, |s| s[i]);
-                    let a = (curve.linear(row[i].to_u16()) - s) / f;
-                    let code = curve.code(a);
-                    if (code == 0 && a < 0.0) || (code == max && a > 1.0) {
-                        stats.clipped_samples += 1;
-                    }
-                    row[i] = T::from_f32(code as f32);
+                    floored_pixels += floored as u64;
                 }
-                stats.floored_pixels += floored as u64;
-            }
-            stats
-        })
+                let srow = scatter.map(|s| s.row(y));
+                CorrectStats {
+                    floored_pixels,
+                    clipped_samples: correct_row(row, fx, srow, curve),
+                }
+            },
+        )
         .reduce(CorrectStats::default, |mut a, b| {
             a += b;
             a
         })
+}
+
+/// `A = (I − S) / F` over one row, `F` already upsampled and floored; returns the clipped samples. A sample is
+/// clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
+#[inline]
+fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &Curve) -> u64 {
+    let mut clipped = 0u64;
+    if curve.is_identity() {
+        // Linear codes: straight-line arithmetic the compiler can vectorise (no table look-ups).
+        let max = curve.max();
+        let mut one = |v: &mut T, f: f32, s: f32| {
+            let lin = v.to_u16() as f32 / max;
+            let a = (lin - s) / f;
+            clipped += ((a < 0.0) | (a > 1.0)) as u64;
+            let code = (a * max + 0.5).clamp(0.0, max) as u16;
+            *v = T::from_f32(code as f32);
+        };
+        match s {
+            Some(s) => {
+                for ((v, &f), &s) in row.iter_mut().zip(f).zip(s) {
+                    one(v, f, s);
+                }
+            }
+            None => {
+                for (v, &f) in row.iter_mut().zip(f) {
+                    one(v, f, 0.0);
+                }
+            }
+        }
+    } else {
+        for (i, (v, &f)) in row.iter_mut().zip(f).enumerate() {
+            let s = s.map_or(0.0, |s| s[i]);
+            let a = (curve.linear(v.to_u16()) - s) / f;
+            clipped += ((a < 0.0) | (a > 1.0)) as u64;
+            *v = T::from_f32(curve.code(a) as f32);
+        }
+    }
+    clipped
 }
 
 #[cfg(test)]
