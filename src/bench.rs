@@ -337,7 +337,10 @@ fn survey_folder(m: &Mission, dir: &Path, count: usize) -> Result<()> {
 /// them (same decoder, writer and settings). Returns seconds.
 pub fn floor(survey: &Path, out: &Path, threads: usize, jpeg_quality: u8) -> Result<(usize, f64)> {
     let found = io::find_photos(survey)?;
-    let settings = EncodeSettings { jpeg_quality };
+    let settings = EncodeSettings {
+        jpeg_quality,
+        ..EncodeSettings::default()
+    };
     let next = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
     let t = Instant::now();

@@ -426,7 +426,10 @@ mod tests {
             for bits in 0u32..(1 << n) {
                 let mut v: Vec<u8> = (0..n).map(|i| ((bits >> i) & 1) as u8).collect();
                 apply_network(&net, &mut v, 1);
-                assert!(v.windows(2).all(|w| w[0] <= w[1]), "n = {n}, input {bits:b}");
+                assert!(
+                    v.windows(2).all(|w| w[0] <= w[1]),
+                    "n = {n}, input {bits:b}"
+                );
             }
         }
     }
@@ -486,7 +489,13 @@ mod tests {
     /// The per-block selection kernel the network replaced, kept as a bit-exact reference.
     mod selection {
         use super::super::*;
-        pub fn block_median<T: Sample>(s: &[T], width: usize, height: usize, c: usize, k: usize) -> Raster {
+        pub fn block_median<T: Sample>(
+            s: &[T],
+            width: usize,
+            height: usize,
+            c: usize,
+            k: usize,
+        ) -> Raster {
             let (bw, bh) = (blocks(width, k), blocks(height, k));
             let mut out = Raster::filled(bw, bh, c, 0.0);
             let mut scratch = Vec::new();
@@ -499,7 +508,8 @@ mod tests {
                                 scratch.push(s[(y * width + x) * c + ch]);
                             }
                         }
-                        out.data[(by * bw + bx) * c + ch] = median_of_samples(&mut scratch) * (1.0 / T::MAX);
+                        out.data[(by * bw + bx) * c + ch] =
+                            median_of_samples(&mut scratch) * (1.0 / T::MAX);
                     }
                 }
             }
