@@ -406,11 +406,17 @@ pub fn write_with(
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".abysslight-tmp")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(dir, e))?;
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".abysslight-tmp");
+    // tempfile creates 0600 files by default; outputs get the mode a plain `File::create` would give them (0666
+    // less the umask, usually 0644), so the rest of the team can read the corrected photos.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let tmp = builder.tempfile_in(dir).map_err(|e| Error::io(dir, e))?;
     {
         let mut w = BufWriter::new(tmp.as_file());
         fill(&mut w)?;
@@ -473,6 +479,25 @@ mod tests {
             .collect();
         assert_eq!(names, ["a/img3.tif", "img1.PNG", "img2.jpg", "img10.jpg"]);
         assert_eq!(f.ignored.len(), 1);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn atomic_output_has_the_mode_a_plain_create_gives() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = tempfile::tempdir().unwrap();
+        let plain = d.path().join("plain");
+        std::fs::File::create(&plain).unwrap();
+        let ours = d.path().join("ours.bin");
+        write_with(&ours, |w| {
+            w.write_all(b"x").map_err(|e| Error::io(&ours, e))
+        })
+        .unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&ours), mode(&plain));
+        if mode(&plain) == 0o600 {
+            eprintln!("umask 077 here: tempfile's default mode would pass this test too");
+        }
     }
 
     #[test]
