@@ -122,8 +122,25 @@ fn median_positions(n: usize) -> Vec<usize> {
 
 /// Apply `net` to `lanes` independent columns stored as `v[e * lanes + lane]` (element `e` of column `lane`).
 /// The inner loop runs over lanes with `min`/`max` only, which the compiler vectorises.
-#[inline]
 fn apply_network<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked above); the body is the same safe code, compiled for AVX2.
+        return unsafe { apply_network_avx2(net, v, lanes) };
+    }
+    apply_network_portable(net, v, lanes)
+}
+
+/// [`apply_network`] compiled with AVX2 enabled (twice the lanes per instruction).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn apply_network_avx2<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
+    apply_network_portable(net, v, lanes)
+}
+
+/// The portable body of [`apply_network`] (any CPU).
+#[inline(always)]
+fn apply_network_portable<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
     for &(a, b) in net {
         let (a, b) = (a as usize * lanes, b as usize * lanes);
         let (lo, hi) = v.split_at_mut(b);
@@ -133,6 +150,48 @@ fn apply_network<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: u
             let swap = q < p;
             *x = if swap { q } else { p };
             *y = if swap { p } else { q };
+        }
+    }
+}
+
+/// Per-column median of integer samples: `out[i]` = the median of `cols[j][i]` over `j` (in sample units, the
+/// mean of the two middle ones for an even count), as [`median_of_samples`] would give it, through a sorting
+/// network over many columns at once.
+pub fn column_median<T: Sample>(cols: &[&[T]], out: &mut [f32]) {
+    let n = cols.len();
+    assert!(n > 0, "median of no columns");
+    for c in cols {
+        assert_eq!(c.len(), out.len());
+    }
+    if n > NETWORK_MAX {
+        let mut scratch = vec![T::default(); n];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (s, c) in scratch.iter_mut().zip(cols) {
+                *s = c[i];
+            }
+            *o = median_of_samples(&mut scratch);
+        }
+        return;
+    }
+    let net = prune_network(&sorting_network(n), &median_positions(n));
+    let mut v = vec![T::default(); n * LANES];
+    for (chunk, o) in out.chunks_mut(LANES).enumerate() {
+        let (lanes, s0) = (o.len(), chunk * LANES);
+        let v = &mut v[..n * lanes];
+        for (e, c) in cols.iter().enumerate() {
+            v[e * lanes..(e + 1) * lanes].copy_from_slice(&c[s0..s0 + lanes]);
+        }
+        apply_network(&net, v, lanes);
+        if n % 2 == 1 {
+            for (o, &m) in o.iter_mut().zip(&v[(n / 2) * lanes..(n / 2 + 1) * lanes]) {
+                *o = m.to_u16() as f32;
+            }
+        } else {
+            let lo = &v[(n / 2 - 1) * lanes..(n / 2) * lanes];
+            let hi = &v[(n / 2) * lanes..(n / 2 + 1) * lanes];
+            for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                *o = (a.to_u16() as f32 + b.to_u16() as f32) * 0.5;
+            }
         }
     }
 }
@@ -190,12 +249,18 @@ pub fn block_median<T: Sample>(
                     // Gather: element e = dy·k + dx of lane (bx, ch).
                     for dy in 0..k {
                         let row = &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len];
+                        // Lane `lane0 + l` is sample `(bx·k)·channels + ch` of the row, `lane = bx·channels + ch`.
+                        let (bx0, ch0) = (lane0 / channels, lane0 % channels);
                         for dx in 0..k {
                             let dst = &mut v[(dy * k + dx) * lanes..(dy * k + dx + 1) * lanes];
-                            for (l, d) in dst.iter_mut().enumerate() {
-                                let lane = lane0 + l;
-                                let (bx, ch) = (lane / channels, lane % channels);
+                            let (mut bx, mut ch) = (bx0, ch0);
+                            for d in dst.iter_mut() {
                                 *d = row[(bx * k + dx) * channels + ch];
+                                ch += 1;
+                                if ch == channels {
+                                    ch = 0;
+                                    bx += 1;
+                                }
                             }
                         }
                     }
@@ -514,6 +579,47 @@ mod tests {
                 }
             }
             out
+        }
+    }
+
+    #[test]
+    fn avx2_and_portable_networks_agree() {
+        let net = sorting_network(64);
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let v: Vec<u8> = (0..64 * 200)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 40) as u8
+            })
+            .collect();
+        let (mut a, mut b) = (v.clone(), v.clone());
+        apply_network(&net, &mut a, 200);
+        apply_network_portable(&net, &mut b, 200);
+        assert_eq!(a, b);
+        let f: Vec<f32> = v.iter().map(|&x| x as f32 / 7.0).collect();
+        let (mut a, mut b) = (f.clone(), f.clone());
+        apply_network(&net, &mut a, 200);
+        apply_network_portable(&net, &mut b, 200);
+        assert_eq!(a, b);
+    }
+
+    proptest! {
+        #[test]
+        fn column_median_matches_sample_median(n in 1usize..20, len in 0usize..300, seed in any::<u64>()) {
+            let mut state = seed | 1;
+            let cols: Vec<Vec<u16>> = (0..n).map(|_| (0..len).map(|_| {
+                state ^= state << 13; state ^= state >> 7; state ^= state << 17;
+                (state >> 48) as u16
+            }).collect()).collect();
+            let refs: Vec<&[u16]> = cols.iter().map(|c| c.as_slice()).collect();
+            let mut out = vec![0.0f32; len];
+            column_median(&refs, &mut out);
+            for (i, o) in out.iter().enumerate() {
+                let mut col: Vec<u16> = cols.iter().map(|c| c[i]).collect();
+                prop_assert_eq!(o.to_bits(), median_of_samples(&mut col).to_bits());
+            }
         }
     }
 
