@@ -197,7 +197,10 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
         let mut one = |v: &mut T, f: f32, s: f32| {
             let lin = v.to_u16() as f32 / max;
             let a = (lin - s) / f;
-            clipped += ((a < 0.0) | (a > 1.0)) as u64;
+            #[allow(clippy::manual_range_contains)]
+            // NaN is not clipped; `contains` would say it is
+            let out = (a < 0.0) | (a > 1.0);
+            clipped += out as u64;
             // In range after the clamp, so the (vectorisable) conversion to i32 gives the same code as to u16.
             let code = (a * max + 0.5).clamp(0.0, max) as i32;
             *v = T::from_code(code as u16);
@@ -218,7 +221,10 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
         for (i, (v, &f)) in row.iter_mut().zip(f).enumerate() {
             let s = s.map_or(0.0, |s| s[i]);
             let a = (curve.linear(v.to_u16()) - s) / f;
-            clipped += ((a < 0.0) | (a > 1.0)) as u64;
+            #[allow(clippy::manual_range_contains)]
+            // NaN is not clipped; `contains` would say it is
+            let out = (a < 0.0) | (a > 1.0);
+            clipped += out as u64;
             *v = T::from_code(curve.code(a));
         }
     }

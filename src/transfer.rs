@@ -219,7 +219,7 @@ impl Curve {
         }
         // Number of thresholds at or below l. Below the first threshold (and for NaN) that is 0; otherwise start
         // from the count at the bottom of l's bucket and step up.
-        if !(l >= self.thresholds[0]) {
+        if l.is_nan() || l < self.thresholds[0] {
             return 0;
         }
         let b = ((l.to_bits() >> self.shift) - self.base) as usize;
