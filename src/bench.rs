@@ -350,7 +350,16 @@ pub fn floor(survey: &Path, out: &Path, threads: usize, jpeg_quality: u8) -> Res
                 let i = next.fetch_add(1, Ordering::SeqCst);
                 let Some(e) = found.photos.get(i) else { break };
                 let ok = io::decode(&e.path).and_then(|p| {
-                    Sink::Folder.write(&p, &e.path, &out.join(&e.relative), settings, &|_| {})
+                    Sink::Folder {
+                        carry_metadata: true,
+                    }
+                    .write(
+                        &p,
+                        &e.path,
+                        &out.join(&e.relative),
+                        settings,
+                        &|_| {},
+                    )
                 });
                 if ok.is_err() {
                     failed.fetch_add(1, Ordering::SeqCst);

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
-use abysslight::options::Transfer;
+use abysslight::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -47,6 +47,12 @@ enum Command {
     Scatter(ScatterArgs),
     /// Benchmark: generate a 12 MP JPEG mission in a temp folder and measure correct against decode + encode.
     Bench(BenchArgs),
+    /// Render a simulated dive with known albedo (water/, survey/, truth/) for testing and evaluation.
+    Simulate(SimulateArgs),
+    /// Score corrected photos: against a simulated dive's truth, and/or by consistency over overlapping photos.
+    Evaluate(EvaluateArgs),
+    /// Simulate a small dive, correct it with every method, score them and draw a contact sheet.
+    Demo(DemoArgs),
 }
 
 #[derive(Args, Debug)]
@@ -83,6 +89,94 @@ struct BenchArgs {
 }
 
 #[derive(Args, Debug)]
+struct SimulateArgs {
+    /// Output folder (water/, survey/, truth/ are written below it).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Survey photos.
+    #[arg(long, value_name = "N", default_value_t = 30)]
+    frames: usize,
+    /// Water-column frames.
+    #[arg(long, value_name = "B", default_value_t = 15)]
+    water_column: usize,
+    /// Photo size.
+    #[arg(long, value_name = "WxH", default_value = "320x240", value_parser = parse_size)]
+    size: (usize, usize),
+    /// Random seed (the same seed renders the same dive).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Share of the seafloor covered by dark nodules.
+    #[arg(long, value_name = "C", default_value_t = 0.2)]
+    contamination: f64,
+    /// Bits per sample of the PNGs written.
+    #[arg(long, value_name = "8|16", default_value_t = 8)]
+    bit_depth: u32,
+    /// Curve applied before quantisation: linear or srgb (what a JPEG camera does).
+    #[arg(long, value_name = "CURVE", default_value = "linear")]
+    encode: Transfer,
+    /// Light rig: two (beside the camera), three (two beside, one behind) or four (ring).
+    #[arg(long, value_name = "RIG", default_value = "three")]
+    rig: abysslight::simulate::Rig,
+    /// Mean altitude above the seafloor, metres.
+    #[arg(long, value_name = "M", default_value_t = 3.0)]
+    altitude: f32,
+    /// Share of a photo's along-track extent that the next photo sees again.
+    #[arg(long, value_name = "O", default_value_t = 0.6)]
+    overlap: f32,
+    /// Horizontal field of view, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 75.0)]
+    fov: f32,
+    /// Sensor noise multiplier (0: none).
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    noise: f32,
+}
+
+#[derive(Args, Debug)]
+struct EvaluateArgs {
+    /// Folders of photos to score, as LABEL=DIR or DIR (label = folder name). Photos are matched by file name.
+    #[arg(value_name = "[LABEL=]DIR", required = true)]
+    sets: Vec<String>,
+    /// A simulated dive (the folder given to simulate --out): scores albedo error and residual lighting pattern.
+    #[arg(long, value_name = "DIR")]
+    truth: Option<PathBuf>,
+    /// Placement of each photo in a mosaic (see docs/evaluation.md), for the consistency metric
+    /// [default with --truth: the simulator's poses].
+    #[arg(long, value_name = "FILE")]
+    placements: Option<PathBuf>,
+    /// Mosaic cell size of the consistency metric, in mosaic units.
+    #[arg(long, value_name = "UNITS", default_value_t = 8.0)]
+    cell: f64,
+    /// How the photos' values relate to light [default: the simulated dive's encoding, else linear].
+    #[arg(long, value_name = "CURVE")]
+    transfer: Option<Transfer>,
+    /// Where to write the scores as JSON.
+    #[arg(long, value_name = "FILE.json", default_value = "evaluation.json")]
+    json: PathBuf,
+}
+
+#[derive(Args, Debug)]
+struct DemoArgs {
+    /// Output folder.
+    #[arg(long, value_name = "DIR", default_value = "abysslight-demo")]
+    out: PathBuf,
+    /// Random seed of the simulated dive.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Curve the simulated camera applies: linear or srgb (the correction is told the same).
+    #[arg(long, value_name = "CURVE", default_value = "linear")]
+    encode: Transfer,
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("invalid size {s:?}: expected WIDTHxHEIGHT, e.g. 320x240");
+    let (w, h) = s.trim().split_once(['x', 'X']).ok_or_else(bad)?;
+    Ok((
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    ))
+}
+
+#[derive(Args, Debug)]
 struct CorrectArgs {
     /// Folder of water-column frames taken on the way down (only water in view), for the backscatter S.
     /// Without it (and without --scatter) S = 0.
@@ -93,13 +187,35 @@ struct CorrectArgs {
     #[arg(long, value_name = "FILE", conflicts_with = "water_column")]
     scatter: Option<PathBuf>,
 
-    /// Folder of survey photos, searched recursively, processed in natural file-name order.
+    /// Folder of survey photos, searched recursively, processed in natural file-name order; - reads frames
+    /// (binary PPM/PGM or PNG, back to back, e.g. from ffmpeg -f image2pipe) from stdin.
     #[arg(long, value_name = "DIR")]
     survey: Option<PathBuf>,
 
     /// Output folder: mirrors the survey tree (same names, format and bit depth); run files go to _abysslight/.
+    /// With "-" the corrected frames go to stdout in order, in the format they came in (log on stderr, report
+    /// only with --report).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+
+    /// Watch the survey folder during a dive: correct photos as they arrive (each once the n/2 photos after it
+    /// are complete), until Ctrl-C/SIGTERM or --idle-timeout; then finish the last photos and write the report.
+    /// A file is taken once its size and mtime are unchanged over two scans: writers should rename files into
+    /// place.
+    #[arg(long)]
+    watch: bool,
+
+    /// With --watch: stop after SECS seconds without a new or changed file [default: never].
+    #[arg(long, value_name = "SECS")]
+    idle_timeout: Option<f64>,
+
+    /// With --watch: milliseconds between two scans of the survey folder [default: 500].
+    #[arg(long, value_name = "MS")]
+    poll_interval: Option<u64>,
+
+    /// Write the run report (JSON) here instead of <out>/_abysslight/report.json (with --out -, the only report).
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
 
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     #[arg(long, value_name = "N", conflicts_with = "contamination")]
@@ -152,6 +268,15 @@ struct CorrectArgs {
     /// Estimation and correction run in linear light [default: linear].
     #[arg(long, value_name = "CURVE")]
     transfer: Option<Transfer>,
+
+    /// How the lighting is estimated: paper (Köser et al.), or the baselines mean (divide by the mission's mean
+    /// image) and polynomial (per-photo robust polynomial fit of log intensity) [default: paper].
+    #[arg(long, value_name = "METHOD")]
+    method: Option<Method>,
+
+    /// Degree of the polynomial of --method polynomial [default: 4].
+    #[arg(long, value_name = "D")]
+    degree: Option<usize>,
 
     /// Mask image the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of
     /// every median and copied unchanged to the output.
@@ -218,9 +343,28 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     macro_rules! set {
         ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
     }
-    set!(water_column, scatter, survey, out, threads, mask);
+    set!(
+        water_column,
+        scatter,
+        survey,
+        out,
+        threads,
+        mask,
+        idle_timeout,
+        report
+    );
+    o.watch |= args.watch;
+    if let Some(v) = args.poll_interval {
+        o.poll_interval = v;
+    }
     if let Some(t) = args.transfer {
         o.transfer = t;
+    }
+    if let Some(m) = args.method {
+        o.method = m;
+    }
+    if let Some(d) = args.degree {
+        o.degree = d;
     }
     o.mask_auto |= args.mask_auto;
     if args.water_column.is_some() {
@@ -330,6 +474,15 @@ impl Progress for Console {
     fn start(&self, total: usize) {
         *self.count.lock().unwrap() = (0, total);
         if let Some(b) = &self.bar {
+            if total == 0 {
+                // A watch or a stream: no total to show a bar against.
+                b.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} [{elapsed_precise}] {pos} photos ({per_sec}) {msg}",
+                    )
+                    .unwrap(),
+                );
+            }
             b.set_length(total as u64);
         }
     }
@@ -343,7 +496,12 @@ impl Progress for Console {
             b.inc(1);
         } else if self.plain {
             let status = if ok { "done" } else { "FAILED" };
-            eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+            if n == 0 {
+                // A watch or a stream: the total is not known.
+                eprintln!("abysslight: [{i}] {status} {}", input.display());
+            } else {
+                eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+            }
         }
     }
     fn finish(&self) {
@@ -355,6 +513,17 @@ impl Progress for Console {
 
 fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
     let opts = options_from(&args)?;
+    if opts.watch {
+        // Ctrl-C or SIGTERM ends the watch cleanly (the last photos are finished, the report is written); a
+        // second one kills at once. signal-hook rather than raw libc: its handlers only set an atomic flag, which
+        // is what is safe in a signal handler, and it keeps unsafe code out of abysslight.
+        let stop = abysslight::watch::stop_flag();
+        for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register_conditional_shutdown(sig, 1, stop.clone())
+                .and_then(|_| signal_hook::flag::register(sig, stop.clone()))
+                .map_err(|e| Error::Usage(format!("cannot install the signal handler: {e}")))?;
+        }
+    }
     let console = Console::new(args.quiet);
     let report = abysslight::correct_mission(&opts, &console)?;
     if !args.quiet {
@@ -453,6 +622,90 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
     Ok(ExitCode::from(EXIT_OK))
 }
 
+fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
+    let sim = abysslight::simulate::Simulation {
+        frames: a.frames,
+        water_column: a.water_column,
+        width: a.size.0,
+        height: a.size.1,
+        seed: a.seed,
+        contamination: a.contamination,
+        bit_depth: a.bit_depth,
+        encode: a.encode,
+        rig: a.rig,
+        altitude: a.altitude,
+        overlap: a.overlap,
+        fov_deg: a.fov,
+        noise: a.noise,
+    };
+    let t = std::time::Instant::now();
+    sim.write(&a.out)?;
+    eprintln!(
+        "abysslight: simulated {} survey photos and {} water-column frames in {:.1} s into {}",
+        sim.frames,
+        sim.water_column,
+        t.elapsed().as_secs_f64(),
+        a.out.display()
+    );
+    Ok(ExitCode::from(EXIT_OK))
+}
+
+fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
+    let sets: Vec<(String, PathBuf)> = a
+        .sets
+        .iter()
+        .map(|s| match s.split_once('=') {
+            Some((l, d)) => (l.to_string(), PathBuf::from(d)),
+            None => {
+                let p = PathBuf::from(s);
+                let label = p
+                    .file_name()
+                    .map_or_else(|| s.clone(), |n| n.to_string_lossy().into_owned());
+                (label, p)
+            }
+        })
+        .collect();
+    let settings = abysslight::evaluate::EvalSettings {
+        cell: a.cell,
+        transfer: a.transfer,
+        ..Default::default()
+    };
+    if !(a.cell > 0.0 && a.cell.is_finite()) {
+        return Err(Error::Usage(format!(
+            "--cell must be above 0, got {}",
+            a.cell
+        )));
+    }
+    let ev = abysslight::evaluate::evaluate(
+        &sets,
+        a.truth.as_deref(),
+        a.placements.as_deref(),
+        &settings,
+    )?;
+    print!("{}", ev.table());
+    ev.save_json(&a.json)?;
+    eprintln!("abysslight: scores written to {}", a.json.display());
+    Ok(ExitCode::from(EXIT_OK))
+}
+
+fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
+    let sim = abysslight::simulate::Simulation {
+        seed: a.seed,
+        encode: a.encode,
+        ..abysslight::demo::demo_simulation()
+    };
+    let console = Console::new(false);
+    let r = abysslight::demo::run_demo(&a.out, &sim, &console)?;
+    print!("{}", r.evaluation.table());
+    eprintln!(
+        "abysslight: demo done in {:.1} s: contact sheet {}, scores {}",
+        r.seconds,
+        r.sheet.display(),
+        r.scores_md.display()
+    );
+    Ok(ExitCode::from(EXIT_OK))
+}
+
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     let w = choose_window(args.contamination, args.risk)?;
     println!("n = {}", w.n);
@@ -474,6 +727,9 @@ pub fn run() -> ExitCode {
         Command::Window(a) => window(a),
         Command::Scatter(a) => scatter(a),
         Command::Bench(a) => bench(a),
+        Command::Simulate(a) => simulate(a),
+        Command::Evaluate(a) => evaluate(a),
+        Command::Demo(a) => demo(a),
     };
     match result {
         Ok(code) => code,

@@ -87,6 +87,47 @@ pub fn tile(img: &RgbImage, width: u32, smooth: bool) -> RgbImage {
     imageops::resize(img, width, h, filter)
 }
 
+/// Tiles laid out in rows on white, with a caption over each column: a contact sheet. Rows may have fewer tiles
+/// than there are captions; each column is as wide as its widest tile.
+pub fn grid(captions: &[&str], rows: &[Vec<RgbImage>], gap: u32) -> RgbImage {
+    let cols = captions
+        .len()
+        .max(rows.iter().map(Vec::len).max().unwrap_or(0));
+    let mut col_w = vec![0u32; cols];
+    for (c, w) in col_w.iter_mut().enumerate() {
+        *w = rows
+            .iter()
+            .filter_map(|r| r.get(c))
+            .map(RgbImage::width)
+            .max()
+            .unwrap_or(0)
+            .max(captions.get(c).map_or(0, |s| text_width(s, 1)));
+    }
+    let caption_h = if captions.is_empty() { 0 } else { 12 };
+    let row_h: Vec<u32> = rows
+        .iter()
+        .map(|r| r.iter().map(RgbImage::height).max().unwrap_or(0))
+        .collect();
+    let width = col_w.iter().map(|w| w + gap).sum::<u32>() + gap;
+    let height = gap + caption_h + row_h.iter().map(|h| h + gap).sum::<u32>();
+    let mut img = RgbImage::from_pixel(width.max(1), height.max(1), WHITE);
+    let mut x = gap as i64;
+    for (c, w) in col_w.iter().enumerate() {
+        if let Some(caption) = captions.get(c) {
+            text(&mut img, x, gap as i64, caption, 1, BLACK);
+        }
+        let mut y = (gap + caption_h) as i64;
+        for (r, h) in rows.iter().zip(&row_h) {
+            if let Some(t) = r.get(c) {
+                imageops::replace(&mut img, t, x, y);
+            }
+            y += (h + gap) as i64;
+        }
+        x += (w + gap) as i64;
+    }
+    img
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,5 +154,20 @@ mod tests {
         assert_eq!(img.get_pixel(8, 5), &RED);
         line(&mut img, (-5, -5), (20, 20), BLUE); // must not panic
         assert_eq!(img.get_pixel(9, 9), &BLUE);
+    }
+
+    #[test]
+    fn grid_places_each_tile_at_its_column_and_row() {
+        let a = RgbImage::from_pixel(3, 2, RED);
+        let b = RgbImage::from_pixel(5, 4, BLUE);
+        let g = grid(&[], &[vec![a.clone(), b.clone()], vec![b.clone()]], 1);
+        // Columns are 5 wide (widest tile), rows 4 high (tallest tile in the row), gap 1 around everything.
+        assert_eq!(g.dimensions(), (1 + 5 + 1 + 5 + 1, 1 + 4 + 1 + 4 + 1));
+        assert_eq!(g.get_pixel(1, 1), &RED);
+        assert_eq!(g.get_pixel(3, 2), &RED);
+        assert_eq!(g.get_pixel(4, 1), &WHITE, "a is only 3 wide");
+        assert_eq!(g.get_pixel(7, 1), &BLUE);
+        assert_eq!(g.get_pixel(1, 6), &BLUE, "second row starts at 1 + 4 + 1");
+        assert_eq!(g.get_pixel(7, 6), &WHITE, "second row has one tile");
     }
 }

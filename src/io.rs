@@ -346,6 +346,10 @@ pub fn encode_to<W: Write>(
             let mut w = w;
             w.write_all(buf.get_ref()).map_err(|e| e.to_string())
         }
+        ImageFormat::Pnm => {
+            let mut w = w;
+            crate::stream::write_pnm(photo, &mut w).map_err(|e| e.to_string())
+        }
         other => Err(format!("writing {other:?} is not supported")),
     }
 }

@@ -24,10 +24,13 @@
 //! # Ok::<(), abysslight::Error>(())
 //! ```
 
+pub mod baseline;
 pub mod bench;
 pub mod correct;
+pub mod demo;
 pub mod draw;
 pub mod error;
+pub mod evaluate;
 pub mod factor;
 pub mod io;
 pub mod mask;
@@ -40,8 +43,11 @@ pub mod pipeline;
 pub mod raster;
 pub mod report;
 pub mod scatter;
+pub mod simulate;
 pub mod source;
+pub mod stream;
 pub mod transfer;
+pub mod watch;
 pub mod window;
 
 pub use error::{Error, Result};

@@ -20,6 +20,8 @@ pub struct Thresholds {
     pub colour_shift: f32,
     /// A block counts as contaminated when its corrected value is off the seafloor colour by this share.
     pub block_deviation: f32,
+    /// Roughness of `F` above which a photo is flagged (see [`roughness`]).
+    pub roughness: f32,
 }
 
 impl Default for Thresholds {
@@ -30,6 +32,7 @@ impl Default for Thresholds {
             factor_change_ratio: 4.0,
             colour_shift: 0.1,
             block_deviation: 0.5,
+            roughness: 0.12,
         }
     }
 }
@@ -43,6 +46,9 @@ pub struct Health {
     pub factor_change: f32,
     /// Largest relative change of `F`'s channel ratios against the start of the mission.
     pub colour_shift: f32,
+    /// Fine structure in `F` (see [`roughness`]): lights make smooth patterns, a window short of seafloor leaves
+    /// the scene in `F`.
+    pub roughness: f32,
     /// Why this photo's correction is likely wrong (empty: no reason to doubt it).
     pub flags: Vec<String>,
 }
@@ -108,6 +114,106 @@ pub fn balance(f: &Raster) -> Vec<f32> {
         .collect()
 }
 
+/// Smallest factor image (width, height) whose roughness is measured (photos of 256×192 at `--downsample 8`).
+pub const MIN_ROUGHNESS_SIZE: (usize, usize) = (32, 24);
+
+/// How much of the scene is left in a factor image: the median, over lit pixels, of `|ln F − ln F̄|`, where `F` is
+/// the mean over channels and `F̄` its box average over a square of side `2r + 1`, `r = max(2, width / 16)`
+/// (edges clamped). Lights, attenuation and vignetting make patterns that are smooth almost everywhere, so this
+/// is small (≈ 0.02–0.07 on real dives whose window holds enough seafloor); when more than half of the window
+/// shows objects at the same place, `F` takes on their outlines and texture (≈ 0.17 on the cluttered AQUALOC
+/// amphora site). Contamination of the corrected photo cannot see that failure: dividing by a copy of the scene
+/// makes the output look flat. Pixels below a tenth of the 99th percentile (unlit corners) are not counted.
+/// Factor images smaller than [`MIN_ROUGHNESS_SIZE`] get 0: on a handful of pixels the curvature of the light
+/// cone itself cannot be told from texture.
+pub fn roughness(f: &Raster) -> f32 {
+    let (w, h, c) = (f.width, f.height, f.channels);
+    if w < MIN_ROUGHNESS_SIZE.0 || h < MIN_ROUGHNESS_SIZE.1 {
+        return 0.0;
+    }
+    let lum: Vec<f32> = (0..w * h)
+        .map(|p| f.data[p * c..(p + 1) * c].iter().sum::<f32>() / c as f32)
+        .collect();
+    let mut finite: Vec<f32> = lum.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return 0.0;
+    }
+    finite.sort_by(f32::total_cmp);
+    let top = finite[(finite.len() - 1) * 99 / 100];
+    let dark = (0.1 * top).max(1e-6);
+    let log: Vec<f32> = lum
+        .iter()
+        .map(|&v| {
+            if v.is_finite() {
+                v.max(dark).ln()
+            } else {
+                f32::NAN
+            }
+        })
+        .collect();
+    let r = (w / 16).max(2);
+    let smooth = box_average(&log, w, h, r);
+    let mut dev: Vec<f32> = (0..w * h)
+        .filter(|&p| lum[p].is_finite() && lum[p] >= dark && smooth[p].is_finite())
+        .map(|p| (log[p] - smooth[p]).abs())
+        .collect();
+    if dev.is_empty() {
+        return 0.0;
+    }
+    let mid = dev.len() / 2;
+    *dev.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+/// Mean over the `(2r + 1)²` square around each pixel, coordinates clamped to the image; `NaN` values are left
+/// out of the mean (`NaN` where all are).
+fn box_average(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    // One dimension at a time: sums over a sliding window of the line padded by clamping (prefix sums, f64 so
+    // the differences stay exact enough), O(1) per pixel whatever r.
+    let line_sums = |line: &[(f32, f32)], out: &mut Vec<(f32, f32)>| {
+        let n = line.len();
+        let mut prefix = Vec::with_capacity(n + 2 * r + 1);
+        prefix.push((0.0f64, 0.0f64));
+        for i in 0..n + 2 * r {
+            let (s, k) = line[(i as isize - r as isize).clamp(0, n as isize - 1) as usize];
+            let last = prefix[i];
+            prefix.push((last.0 + s as f64, last.1 + k as f64));
+        }
+        out.clear();
+        out.extend((0..n).map(|x| {
+            let (a, b) = (prefix[x], prefix[x + 2 * r + 1]);
+            ((b.0 - a.0) as f32, (b.1 - a.1) as f32)
+        }));
+    };
+    let pass = |src: &[(f32, f32)], horizontal: bool| -> Vec<(f32, f32)> {
+        let mut out = vec![(0.0, 0.0); w * h];
+        let (mut line, mut sums) = (Vec::new(), Vec::new());
+        if horizontal {
+            for y in 0..h {
+                line_sums(&src[y * w..(y + 1) * w], &mut sums);
+                out[y * w..(y + 1) * w].copy_from_slice(&sums);
+            }
+        } else {
+            for x in 0..w {
+                line.clear();
+                line.extend((0..h).map(|y| src[y * w + x]));
+                line_sums(&line, &mut sums);
+                for (y, v) in sums.iter().enumerate() {
+                    out[y * w + x] = *v;
+                }
+            }
+        }
+        out
+    };
+    let start: Vec<(f32, f32)> = v
+        .iter()
+        .map(|&x| if x.is_finite() { (x, 1.0) } else { (0.0, 0.0) })
+        .collect();
+    pass(&pass(&start, true), false)
+        .into_iter()
+        .map(|(s, n)| if n > 0.0 { s / n } else { f32::NAN })
+        .collect()
+}
+
 /// Follows the mission photo by photo and flags photos whose estimate is likely broken.
 #[derive(Debug, Default)]
 pub struct Monitor {
@@ -157,6 +263,14 @@ impl Monitor {
             }
             self.changes.push(change);
         }
+        h.roughness = roughness(f);
+        if h.roughness > t.roughness {
+            h.flags.push(format!(
+                "F shows the scene ({:.0} % fine structure; lights make smooth patterns): the window holds too \
+                 little seafloor here, raise --window or mask the objects",
+                100.0 * h.roughness
+            ));
+        }
         let b = balance(f);
         if self.reference.is_none() {
             self.start.push(b.clone());
@@ -203,6 +317,7 @@ pub struct Summary {
     pub contamination: usize,
     pub factor_change: usize,
     pub colour_shift: usize,
+    pub roughness: usize,
     pub short_mission: usize,
 }
 
@@ -219,6 +334,8 @@ impl Summary {
                 self.factor_change += 1;
             } else if f.starts_with("F's colour") {
                 self.colour_shift += 1;
+            } else if f.starts_with("F shows the scene") {
+                self.roughness += 1;
             } else {
                 self.short_mission += 1;
             }
@@ -235,6 +352,7 @@ impl Summary {
             (self.contamination, "contamination near 50 %"),
             (self.factor_change, "sudden change of F"),
             (self.colour_shift, "colour change of F"),
+            (self.roughness, "scene left in F"),
             (self.short_mission, "too few photos for the window"),
         ] {
             if n > 0 {
@@ -326,5 +444,75 @@ mod tests {
         s.add(&[]);
         assert_eq!(s.flagged, 1);
         assert!(s.line(2).contains("1 of 2"));
+    }
+
+    /// Brute force: each pixel's mean over the clamped square, summed directly in two dimensions.
+    fn box_brute(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+        let mut out = vec![0.0; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let (mut s, mut n) = (0.0f64, 0.0f64);
+                for dy in -(r as isize)..=r as isize {
+                    for dx in -(r as isize)..=r as isize {
+                        let sx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
+                        let sy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
+                        if v[sy * w + sx].is_finite() {
+                            s += v[sy * w + sx] as f64;
+                            n += 1.0;
+                        }
+                    }
+                }
+                out[y * w + x] = (s / n) as f32;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn box_average_matches_brute_force() {
+        let (w, h) = (13, 7);
+        let mut v: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 11) as f32 * 0.3).collect();
+        v[20] = f32::NAN;
+        for r in [1, 2, 4] {
+            let got = box_average(&v, w, h, r);
+            let want = box_brute(&v, w, h, r);
+            for (g, e) in got.iter().zip(&want) {
+                assert!((g - e).abs() < 1e-5, "r={r}: {g} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn roughness_tells_a_light_cone_from_the_scene() {
+        // A smooth cone: well under the threshold.
+        let cone = |x: usize, y: usize| {
+            let (dx, dy) = (x as f32 - 40.0, y as f32 - 25.0);
+            0.05 + 0.9 * (-(dx * dx + dy * dy) / 900.0).exp()
+        };
+        let smooth = Raster::from_fn(80, 50, 3, |x, y, _| cone(x, y));
+        let r_smooth = roughness(&smooth);
+        assert!(r_smooth < 0.03, "{r_smooth}");
+        let tiny = Raster::from_fn(31, 50, 3, |x, y, _| 0.5 + 0.5 * ((x + y) % 2) as f32);
+        assert_eq!(roughness(&tiny), 0.0, "too small to tell");
+        // The same cone times objects (dark blobs on a 6-pixel grid): the scene is in F.
+        let scene = Raster::from_fn(80, 50, 3, |x, y, _| {
+            let blob = (x / 3 + y / 3) % 2 == 0;
+            cone(x, y) * if blob { 0.5 } else { 1.0 }
+        });
+        let r_scene = roughness(&scene);
+        assert!(r_scene > 0.25, "{r_scene}");
+        // Independent check of the definition on the scene: ln 2 / 2 apart from the blurred mean, at most.
+        assert!(r_scene <= std::f32::consts::LN_2 * 0.5 + 0.05, "{r_scene}");
+        let h = Monitor::new(Thresholds::default()).observe(&smooth, 0.1);
+        assert!(h.flags.is_empty(), "{:?}", h.flags);
+        let h = Monitor::new(Thresholds::default()).observe(&scene, 0.1);
+        assert!(
+            h.flags.iter().any(|f| f.starts_with("F shows the scene")),
+            "{:?}",
+            h.flags
+        );
+        let mut s = Summary::default();
+        s.add(&h.flags);
+        assert_eq!((s.roughness, s.short_mission), (1, 0));
     }
 }

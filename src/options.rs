@@ -6,6 +6,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::baseline::Method;
 use crate::error::Error;
 pub use crate::transfer::Transfer;
 use crate::window::{choose_window, p_half, WindowChoice};
@@ -216,6 +217,21 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
+    /// How the lighting is estimated: `paper` (Köser et al.), or the baselines `mean` (mission mean image,
+    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: paper.
+    pub method: Method,
+    /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
+    pub degree: usize,
+    /// Watch the survey folder during a dive: correct photos as they arrive (each once the `n/2` photos after it
+    /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See [`crate::watch`].
+    /// Default: false.
+    pub watch: bool,
+    /// With `watch`: stop after this many seconds without a new or changed file. Default: none (until stopped).
+    pub idle_timeout: Option<f64>,
+    /// With `watch`: milliseconds between two scans of the survey folder. Default: 500.
+    pub poll_interval: u64,
+    /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
+    pub report: Option<PathBuf>,
 }
 
 impl Default for Options {
@@ -242,6 +258,12 @@ impl Default for Options {
             transfer: Transfer::default(),
             mask: None,
             mask_auto: false,
+            method: Method::default(),
+            degree: 4,
+            watch: false,
+            idle_timeout: None,
+            poll_interval: 500,
+            report: None,
         }
     }
 }
@@ -261,6 +283,7 @@ impl Options {
             &mut opts.survey,
             &mut opts.out,
             &mut opts.mask,
+            &mut opts.report,
         ]
         .into_iter()
         .flatten()
@@ -322,8 +345,53 @@ impl Options {
                 self.jpeg_quality
             ));
         }
+        if self.method == Method::Polynomial && !(1..=8).contains(&self.degree) {
+            return usage(format!("--degree must be 1 to 8, got {}", self.degree));
+        }
         if self.threads == Some(0) {
             return usage("--threads must be at least 1".into());
+        }
+        let stdin = self.survey.as_deref() == Some(Path::new("-"));
+        let stdout = self.out.as_deref() == Some(Path::new("-"));
+        if self.watch && stdin {
+            return usage(
+                "--watch watches a folder; it cannot be used with --survey - (frames on stdin)"
+                    .into(),
+            );
+        }
+        if self.watch || stdin {
+            let what = if self.watch { "--watch" } else { "--survey -" };
+            for (on, flag) in [
+                (self.shard.is_some(), "--shard"),
+                (self.resume, "--resume"),
+                (
+                    self.mask_auto,
+                    "--mask-auto (it needs the whole mission up front; give --mask instead)",
+                ),
+            ] {
+                if on {
+                    return usage(format!("{flag} cannot be used with {what}"));
+                }
+            }
+        }
+        if !self.watch && self.idle_timeout.is_some() {
+            return usage("--idle-timeout needs --watch".into());
+        }
+        if self
+            .idle_timeout
+            .is_some_and(|t| !(t >= 0.0 && t.is_finite()))
+        {
+            return usage("--idle-timeout must be 0 or more seconds".into());
+        }
+        if self.poll_interval == 0 {
+            return usage("--poll-interval must be at least 1 ms".into());
+        }
+        if stdout && (self.save_scatter || self.save_factors || self.mask_auto) {
+            return usage(
+                "--save-scatter, --save-factors and --mask-auto write into the output folder; with --out - there \
+                 is none"
+                    .into(),
+            );
         }
         if self.scatter.is_some() && self.water_column.is_some() {
             return usage("give either --water-column or --scatter, not both".into());

@@ -19,7 +19,7 @@ struct Series<'a> {
     threshold: f32,
 }
 
-/// Draw the mission overview: contamination, change of F, colour shift of F, per photo; flagged photos in red.
+/// Draw the mission overview: contamination, change of F, colour shift and roughness of F, per photo; flagged photos in red.
 pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
     let series = [
         Series {
@@ -36,6 +36,11 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
             title: "colour shift of F against the mission start",
             values: frames.iter().map(|f| f.health.colour_shift).collect(),
             threshold: t.colour_shift,
+        },
+        Series {
+            title: "roughness of F (scene left in F)",
+            values: frames.iter().map(|f| f.health.roughness).collect(),
+            threshold: t.roughness,
         },
     ];
     let n = frames.len().max(1);
@@ -186,6 +191,42 @@ pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<Rg
         y += (a.height().max(f.height()) + gap) as i64;
     }
     Some(img)
+}
+
+/// A before/after contact sheet of a corrected folder: `rows` photos spread evenly over the mission, each as
+/// input | corrected | `F·C` (the last only where `--save-factors` wrote it), `width` pixels wide per tile.
+/// For looking at a run; `examples/before_after.rs` and `examples/real_sheets.rs` use it.
+pub fn before_after_sheet(
+    input: &Path,
+    output: &Path,
+    rows: usize,
+    width: u32,
+) -> Result<RgbImage> {
+    let found = crate::io::find_photos(input)?;
+    let n = found.photos.len();
+    if n == 0 || rows == 0 {
+        return Err(Error::Usage(format!("no photos in {}", input.display())));
+    }
+    let rows = rows.min(n);
+    let mut tiles = Vec::new();
+    for r in 0..rows {
+        let e = &found.photos[r * (n - 1) / (rows - 1).max(1)];
+        let factor = output
+            .join("_abysslight/factors")
+            .join(&e.relative)
+            .with_extension("png");
+        let mut row: Vec<RgbImage> = [e.path.clone(), output.join(&e.relative)]
+            .iter()
+            .filter_map(|p| image::open(p).ok())
+            .map(|img| draw::tile(&img.to_rgb8(), width, true))
+            .collect();
+        // F·C is dim (it is the light on a grey seafloor): stretched like the flagged sheet's.
+        if let Ok(f) = crate::io::load_raster(&factor) {
+            row.push(draw::tile(&raster_rgb(&f), width, true));
+        }
+        tiles.push(row);
+    }
+    Ok(draw::grid(&["input", "corrected", "F*C"], &tiles, 4))
 }
 
 /// A raster in `[0, 1]` as an 8-bit RGB image (grey rasters replicated), scaled so its 99th percentile is white.

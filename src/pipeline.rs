@@ -14,7 +14,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crossbeam_channel::bounded;
 
@@ -25,13 +25,15 @@ use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettings, Mask};
 use crate::median::{block_median, stack_median};
 use crate::monitor::{contamination, Monitor, Summary, Thresholds};
-use crate::options::Options;
+use crate::options::{Method, Options};
 use crate::overview;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::scatter::{self, Scatter};
 use crate::source::{FileList, Item, Role, Sink, Source};
+use crate::stream::StreamFrames;
 use crate::transfer::Curve;
+use crate::watch::WatchFolder;
 use crate::window::window_range;
 
 fn ms(since: Instant) -> f64 {
@@ -200,17 +202,36 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         .out
         .as_deref()
         .ok_or_else(|| Error::Usage("--out is required".into()))?;
-    let mut inputs = vec![("survey", survey)];
+    // Live and video input (src/watch.rs, src/stream.rs): no list of photos up front.
+    let stdin = survey == Path::new("-");
+    let stdout = out == Path::new("-");
+    let streaming = stdin || opts.watch;
+    let mut inputs = Vec::new();
+    if !stdin {
+        inputs.push(("survey", survey));
+    }
     if let Some(w) = opts.water_column.as_deref() {
         inputs.push(("water-column", w));
     }
-    check_output_folder(out, &inputs)?;
+    if !stdout {
+        check_output_folder(out, &inputs)?;
+    }
     let window = opts.window_choice()?;
     let n = window.n;
     let k = opts.downsample;
 
-    let found = find_photos(survey)?;
-    if found.photos.is_empty() {
+    let found = if streaming {
+        if opts.watch && !survey.is_dir() {
+            return Err(Error::Usage(format!(
+                "--watch {}: not a folder",
+                survey.display()
+            )));
+        }
+        io::Found::default()
+    } else {
+        find_photos(survey)?
+    };
+    if !streaming && found.photos.is_empty() {
         return Err(Error::Usage(format!(
             "no photos ({}) found below {}",
             io::PHOTO_EXTENSIONS.join(", "),
@@ -233,8 +254,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             ),
         );
     }
-    let work_dir = out.join(WORK_DIR);
-    std::fs::create_dir_all(&work_dir).map_err(|e| Error::io(&work_dir, e))?;
+    // With --out - there is no output folder and no run files (the report goes to --report).
+    let work_dir: Option<PathBuf> = (!stdout).then(|| out.join(WORK_DIR));
+    if let Some(w) = &work_dir {
+        std::fs::create_dir_all(w).map_err(|e| Error::io(w, e))?;
+    }
 
     // --- S -------------------------------------------------------------------------------------------------
     let mut errors: Vec<FileError> = Vec::new();
@@ -297,7 +321,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         );
         None
     };
-    if let (Some(s), true) = (&scatter, opts.save_scatter) {
+    if let (Some(s), true, Some(work_dir)) = (&scatter, opts.save_scatter, &work_dir) {
         let p = work_dir.join("scatter.png");
         io::save_raster_png16(&s.full, &p)?;
         scatter_info.saved_to = Some(p);
@@ -343,8 +367,13 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         }
         if !medians.is_empty() && medians.iter().all(|m| m.layout() == medians[0].layout()) {
             let found_mask = detect_static(&medians, DetectSettings::default());
-            let p = work_dir.join("mask-auto.png");
-            found_mask.save(&p)?;
+            let p = work_dir
+                .as_deref()
+                .unwrap_or(Path::new("."))
+                .join("mask-auto.png");
+            if work_dir.is_some() {
+                found_mask.save(&p)?;
+            }
             let share = found_mask.count() as f64 / found_mask.ignore.len().max(1) as f64;
             progress.stage(&format!(
                 "static pixels found: {:.2} % of the frame, written to {}",
@@ -402,6 +431,23 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     });
     drop(scatter);
     let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
+    // Baseline `--method mean` needs the whole mission's mean before the stream.
+    if streaming && opts.method == Method::Mean {
+        return Err(Error::Usage(
+            "--method mean needs every photo of the mission before it corrects the first; it cannot be used with \
+             --watch or --survey -"
+                .into(),
+        ));
+    }
+    let mission_mean = match opts.method {
+        Method::Mean => Some(crate::baseline::mission_mean(
+            &found.photos,
+            k,
+            transfer,
+            progress,
+        )?),
+        _ => None,
+    };
 
     // --- which photos to read and which to write ---------------------------------------------------------------
     let total_files = found.photos.len();
@@ -432,9 +478,38 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             }
         })
         .collect();
-    let total_items = items.len();
-    let source = FileList::new(items);
-    let sink = Sink::Folder;
+    let total_items = if streaming { usize::MAX } else { items.len() };
+    let source: Box<dyn Source> = if stdin {
+        progress.stage("reading frames from stdin (PPM, PGM or PNG, back to back)");
+        Box::new(StreamFrames::new(std::io::BufReader::with_capacity(
+            1 << 20,
+            std::io::stdin(),
+        )))
+    } else if opts.watch {
+        progress.stage(&format!(
+            "watching {} for photos (scan every {} ms{}; stop with Ctrl-C or SIGTERM)",
+            survey.display(),
+            opts.poll_interval,
+            opts.idle_timeout
+                .map(|t| format!(", stop after {t} s without new files"))
+                .unwrap_or_default()
+        ));
+        Box::new(WatchFolder::new(
+            survey,
+            Duration::from_millis(opts.poll_interval),
+            opts.idle_timeout.map(Duration::from_secs_f64),
+            crate::watch::stop_flag(),
+        ))
+    } else {
+        Box::new(FileList::new(items))
+    };
+    let sink = if stdout {
+        Sink::Stdout
+    } else {
+        Sink::Folder {
+            carry_metadata: !stdin,
+        }
+    };
     // The stream can stop once every photo of the chunk has been handled.
     let last_needed = chunk.end.saturating_sub(first);
     if let Some(s) = opts.shard {
@@ -457,15 +532,27 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
 
     // --- the survey stream -----------------------------------------------------------------------------------
     let to_handle = chunk.len();
-    progress.stage(&format!(
-        "correcting {} survey photos (window n = {n}, blocks {k}x{k})",
-        to_handle - skipped_existing
-    ));
+    if streaming {
+        progress.stage(&format!(
+            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in; \
+             blocks {k}x{k})",
+            n / 2
+        ));
+    } else {
+        progress.stage(&format!(
+            "correcting {} survey photos (window n = {n}, blocks {k}x{k})",
+            to_handle - skipped_existing
+        ));
+    }
     progress.start(to_handle);
-    let writers = opts
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
-        .max(1);
+    // Frames on stdout must leave in order: one writer, fed in order.
+    let writers = if stdout {
+        1
+    } else {
+        opts.threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
+            .max(1)
+    };
     let settings = EncodeSettings {
         jpeg_quality: opts.jpeg_quality,
         png_compression: opts.png_compression,
@@ -477,6 +564,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut survey_failed = 0usize;
     let live = LiveCount::default();
     let mut flagged_lit: Vec<(usize, Raster)> = Vec::new();
+    let mut streamed = 0usize;
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
         let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
@@ -515,6 +603,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                                 .lock()
                                 .unwrap()
                                 .push(FileError::from_error(&job.frame.input, &e));
+                            // Nobody reads stdout any more (e.g. the downstream ffmpeg ended): stop the run
+                            // instead of failing every remaining frame.
+                            if matches!(sink, Sink::Stdout) && matches!(e, Error::Io { .. }) {
+                                break;
+                            }
                         }
                     }
                 }
@@ -534,10 +627,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             scatter_low: scatter_low.as_ref(),
             mask: mask.as_ref(),
             curves: &curves,
+            mission_mean: mission_mean.as_ref(),
             monitor: Monitor::new(Thresholds::default()),
             flagged_lit: Vec::new(),
             out,
-            work_dir: &work_dir,
+            work_dir: work_dir.as_deref(),
             progress,
         };
         let mut fail = |errors: &mut Vec<FileError>, item: &Item, e: Error| {
@@ -551,6 +645,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         };
         let mut reached_end = true;
         for d in dec_rx {
+            streamed += 1;
             let path = &d.item.entry.path;
             let index = d.item.index;
             match d.photo {
@@ -664,7 +759,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     for f in &frames {
         monitor.add(&f.health.flags);
     }
-    if !frames.is_empty() {
+    if let (false, Some(work_dir)) = (frames.is_empty(), &work_dir) {
         let name = match opts.shard {
             Some(s) => format!("overview-shard-{}-of-{}.png", s.index, s.count),
             None => "overview.png".into(),
@@ -699,7 +794,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         window,
         layout,
         scatter: scatter_info,
-        survey_photos: total_files,
+        survey_photos: if streaming { streamed } else { total_files },
         corrected: frames.len(),
         skipped_existing,
         peak_photos_in_memory: live.peak.load(Ordering::SeqCst),
@@ -715,17 +810,23 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         elapsed_s: started.elapsed().as_secs_f64(),
         report_path: None,
     };
-    let report_path = work_dir.join(match opts.shard {
-        Some(s) => format!("report-shard-{}-of-{}.json", s.index, s.count),
-        None => "report.json".into(),
-    });
-    report.report_path = Some(report_path.clone());
-    io::write_with(&report_path, |w| {
-        serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
-            path: report_path.clone(),
-            reason: e.to_string(),
+    let report_path = opts.report.clone().or_else(|| {
+        work_dir.as_ref().map(|w| {
+            w.join(match opts.shard {
+                Some(s) => format!("report-shard-{}-of-{}.json", s.index, s.count),
+                None => "report.json".into(),
+            })
         })
-    })?;
+    });
+    if let Some(report_path) = report_path {
+        report.report_path = Some(report_path.clone());
+        io::write_with(&report_path, |w| {
+            serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
+                path: report_path.clone(),
+                reason: e.to_string(),
+            })
+        })?;
+    }
     Ok(report)
 }
 
@@ -788,11 +889,14 @@ struct Ctx<'a> {
     scatter: Option<&'a Raster>,
     scatter_low: Option<&'a Raster>,
     out: &'a Path,
-    work_dir: &'a Path,
+    /// `None` with `--out -`.
+    work_dir: Option<&'a Path>,
     progress: &'a dyn Progress,
     mask: Option<&'a Mask>,
     /// Transfer tables for 8- and 16-bit photos.
     curves: &'a (Curve, Curve),
+    /// `M` of `--method mean` (block resolution, linear light).
+    mission_mean: Option<&'a Raster>,
     monitor: Monitor,
     /// `F·C` of flagged photos (at most [`FLAGGED_KEPT`]), for the contact sheet.
     flagged_lit: Vec<(usize, Raster)>,
@@ -844,17 +948,23 @@ impl Ctx<'_> {
                 range.len(),
                 "ring buffer lost a frame of the window"
             );
-            let m = stack_median(&stack);
-            let mut f = factor(&m, self.scatter_low, &self.colour);
-            if self.mask.is_some() {
-                fill_missing(&mut f);
-            }
-            let lit = lit_seafloor(&f, &self.colour);
             let own = ring
                 .iter()
                 .find(|(s, _)| *s == i)
                 .map(|(_, r)| r)
                 .expect("a photo's own low-resolution image is in its window");
+            let m = match (self.opts.method, self.mission_mean) {
+                (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
+                (Method::Polynomial, _) => {
+                    crate::baseline::polynomial_m(own, self.scatter_low, self.opts.degree)
+                }
+                _ => stack_median(&stack),
+            };
+            let mut f = factor(&m, self.scatter_low, &self.colour);
+            if self.mask.is_some() {
+                fill_missing(&mut f);
+            }
+            let lit = lit_seafloor(&f, &self.colour);
             let contaminated = contamination(
                 own,
                 &lit,
@@ -872,9 +982,8 @@ impl Ctx<'_> {
                 self.flagged_lit.push((i, lit.clone()));
             }
             let estimate_ms = w.downsample_ms + ms(t);
-            if self.opts.save_factors {
-                let p = self
-                    .work_dir
+            if let (true, Some(work_dir)) = (self.opts.save_factors, self.work_dir) {
+                let p = work_dir
                     .join("factors")
                     .join(&entry.relative)
                     .with_extension("png");
@@ -910,7 +1019,11 @@ impl Ctx<'_> {
                 })
                 .is_err()
             {
-                return Err(Error::Usage("all output writers stopped".into()));
+                return Err(Error::Usage(if self.out == Path::new("-") {
+                    "stdout was closed (is the program reading the frames still running?)".into()
+                } else {
+                    "all output writers stopped".into()
+                }));
             }
         }
         Ok(())

@@ -6,7 +6,9 @@
 use std::path::Path;
 use std::time::Instant;
 
-use crate::error::Result;
+use std::io::Write;
+
+use crate::error::{Error, Result};
 use crate::io::{decode, EncodeSettings, Entry};
 use crate::raster::Photo;
 
@@ -61,8 +63,12 @@ impl Source for FileList {
 
 /// Where corrected photos go.
 pub enum Sink {
-    /// Files, written atomically at the output path of each photo.
-    Folder,
+    /// Files, written atomically at the output path of each photo, carrying the metadata of their input file if
+    /// `carry_metadata` (inputs from a stream have no file to carry it from).
+    Folder { carry_metadata: bool },
+    /// Frames back to back on stdout (`--out -`), each in the format its output path names (`.ppm`, `.pgm`:
+    /// binary PNM; `.png`). The caller writes them in stream order.
+    Stdout,
 }
 
 impl Sink {
@@ -77,7 +83,29 @@ impl Sink {
         warn: &dyn Fn(&str),
     ) -> Result<()> {
         match self {
-            Sink::Folder => crate::metadata::write_carrying(photo, input, output, settings, warn),
+            Sink::Folder {
+                carry_metadata: true,
+            } => crate::metadata::write_carrying(photo, input, output, settings, warn),
+            Sink::Folder {
+                carry_metadata: false,
+            } => crate::io::write_atomic(photo, output, settings),
+            Sink::Stdout => {
+                let format = crate::io::format_of(output).unwrap_or(image::ImageFormat::Pnm);
+                let mut bytes = Vec::new();
+                crate::io::encode_to(photo, format, settings, &mut bytes).map_err(|reason| {
+                    Error::Encode {
+                        path: output.to_owned(),
+                        reason,
+                    }
+                })?;
+                let mut out = std::io::stdout().lock();
+                out.write_all(&bytes)
+                    .and_then(|()| out.flush())
+                    .map_err(|e| {
+                        let name = output.file_name().unwrap_or_default().to_string_lossy();
+                        Error::io(format!("stdout ({name})"), e)
+                    })
+            }
         }
     }
 }

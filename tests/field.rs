@@ -222,7 +222,10 @@ fn seafloor_colour_change_half_way_is_flagged() {
         "colour shift per photo: {:?}",
         r.frames
             .iter()
-            .map(|f| (f.health.colour_shift * 100.0).round())
+            .map(|f| (
+                (f.health.colour_shift * 100.0).round(),
+                (f.health.roughness * 100.0).round()
+            ))
             .collect::<Vec<_>>()
     );
     // Before the change (and before its window reaches it) nothing is flagged; after it every photo is.

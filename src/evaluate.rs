@@ -1,0 +1,508 @@
+//! `abysslight evaluate`: score corrected photos.
+//!
+//! - With ground truth (a simulated dive): the **albedo error** after one global per-channel scale `s_c` (least
+//!   squares, since white balance is a free choice of each method): `Σ|g − s_c·t| / Σ s_c·t` over all samples of all
+//!   photos, in linear light; and the **residual lighting pattern**: the image frame is cut into a coarse grid, the
+//!   median of `g / (s_c·t)` is taken per cell over all photos, and the robust spread of those cell medians
+//!   (1.4826·median absolute deviation divided by the median, i.e. a robust coefficient of variation) is reported, averaged over channels. A perfect correction scores 0 on both.
+//! - Without ground truth: the **consistency** metric of Köser et al. over overlapping photos, given their
+//!   placement in a mosaic: each photo's mean value per mosaic cell (cells it covers completely), the RMS
+//!   difference of those to the per-cell mean over cells seen by at least two photos, divided by the standard
+//!   deviation of all observed pixels; per channel, then averaged.
+//!
+//! Placement file (`placements.txt`): one photo per line, `#` starts a comment, fields separated by white space:
+//! `NAME TX TY` (the photo's pixel `(u, v)` lies at mosaic `(u + TX, v + TY)`) or `NAME H11 H12 H13 H21 H22 H23
+//! H31 H32 H33` (a homography from photo pixels to mosaic coordinates, row-major). Pixel coordinates: the
+//! top-left corner of the photo is `(0, 0)`, pixel centres are at `+0.5`. NAME is the photo's path relative to the
+//! photo folder.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::io::decode;
+use crate::raster::Raster;
+use crate::simulate::{apply_h, invert3, load_truth};
+use crate::transfer::Transfer;
+
+/// Placement of one photo in the mosaic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placement {
+    pub name: String,
+    /// Photo pixel → mosaic, row-major.
+    pub h: [f64; 9],
+}
+
+/// Parse a placement file's text (see the module docs). `path` is only used in error messages.
+pub fn parse_placements(text: &str, path: &Path) -> Result<Vec<Placement>> {
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let bad = |reason: String| Error::Config {
+            path: path.to_owned(),
+            reason: format!("line {}: {reason}", i + 1),
+        };
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        let nums: Vec<f64> = fields[1..]
+            .iter()
+            .map(|f| f.parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| bad(format!("not a number in {line:?}")))?;
+        let h = match nums.as_slice() {
+            [tx, ty] => [1.0, 0.0, *tx, 0.0, 1.0, *ty, 0.0, 0.0, 1.0],
+            [..] if nums.len() == 9 => {
+                let mut h = [0.0; 9];
+                h.copy_from_slice(&nums);
+                h
+            }
+            _ => {
+                return Err(bad(format!(
+                    "expected NAME TX TY or NAME and 9 homography entries, got {} numbers",
+                    nums.len()
+                )))
+            }
+        };
+        if nums.iter().any(|v| !v.is_finite()) || invert3(&h).is_none() {
+            return Err(bad("placement is not finite or not invertible".into()));
+        }
+        out.push(Placement {
+            name: fields[0].to_owned(),
+            h,
+        });
+    }
+    if out.is_empty() {
+        return Err(Error::Config {
+            path: path.to_owned(),
+            reason: "no placements in the file".into(),
+        });
+    }
+    Ok(out)
+}
+
+/// The text of a placement file with one homography per photo.
+pub fn placements_text<'a>(rows: impl Iterator<Item = (&'a str, &'a [f64; 9])>) -> String {
+    let mut s = String::from(
+        "# abysslight placements: NAME and the homography photo pixel -> mosaic (row-major), or NAME TX TY\n",
+    );
+    for (name, h) in rows {
+        s.push_str(name);
+        for v in h {
+            s.push_str(&format!(" {v:.9e}"));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Per-channel least-squares scale `s_c` minimising `Σ (g − s_c·t)²`.
+fn channel_scales(got: &[Raster], truth: &[Raster]) -> Vec<f64> {
+    let c = truth[0].channels;
+    let (mut num, mut den) = (vec![0.0f64; c], vec![0.0f64; c]);
+    for (g, t) in got.iter().zip(truth) {
+        for (i, (&gv, &tv)) in g.data.iter().zip(&t.data).enumerate() {
+            num[i % c] += gv as f64 * tv as f64;
+            den[i % c] += tv as f64 * tv as f64;
+        }
+    }
+    num.iter()
+        .zip(&den)
+        .map(|(n, d)| n / d.max(1e-30))
+        .collect()
+}
+
+fn check_pairs(got: &[Raster], truth: &[Raster]) {
+    assert_eq!(got.len(), truth.len(), "one truth per photo");
+    assert!(!truth.is_empty(), "no photos");
+    for (g, t) in got.iter().zip(truth) {
+        assert_eq!(g.layout(), t.layout(), "photo and truth differ in size");
+    }
+}
+
+/// Albedo error after the best global per-channel scale: `Σ|g − s_c·t| / Σ s_c·t`.
+pub fn albedo_error(got: &[Raster], truth: &[Raster]) -> f64 {
+    check_pairs(got, truth);
+    let s = channel_scales(got, truth);
+    let c = s.len();
+    let (mut err, mut mag) = (0.0f64, 0.0f64);
+    for (g, t) in got.iter().zip(truth) {
+        for (i, (&gv, &tv)) in g.data.iter().zip(&t.data).enumerate() {
+            let e = s[i % c] * tv as f64;
+            err += (gv as f64 - e).abs();
+            mag += e;
+        }
+    }
+    err / mag.max(1e-30)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Residual lighting pattern: robust spread (1.4826·MAD / median) of the per-cell medians of `g / (s_c·t)` over a `gx`×`gy` grid
+/// of the image frame (pooled over photos), averaged over channels. Samples with `t` below 0.02 are skipped.
+pub fn residual_pattern(got: &[Raster], truth: &[Raster], grid: (usize, usize)) -> f64 {
+    check_pairs(got, truth);
+    let s = channel_scales(got, truth);
+    let c = s.len();
+    let (w, h) = (truth[0].width, truth[0].height);
+    let (gx, gy) = (grid.0.clamp(1, w), grid.1.clamp(1, h));
+    let mut total = 0.0;
+    for (ch, &sc) in s.iter().enumerate() {
+        let mut cells: Vec<Vec<f64>> = vec![Vec::new(); gx * gy];
+        for (g, t) in got.iter().zip(truth) {
+            for y in 0..h {
+                for x in 0..w {
+                    let i = (y * w + x) * c + ch;
+                    let tv = t.data[i] as f64;
+                    if tv >= 0.02 {
+                        cells[(y * gy / h) * gx + x * gx / w].push(g.data[i] as f64 / (sc * tv));
+                    }
+                }
+            }
+        }
+        let meds: Vec<f64> = cells
+            .iter_mut()
+            .filter(|v| !v.is_empty())
+            .map(|v| median(v))
+            .collect();
+        let mut meds = meds;
+        let mid = median(&mut meds);
+        let mut dev: Vec<f64> = meds.iter().map(|m| (m - mid).abs()).collect();
+        total += 1.4826 * median(&mut dev) / mid.abs().max(1e-30);
+    }
+    total / c as f64
+}
+
+/// Bilinear sample at continuous pixel coordinates (pixel centres at `+0.5`), clamped at the border.
+fn sample(r: &Raster, u: f64, v: f64, ch: usize) -> f64 {
+    let x = (u - 0.5).clamp(0.0, (r.width - 1) as f64);
+    let y = (v - 0.5).clamp(0.0, (r.height - 1) as f64);
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(r.width - 1), (y0 + 1).min(r.height - 1));
+    let (tx, ty) = (x - x0 as f64, y - y0 as f64);
+    let g = |xx: usize, yy: usize| r.get(xx, yy, ch) as f64;
+    let a = g(x0, y0) + (g(x1, y0) - g(x0, y0)) * tx;
+    let b = g(x0, y1) + (g(x1, y1) - g(x0, y1)) * tx;
+    a + (b - a) * ty
+}
+
+/// A photo's mean over one mosaic cell: (cell index, per-channel mean).
+type CellObservation = ((i64, i64), Vec<f64>);
+/// Per mosaic cell: photos seen, per-channel sum and sum of squares of their cell means.
+type CellSums = (usize, Vec<f64>, Vec<f64>);
+
+/// Sample points per cell side when a photo's mean over a mosaic cell is taken.
+const CELL_SAMPLES: usize = 4;
+
+/// The consistency metric (see the module docs); `cell` is the mosaic cell size in mosaic units. `None` when no
+/// cell is seen by two photos.
+pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> {
+    assert_eq!(photos.len(), h.len(), "one placement per photo");
+    let c = photos.first()?.channels;
+    // Per photo: (cell, per-channel mean) of the cells it covers completely.
+    let per_photo: Vec<Vec<CellObservation>> = photos
+        .par_iter()
+        .zip(h)
+        .map(|(p, h)| {
+            let inv = invert3(h).expect("placement homography is invertible");
+            let (w, hh) = (p.width as f64, p.height as f64);
+            let corners = [(0.0, 0.0), (w, 0.0), (0.0, hh), (w, hh)].map(|(u, v)| apply_h(h, u, v));
+            let lo_x = corners.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
+            let hi_x = corners
+                .iter()
+                .map(|c| c.0)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let lo_y = corners.iter().map(|c| c.1).fold(f64::INFINITY, f64::min);
+            let hi_y = corners
+                .iter()
+                .map(|c| c.1)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let inside = |(u, v): (f64, f64)| u >= 0.0 && v >= 0.0 && u <= w && v <= hh;
+            let mut out = Vec::new();
+            for cy in (lo_y / cell).floor() as i64..=(hi_y / cell).floor() as i64 {
+                for cx in (lo_x / cell).floor() as i64..=(hi_x / cell).floor() as i64 {
+                    let (x0, y0) = (cx as f64 * cell, cy as f64 * cell);
+                    let covered = [
+                        (x0, y0),
+                        (x0 + cell, y0),
+                        (x0, y0 + cell),
+                        (x0 + cell, y0 + cell),
+                    ]
+                    .into_iter()
+                    .all(|(x, y)| inside(apply_h(&inv, x, y)));
+                    if !covered {
+                        continue;
+                    }
+                    let mut mean = vec![0.0f64; c];
+                    for sy in 0..CELL_SAMPLES {
+                        for sx in 0..CELL_SAMPLES {
+                            let x = x0 + (sx as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
+                            let y = y0 + (sy as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
+                            let (u, v) = apply_h(&inv, x, y);
+                            for (ch, m) in mean.iter_mut().enumerate() {
+                                *m += sample(p, u, v, ch);
+                            }
+                        }
+                    }
+                    for m in &mut mean {
+                        *m /= (CELL_SAMPLES * CELL_SAMPLES) as f64;
+                    }
+                    out.push(((cx, cy), mean));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut cells: std::collections::HashMap<(i64, i64), CellSums> =
+        std::collections::HashMap::new();
+    for obs in per_photo.iter().flatten() {
+        let e = cells
+            .entry(obs.0)
+            .or_insert_with(|| (0, vec![0.0; c], vec![0.0; c]));
+        e.0 += 1;
+        for ch in 0..c {
+            e.1[ch] += obs.1[ch];
+            e.2[ch] += obs.1[ch] * obs.1[ch];
+        }
+    }
+    let (mut ss, mut n) = (vec![0.0f64; c], 0usize);
+    for (count, sum, sumsq) in cells.values().filter(|e| e.0 >= 2) {
+        n += count;
+        for ch in 0..c {
+            ss[ch] += (sumsq[ch] - sum[ch] * sum[ch] / *count as f64).max(0.0);
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    // Standard deviation of all observed pixels, per channel.
+    let (mut s1, mut s2, mut m) = (vec![0.0f64; c], vec![0.0f64; c], 0usize);
+    for p in photos {
+        for px in p.data.chunks_exact(c) {
+            for ch in 0..c {
+                s1[ch] += px[ch] as f64;
+                s2[ch] += (px[ch] as f64).powi(2);
+            }
+            m += 1;
+        }
+    }
+    let mut total = 0.0;
+    for ch in 0..c {
+        let rms = (ss[ch] / n as f64).sqrt();
+        let mean = s1[ch] / m as f64;
+        let sd = (s2[ch] / m as f64 - mean * mean).max(0.0).sqrt();
+        total += rms / sd.max(1e-30);
+    }
+    Some(total / c as f64)
+}
+
+/// Settings of [`evaluate`].
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalSettings {
+    /// Mosaic cell size for the consistency metric, in mosaic units. Default: 8.
+    pub cell: f64,
+    /// Grid of the residual pattern (columns, rows). Default: 8×6.
+    pub grid: (usize, usize),
+    /// Transfer curve of the photos (all sets). Default: the simulated dive's encoding, else linear.
+    pub transfer: Option<Transfer>,
+}
+
+impl Default for EvalSettings {
+    fn default() -> Self {
+        EvalSettings {
+            cell: 8.0,
+            grid: (8, 6),
+            transfer: None,
+        }
+    }
+}
+
+/// Scores of one set of photos.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scores {
+    pub label: String,
+    pub folder: PathBuf,
+    pub photos: usize,
+    pub albedo_error: Option<f64>,
+    pub residual_pattern: Option<f64>,
+    pub consistency: Option<f64>,
+}
+
+/// What `abysslight evaluate` writes as JSON.
+#[derive(Debug, Clone, Serialize)]
+pub struct Evaluation {
+    pub truth: Option<PathBuf>,
+    pub placements: Option<PathBuf>,
+    pub transfer: Transfer,
+    pub settings: EvalSettings,
+    pub sets: Vec<Scores>,
+}
+
+/// `truth/dive.json` below a dive folder, or the file itself.
+fn truth_file(p: &Path) -> PathBuf {
+    if p.is_dir() {
+        if p.join("truth").join("dive.json").is_file() {
+            p.join("truth").join("dive.json")
+        } else {
+            p.join("dive.json")
+        }
+    } else {
+        p.to_owned()
+    }
+}
+
+fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
+    let mut r = Raster::from_photo(&decode(path)?);
+    if !transfer.is_linear() {
+        for v in &mut r.data {
+            *v = transfer.to_linear(*v);
+        }
+    }
+    Ok(r)
+}
+
+/// Score each `(label, folder)` of photos. `truth` is a simulated dive folder (or its `truth/dive.json`);
+/// `placements` a placement file (default with a truth: the simulator's poses).
+pub fn evaluate(
+    sets: &[(String, PathBuf)],
+    truth: Option<&Path>,
+    placements: Option<&Path>,
+    settings: &EvalSettings,
+) -> Result<Evaluation> {
+    if sets.is_empty() {
+        return Err(Error::Usage(
+            "give at least one folder of photos to evaluate".into(),
+        ));
+    }
+    let truth_path = truth.map(truth_file);
+    let truth = truth_path.as_deref().map(load_truth).transpose()?;
+    let placed: Option<Vec<Placement>> = match placements {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            Some(parse_placements(&text, p)?)
+        }
+        None => truth.as_ref().map(|t| {
+            t.poses
+                .iter()
+                .map(|p| Placement {
+                    name: p.file.clone(),
+                    h: p.homography,
+                })
+                .collect()
+        }),
+    };
+    if truth.is_none() && placed.is_none() {
+        return Err(Error::Usage(
+            "nothing to score against: give --truth (a simulated dive) and/or --placements FILE"
+                .into(),
+        ));
+    }
+    let transfer = settings
+        .transfer
+        .or(truth.as_ref().map(|t| t.settings.encode))
+        .unwrap_or_default();
+    let names: Vec<String> = match (&truth, &placed) {
+        (Some(t), _) => t.poses.iter().map(|p| p.file.clone()).collect(),
+        (None, Some(p)) => p.iter().map(|p| p.name.clone()).collect(),
+        (None, None) => unreachable!(),
+    };
+    let albedo: Option<Vec<Raster>> = match (&truth, &truth_path) {
+        (Some(_), Some(tp)) => {
+            let dir = tp.parent().unwrap_or(Path::new(".")).join("albedo");
+            Some(
+                names
+                    .par_iter()
+                    .map(|n| load_linear(&dir.join(n), Transfer::Linear))
+                    .collect::<Result<_>>()?,
+            )
+        }
+        _ => None,
+    };
+    let mut scores = Vec::new();
+    for (label, folder) in sets {
+        let photos: Vec<Raster> = names
+            .par_iter()
+            .map(|n| load_linear(&folder.join(n), transfer))
+            .collect::<Result<_>>()?;
+        if let Some(a) = &albedo {
+            for (p, (t, n)) in photos.iter().zip(a.iter().zip(&names)) {
+                if p.layout() != t.layout() {
+                    return Err(Error::Mismatch {
+                        path: folder.join(n),
+                        reason: format!(
+                            "photo is {}, its true albedo is {}",
+                            p.layout(),
+                            t.layout()
+                        ),
+                    });
+                }
+            }
+        }
+        let consistency = placed.as_ref().and_then(|pl| {
+            let hs: Vec<[f64; 9]> = names
+                .iter()
+                .map(|n| pl.iter().find(|p| &p.name == n).map(|p| p.h))
+                .collect::<Option<_>>()?;
+            consistency(&photos, &hs, settings.cell)
+        });
+        scores.push(Scores {
+            label: label.clone(),
+            folder: folder.clone(),
+            photos: photos.len(),
+            albedo_error: albedo.as_ref().map(|a| albedo_error(&photos, a)),
+            residual_pattern: albedo
+                .as_ref()
+                .map(|a| residual_pattern(&photos, a, settings.grid)),
+            consistency,
+        });
+    }
+    Ok(Evaluation {
+        truth: truth_path,
+        placements: placements.map(Path::to_owned),
+        transfer,
+        settings: settings.clone(),
+        sets: scores,
+    })
+}
+
+impl Evaluation {
+    /// A Markdown table of the scores (lower is better everywhere).
+    pub fn table(&self) -> String {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+        let mut s = String::from(
+            "| method | photos | albedo error | residual pattern | consistency |\n|---|---:|---:|---:|---:|\n",
+        );
+        for r in &self.sets {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} |\n",
+                r.label,
+                r.photos,
+                f(r.albedo_error),
+                f(r.residual_pattern),
+                f(r.consistency)
+            ));
+        }
+        s
+    }
+
+    /// Write the evaluation as JSON (atomically).
+    pub fn save_json(&self, path: &Path) -> Result<()> {
+        crate::io::write_with(path, |w| {
+            serde_json::to_writer_pretty(w, self).map_err(|e| Error::Encode {
+                path: path.to_owned(),
+                reason: e.to_string(),
+            })
+        })
+    }
+}

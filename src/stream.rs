@@ -1,0 +1,480 @@
+//! Image frames back to back on a byte stream (`--survey -`, `--out -`), as `ffmpeg -f image2pipe` reads and
+//! writes them: binary PPM (`P6`) and PGM (`P5`) with 8- or 16-bit samples, and PNG.
+//!
+//! A stream has no index, so each frame is delimited by its own structure: a PNM frame by its header (magic,
+//! width, height, maxval, with `#` comments allowed between the fields) followed by exactly
+//! `width × height × channels × (1 or 2)` bytes; a PNG frame by its signature and chunks up to `IEND`. A frame
+//! cut short by the end of the stream is an error naming the frame; the frames before it are not affected.
+//! After a frame that cannot be delimited (bad magic, bad header) the stream cannot be resynchronised and
+//! reading stops there.
+
+use std::io::{BufRead, ErrorKind, Read, Write};
+use std::path::PathBuf;
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::io::{photo_from_dynamic, Entry};
+use crate::raster::{Layout, Photo, Samples};
+use crate::source::{Item, Role, Source};
+
+/// Container of a frame on the stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameFormat {
+    /// Binary PGM/PPM (`P5`/`P6`).
+    Pnm,
+    Png,
+}
+
+impl FrameFormat {
+    /// File name extension used for a frame of this format with `channels` channels.
+    pub fn extension(self, channels: usize) -> &'static str {
+        match (self, channels) {
+            (FrameFormat::Png, _) => "png",
+            (FrameFormat::Pnm, 1) => "pgm",
+            (FrameFormat::Pnm, _) => "ppm",
+        }
+    }
+}
+
+/// One frame cut from the stream, not decoded yet.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawFrame {
+    pub format: FrameFormat,
+    /// The frame's bytes, exactly as on the stream.
+    pub bytes: Vec<u8>,
+}
+
+/// Name a frame gets in errors and in the report: `stdin frame 12` (0-based, the order on the stream).
+pub fn frame_name(index: usize) -> String {
+    format!("stdin frame {index}")
+}
+
+/// Read bytes until `buf` is full; returns how many were read (less only at the end of the stream).
+fn read_full(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut got = 0;
+    while got < buf.len() {
+        match r.read(&mut buf[got..]) {
+            Ok(0) => break,
+            Ok(k) => got += k,
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(got)
+}
+
+/// Cuts frames off a byte stream.
+pub struct FrameSplitter<R> {
+    r: R,
+    /// Frames cut so far.
+    pub frames: usize,
+    broken: bool,
+}
+
+impl<R: BufRead> FrameSplitter<R> {
+    pub fn new(r: R) -> Self {
+        FrameSplitter {
+            r,
+            frames: 0,
+            broken: false,
+        }
+    }
+
+    /// The next frame, `None` at a clean end of the stream (between frames). An error means the stream cannot be
+    /// read further (truncated or unrecognised frame); later calls return `None`.
+    pub fn next_frame(&mut self) -> Option<std::result::Result<RawFrame, String>> {
+        if self.broken {
+            return None;
+        }
+        let r = self.read_frame();
+        match &r {
+            Ok(None) => return None,
+            Ok(Some(_)) => self.frames += 1,
+            Err(_) => {
+                self.broken = true;
+                self.frames += 1;
+            }
+        }
+        r.transpose()
+    }
+
+    fn read_frame(&mut self) -> std::result::Result<Option<RawFrame>, String> {
+        let io = |e: std::io::Error| format!("cannot read the stream: {e}");
+        let mut magic = [0u8; 2];
+        match read_full(&mut self.r, &mut magic).map_err(io)? {
+            0 => return Ok(None),
+            1 => return Err("truncated: the stream ends 1 byte into the frame".into()),
+            _ => {}
+        }
+        match &magic {
+            b"P5" | b"P6" => self.read_pnm(magic).map(Some),
+            [0x89, b'P'] => self.read_png(magic).map(Some),
+            b"P1" | b"P2" | b"P3" | b"P4" | b"P7" => Err(format!(
+                "{} PNM frames are not supported: use binary PGM (P5) or PPM (P6), e.g. ffmpeg -vcodec ppm",
+                String::from_utf8_lossy(&magic)
+            )),
+            _ => Err(format!(
+                "not a PPM, PGM or PNG frame (starts with bytes {:02x} {:02x}); frames must be back to back, \
+                 e.g. ffmpeg -f image2pipe -vcodec ppm",
+                magic[0], magic[1]
+            )),
+        }
+    }
+
+    fn byte(&mut self) -> std::result::Result<Option<u8>, String> {
+        let mut b = [0u8; 1];
+        match read_full(&mut self.r, &mut b) {
+            Ok(0) => Ok(None),
+            Ok(_) => Ok(Some(b[0])),
+            Err(e) => Err(format!("cannot read the stream: {e}")),
+        }
+    }
+
+    /// One header field of a PNM frame (a decimal number), skipping whitespace and `#` comments before it.
+    /// Consumes the single whitespace byte after it, which is part of `bytes`.
+    fn pnm_field(&mut self, bytes: &mut Vec<u8>, what: &str) -> std::result::Result<u64, String> {
+        let eof = || format!("truncated: the stream ends in the PNM header (before the {what})");
+        let mut c = self.byte()?.ok_or_else(eof)?;
+        loop {
+            bytes.push(c);
+            if c == b'#' {
+                while c != b'\n' && c != b'\r' {
+                    c = self.byte()?.ok_or_else(eof)?;
+                    bytes.push(c);
+                }
+            } else if !c.is_ascii_whitespace() {
+                break;
+            }
+            c = self.byte()?.ok_or_else(eof)?;
+        }
+        let mut v: u64 = 0;
+        loop {
+            if !c.is_ascii_digit() {
+                return Err(format!(
+                    "bad PNM header: the {what} is not a number (byte {c:#04x})"
+                ));
+            }
+            v = v
+                .checked_mul(10)
+                .and_then(|v| v.checked_add((c - b'0') as u64))
+                .ok_or_else(|| format!("bad PNM header: the {what} is too large"))?;
+            c = self.byte()?.ok_or_else(eof)?;
+            bytes.push(c);
+            if c.is_ascii_whitespace() {
+                return Ok(v);
+            }
+        }
+    }
+
+    fn read_pnm(&mut self, magic: [u8; 2]) -> std::result::Result<RawFrame, String> {
+        let mut bytes = magic.to_vec();
+        let width = self.pnm_field(&mut bytes, "width")?;
+        let height = self.pnm_field(&mut bytes, "height")?;
+        let maxval = self.pnm_field(&mut bytes, "maxval")?;
+        if width == 0 || height == 0 {
+            return Err(format!("bad PNM header: size {width}x{height}"));
+        }
+        if !(1..=65535).contains(&maxval) {
+            return Err(format!(
+                "bad PNM header: maxval {maxval} (must be 1 to 65535)"
+            ));
+        }
+        let channels = if &magic == b"P6" { 3 } else { 1 };
+        let per_sample = if maxval < 256 { 1 } else { 2 };
+        let data = width
+            .checked_mul(height)
+            .and_then(|v| v.checked_mul(channels * per_sample))
+            .filter(|&v| v < (1 << 40))
+            .ok_or_else(|| format!("bad PNM header: size {width}x{height} is too large"))?
+            as usize;
+        let head = bytes.len();
+        bytes.resize(head + data, 0);
+        let got = read_full(&mut self.r, &mut bytes[head..])
+            .map_err(|e| format!("cannot read the stream: {e}"))?;
+        if got < data {
+            return Err(format!(
+                "truncated: the stream ends {got} bytes into the {data} bytes of pixel data of a {width}x{height} \
+                 {} frame",
+                String::from_utf8_lossy(&magic)
+            ));
+        }
+        Ok(RawFrame {
+            format: FrameFormat::Pnm,
+            bytes,
+        })
+    }
+
+    fn read_png(&mut self, magic: [u8; 2]) -> std::result::Result<RawFrame, String> {
+        const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+        let mut bytes = magic.to_vec();
+        bytes.resize(8, 0);
+        let got = read_full(&mut self.r, &mut bytes[2..]).map_err(|e| e.to_string())?;
+        if got < 6 {
+            return Err("truncated: the stream ends in the PNG signature".into());
+        }
+        if bytes[..8] != SIGNATURE {
+            return Err("bad PNG signature".into());
+        }
+        let mut chunks = 0;
+        loop {
+            let start = bytes.len();
+            bytes.resize(start + 8, 0);
+            let got = read_full(&mut self.r, &mut bytes[start..]).map_err(|e| e.to_string())?;
+            if got < 8 {
+                return Err(format!(
+                    "truncated: the stream ends in PNG chunk {chunks} (before IEND)"
+                ));
+            }
+            let len = u32::from_be_bytes(bytes[start..start + 4].try_into().unwrap()) as usize;
+            let kind: [u8; 4] = bytes[start + 4..start + 8].try_into().unwrap();
+            if len > 0x7fff_ffff || !kind.iter().all(|b| b.is_ascii_alphabetic()) {
+                return Err(format!(
+                    "bad PNG chunk {chunks} (type {:?}, length {len})",
+                    String::from_utf8_lossy(&kind)
+                ));
+            }
+            let body = bytes.len();
+            bytes.resize(body + len + 4, 0);
+            let got = read_full(&mut self.r, &mut bytes[body..]).map_err(|e| e.to_string())?;
+            if got < len + 4 {
+                return Err(format!(
+                    "truncated: the stream ends inside PNG chunk {chunks} ({}, {got} of {} bytes)",
+                    String::from_utf8_lossy(&kind),
+                    len + 4
+                ));
+            }
+            chunks += 1;
+            if &kind == b"IEND" {
+                return Ok(RawFrame {
+                    format: FrameFormat::Png,
+                    bytes,
+                });
+            }
+        }
+    }
+}
+
+/// Decode a binary PGM/PPM frame. Maxval 255 and 65535 give 8- and 16-bit samples as they are; other maxvals
+/// are scaled to the full 8- (maxval < 256) or 16-bit range.
+pub fn decode_pnm(bytes: &[u8]) -> std::result::Result<Photo, String> {
+    let mut s = FrameSplitter::new(bytes);
+    let mut magic = [0u8; 2];
+    read_full(&mut s.r, &mut magic).map_err(|e| e.to_string())?;
+    let mut head = Vec::new();
+    let width = s.pnm_field(&mut head, "width")? as usize;
+    let height = s.pnm_field(&mut head, "height")? as usize;
+    let maxval = s.pnm_field(&mut head, "maxval")? as u32;
+    let channels = if &magic == b"P6" { 3 } else { 1 };
+    let data = s.r;
+    let count = width * height * channels;
+    let samples = if maxval < 256 {
+        let v = data.get(..count).ok_or("truncated pixel data")?;
+        Samples::U8(if maxval == 255 {
+            v.to_vec()
+        } else {
+            v.iter()
+                .map(|&x| ((x.min(maxval as u8) as u32 * 255 + maxval / 2) / maxval) as u8)
+                .collect()
+        })
+    } else {
+        let v = data.get(..count * 2).ok_or("truncated pixel data")?;
+        Samples::U16(
+            v.chunks_exact(2)
+                .map(|b| {
+                    let x = u16::from_be_bytes([b[0], b[1]]) as u32;
+                    if maxval == 65535 {
+                        x as u16
+                    } else {
+                        ((x.min(maxval) * 65535 + maxval / 2) / maxval) as u16
+                    }
+                })
+                .collect(),
+        )
+    };
+    Ok(Photo {
+        layout: Layout {
+            width,
+            height,
+            channels,
+        },
+        samples,
+        alpha: None,
+    })
+}
+
+/// Decode a frame cut by [`FrameSplitter`].
+pub fn decode_frame(frame: &RawFrame) -> std::result::Result<Photo, String> {
+    match frame.format {
+        FrameFormat::Pnm => decode_pnm(&frame.bytes),
+        FrameFormat::Png => {
+            let img = image::load_from_memory_with_format(&frame.bytes, image::ImageFormat::Png)
+                .map_err(|e| e.to_string())?;
+            photo_from_dynamic(img)
+        }
+    }
+}
+
+/// Write `photo` as a binary PGM (grey) or PPM (RGB) with maxval 255 or 65535 (alpha is dropped).
+pub fn write_pnm(photo: &Photo, w: &mut impl Write) -> std::io::Result<()> {
+    let l = photo.layout;
+    let magic = if l.channels == 1 { "P5" } else { "P6" };
+    match &photo.samples {
+        Samples::U8(v) => {
+            write!(w, "{magic}\n{} {}\n255\n", l.width, l.height)?;
+            w.write_all(v)
+        }
+        Samples::U16(v) => {
+            write!(w, "{magic}\n{} {}\n65535\n", l.width, l.height)?;
+            let mut buf = Vec::with_capacity(v.len() * 2);
+            for s in v {
+                buf.extend_from_slice(&s.to_be_bytes());
+            }
+            w.write_all(&buf)
+        }
+    }
+}
+
+/// Survey photos read as frames from a stream (stdin for `--survey -`). Frame `i` is named
+/// `frame-<i>.<ppm|pgm|png>` (6 digits, 0-based), the name its output gets in an output folder.
+pub struct StreamFrames<R> {
+    splitter: FrameSplitter<R>,
+}
+
+impl<R: BufRead> StreamFrames<R> {
+    pub fn new(r: R) -> Self {
+        StreamFrames {
+            splitter: FrameSplitter::new(r),
+        }
+    }
+}
+
+impl<R: BufRead + Send> Source for StreamFrames<R> {
+    fn next_photo(&mut self) -> Option<(Item, Result<Photo>, f64)> {
+        let t = Instant::now();
+        let index = self.splitter.frames;
+        let frame = self.splitter.next_frame()?;
+        let path = PathBuf::from(frame_name(index));
+        let (relative, photo) = match frame {
+            Ok(f) => {
+                let photo = decode_frame(&f);
+                let channels = photo.as_ref().map_or(3, |p| p.layout.channels);
+                let name = format!("frame-{index:06}.{}", f.format.extension(channels));
+                (PathBuf::from(name), photo)
+            }
+            Err(e) => (PathBuf::from(format!("frame-{index:06}")), Err(e)),
+        };
+        let photo = photo.map_err(|reason| Error::Decode {
+            path: path.clone(),
+            reason,
+        });
+        let item = Item {
+            index,
+            entry: Entry { path, relative },
+            role: Role::Write,
+        };
+        Some((item, photo, t.elapsed().as_secs_f64() * 1000.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn split(bytes: &[u8]) -> Vec<std::result::Result<RawFrame, String>> {
+        let mut s = FrameSplitter::new(bytes);
+        std::iter::from_fn(|| s.next_frame()).collect()
+    }
+
+    #[test]
+    fn pnm_headers_with_comments_and_both_depths() {
+        let mut stream = Vec::new();
+        stream.extend_from_slice(b"P6\n# made by hand\n2 1\n# another\n255\n");
+        stream.extend_from_slice(&[1, 2, 3, 4, 5, 6]);
+        stream.extend_from_slice(b"P5 2\t2 65535\r");
+        stream.extend_from_slice(&[0, 1, 0, 2, 255, 255, 1, 0]);
+        let frames = split(&stream);
+        assert_eq!(frames.len(), 2);
+        let a = decode_frame(frames[0].as_ref().unwrap()).unwrap();
+        assert_eq!(
+            (a.layout.width, a.layout.height, a.layout.channels),
+            (2, 1, 3)
+        );
+        assert_eq!(a.samples, Samples::U8(vec![1, 2, 3, 4, 5, 6]));
+        let b = decode_frame(frames[1].as_ref().unwrap()).unwrap();
+        assert_eq!(b.layout.channels, 1);
+        assert_eq!(b.samples, Samples::U16(vec![1, 2, 65535, 256]));
+        let mut back = Vec::new();
+        write_pnm(&b, &mut back).unwrap();
+        let again = split(&back);
+        assert_eq!(decode_frame(again[0].as_ref().unwrap()).unwrap(), b);
+    }
+
+    #[test]
+    fn odd_maxval_is_scaled() {
+        let frames = split(b"P5 2 1 15\n\x00\x0f");
+        let p = decode_frame(frames[0].as_ref().unwrap()).unwrap();
+        assert_eq!(p.samples, Samples::U8(vec![0, 255]));
+    }
+
+    #[test]
+    fn truncated_pnm_is_an_error_after_the_good_frames() {
+        let mut stream = b"P5 1 1 255\n\x07".to_vec();
+        stream.extend_from_slice(b"P5 2 2 255\n\x01\x02");
+        let frames = split(&stream);
+        assert_eq!(frames.len(), 2);
+        assert!(frames[0].is_ok());
+        let e = frames[1].as_ref().unwrap_err();
+        assert!(
+            e.contains("truncated") && e.contains("2 bytes into the 4"),
+            "{e}"
+        );
+        let e = split(b"P6 4 ").pop().unwrap().unwrap_err();
+        assert!(e.contains("PNM header"), "{e}");
+    }
+
+    #[test]
+    fn garbage_and_ascii_pnm_are_refused() {
+        let e = split(b"GIF89a").pop().unwrap().unwrap_err();
+        assert!(e.contains("not a PPM, PGM or PNG"), "{e}");
+        let e = split(b"P3 1 1 255 0 0 0").pop().unwrap().unwrap_err();
+        assert!(e.contains("P3"), "{e}");
+        assert!(split(b"").is_empty());
+    }
+
+    fn png(w: u32, h: u32, sixteen: bool) -> Vec<u8> {
+        let mut out = Vec::new();
+        let img: image::DynamicImage = if sixteen {
+            image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(w, h, |x, y| {
+                image::Rgb([x as u16 * 1000, y as u16 * 3000, 65535])
+            })
+            .into()
+        } else {
+            image::ImageBuffer::<image::Luma<u8>, _>::from_fn(w, h, |x, y| {
+                image::Luma([(x * 10 + y) as u8])
+            })
+            .into()
+        };
+        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn png_chunks_are_walked_to_iend() {
+        let (a, b) = (png(5, 4, false), png(3, 3, true));
+        let mut stream = a.clone();
+        stream.extend_from_slice(&b);
+        stream.extend_from_slice(b"P5 1 1 255\n\x09");
+        let frames = split(&stream);
+        assert_eq!(frames.len(), 3);
+        assert_eq!(frames[0].as_ref().unwrap().bytes, a);
+        assert_eq!(frames[1].as_ref().unwrap().bytes, b);
+        let p = decode_frame(frames[1].as_ref().unwrap()).unwrap();
+        assert_eq!(p.layout.channels, 3);
+        assert!(matches!(p.samples, Samples::U16(_)));
+        assert_eq!(frames[2].as_ref().unwrap().format, FrameFormat::Pnm);
+        let cut = &b[..b.len() - 6];
+        let e = split(cut).pop().unwrap().unwrap_err();
+        assert!(e.contains("truncated") && e.contains("IEND"), "{e}");
+    }
+}
