@@ -45,12 +45,47 @@ enum Command {
     /// Estimate the backscatter S from water-column frames once, for --scatter (e.g. before sharded runs).
     #[command(after_help = EXIT_HELP)]
     Scatter(ScatterArgs),
+    /// Benchmark: generate a 12 MP JPEG mission in a temp folder and measure correct against decode + encode.
+    Bench(BenchArgs),
     /// Render a simulated dive with known albedo (water/, survey/, truth/) for testing and evaluation.
     Simulate(SimulateArgs),
     /// Score corrected photos: against a simulated dive's truth, and/or by consistency over overlapping photos.
     Evaluate(EvaluateArgs),
     /// Simulate a small dive, correct it with every method, score them and draw a contact sheet.
     Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+struct BenchArgs {
+    /// Photo size WIDTHxHEIGHT.
+    #[arg(long, default_value = "4000x3000", value_name = "WxH")]
+    size: String,
+    /// Survey photos of the short mission (the long one has 10x as many).
+    #[arg(long, default_value_t = 20)]
+    photos: usize,
+    /// How many times longer the long mission is.
+    #[arg(long, default_value_t = 10)]
+    long_factor: usize,
+    /// Worker threads of correct and of the floor.
+    #[arg(long, short = 'j', default_value_t = 2)]
+    threads: usize,
+    /// Sliding window n.
+    #[arg(long, default_value_t = 7)]
+    window: usize,
+    /// JPEG output quality.
+    #[arg(long, default_value_t = 95)]
+    jpeg_quality: u8,
+    /// Generate the mission here instead of in a temporary folder.
+    #[arg(long, value_name = "DIR")]
+    dir: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child: bool,
+    #[arg(long, hide = true)]
+    child_water_column: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child_survey: Option<PathBuf>,
+    #[arg(long, hide = true)]
+    child_out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -223,6 +258,11 @@ struct CorrectArgs {
     #[arg(long, value_name = "Q")]
     jpeg_quality: Option<u8>,
 
+    /// PNG output compression: fast, default or best [default: fast]. Lossless either way; fast writes a 12 MP
+    /// photo several times quicker for files somewhat larger (docs/performance.md). TIFF is written uncompressed.
+    #[arg(long, value_name = "LEVEL")]
+    png_compression: Option<abysslight::io::PngCompression>,
+
     /// Worker threads [default: all cores].
     #[arg(long, short = 'j', value_name = "N")]
     threads: Option<usize>,
@@ -355,6 +395,9 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if let Some(v) = args.factor_floor {
         o.factor_floor = v;
+    }
+    if let Some(v) = args.png_compression {
+        o.png_compression = v;
     }
     if let Some(v) = args.jpeg_quality {
         o.jpeg_quality = v;
@@ -537,6 +580,51 @@ fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
     }))
 }
 
+fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
+    use abysslight::bench;
+    if a.child {
+        let need = |p: &Option<PathBuf>| {
+            p.clone()
+                .ok_or_else(|| Error::Usage("bench --child needs its folders".into()))
+        };
+        let r = bench::child(
+            &need(&a.child_water_column)?,
+            &need(&a.child_survey)?,
+            &need(&a.child_out)?,
+            a.threads,
+            a.window,
+            a.jpeg_quality,
+        )?;
+        println!(
+            "{}{}",
+            bench::CHILD_LINE,
+            serde_json::to_string(&r).unwrap_or_default()
+        );
+        return Ok(ExitCode::from(EXIT_OK));
+    }
+    let (w, h) = a
+        .size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .ok_or_else(|| Error::Usage(format!("--size {}: expected WIDTHxHEIGHT", a.size)))?;
+    let o = bench::BenchOptions {
+        width: w,
+        height: h,
+        photos: a.photos,
+        long_factor: a.long_factor,
+        threads: a.threads,
+        window: a.window,
+        jpeg_quality: a.jpeg_quality,
+        dir: a.dir,
+        ..bench::BenchOptions::default()
+    };
+    let exe = std::env::current_exe()
+        .map_err(|e| Error::Usage(format!("cannot find the abysslight binary: {e}")))?;
+    let r = bench::run(&exe, &o, &|m| eprintln!("abysslight bench: {m}"))?;
+    println!("{}", r.table());
+    Ok(ExitCode::from(EXIT_OK))
+}
+
 fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
     let sim = abysslight::simulate::Simulation {
         frames: a.frames,
@@ -642,6 +730,7 @@ pub fn run() -> ExitCode {
         Command::Correct(a) => correct(*a),
         Command::Window(a) => window(a),
         Command::Scatter(a) => scatter(a),
+        Command::Bench(a) => bench(a),
         Command::Simulate(a) => simulate(a),
         Command::Evaluate(a) => evaluate(a),
         Command::Demo(a) => demo(a),

@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::factor::{lerp_rows, taps};
+use crate::factor::{lerp_rows, taps, Tap};
 use crate::raster::{Layout, Raster, Sample};
 use crate::transfer::Curve;
 
@@ -58,48 +58,177 @@ pub fn correct_in_place<T: Sample>(
     }
     let tx = taps(width, k);
     let ty = taps(height, k);
-    let max = T::MAX as u16;
     samples
         .par_chunks_mut(row_len)
         .enumerate()
-        .map(|(y, row)| {
-            let t = ty[y];
-            let mut frow = vec![0.0f32; factor_low.width * c];
-            lerp_rows(
-                factor_low.row(t.i0 as usize),
-                factor_low.row(t.i1 as usize),
-                t.t,
-                &mut frow,
-            );
-            let srow = scatter.map(|s| s.row(y));
-            let mut stats = CorrectStats::default();
-            for (x, tp) in tx.iter().enumerate() {
-                let mut floored = false;
-                for ch in 0..c {
-                    let a = frow[tp.i0 as usize * c + ch];
-                    let b = frow[tp.i1 as usize * c + ch];
-                    let mut f = a + (b - a) * tp.t;
-                    if f < floor || f.is_nan() {
-                        f = floor;
-                        floored = true;
-                    }
-                    let i = x * c + ch;
-                    let s = srow.map_or(0.0, |s| s[i]);
-                    let a = (curve.linear(row[i].to_u16()) - s) / f;
-                    let code = curve.code(a);
-                    if (code == 0 && a < 0.0) || (code == max && a > 1.0) {
-                        stats.clipped_samples += 1;
-                    }
-                    row[i] = T::from_f32(code as f32);
-                }
-                stats.floored_pixels += floored as u64;
-            }
-            stats
-        })
+        .map_init(
+            || (vec![0.0f32; factor_low.width * c], vec![0.0f32; row_len]),
+            |(frow, fx), (y, row)| {
+                let t = ty[y];
+                lerp_rows(
+                    factor_low.row(t.i0 as usize),
+                    factor_low.row(t.i1 as usize),
+                    t.t,
+                    frow,
+                );
+                let srow = scatter.map(|s| s.row(y));
+                correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, curve)
+            },
+        )
         .reduce(CorrectStats::default, |mut a, b| {
             a += b;
             a
         })
+}
+
+/// One row: `F` upsampled along the row and floored into `fx`, then `A = (I − S) / F`. Runs the AVX2 build of
+/// the same code where the CPU has it (IEEE arithmetic, no fused operations: the same bits either way).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn correct_row_dispatch<T: Sample>(
+    row: &mut [T],
+    frow: &[f32],
+    fx: &mut [f32],
+    tx: &[Tap],
+    c: usize,
+    floor: f32,
+    srow: Option<&[f32]>,
+    curve: &Curve,
+) -> CorrectStats {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
+        return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, curve) };
+    }
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, curve)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn correct_row_avx2<T: Sample>(
+    row: &mut [T],
+    frow: &[f32],
+    fx: &mut [f32],
+    tx: &[Tap],
+    c: usize,
+    floor: f32,
+    srow: Option<&[f32]>,
+    curve: &Curve,
+) -> CorrectStats {
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, curve)
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn correct_row_portable<T: Sample>(
+    row: &mut [T],
+    frow: &[f32],
+    fx: &mut [f32],
+    tx: &[Tap],
+    c: usize,
+    floor: f32,
+    srow: Option<&[f32]>,
+    curve: &Curve,
+) -> CorrectStats {
+    // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
+    // made a constant for RGB and grey so the per-pixel loop unrolls.
+    let floored_pixels = match c {
+        3 => expand_f::<3>(frow, fx, tx, floor),
+        1 => expand_f::<1>(frow, fx, tx, floor),
+        _ => expand_f_dyn(frow, fx, tx, c, floor),
+    };
+    CorrectStats {
+        floored_pixels,
+        clipped_samples: correct_row(row, fx, srow, curve),
+    }
+}
+
+/// Upsample one low-resolution `F` row (`frow`, already interpolated between block rows) along x into `fx`,
+/// floored; returns the pixels where any channel was floored.
+#[inline(always)]
+fn expand_f<const C: usize>(frow: &[f32], fx: &mut [f32], tx: &[Tap], floor: f32) -> u64 {
+    let mut floored_pixels = 0u64;
+    for (tp, fpx) in tx.iter().zip(fx.chunks_exact_mut(C)) {
+        let (i0, i1) = (tp.i0 as usize * C, tp.i1 as usize * C);
+        let (a, b) = (&frow[i0..i0 + C], &frow[i1..i1 + C]);
+        let mut floored = false;
+        for ch in 0..C {
+            let mut f = a[ch] + (b[ch] - a[ch]) * tp.t;
+            if f < floor || f.is_nan() {
+                f = floor;
+                floored = true;
+            }
+            fpx[ch] = f;
+        }
+        floored_pixels += floored as u64;
+    }
+    floored_pixels
+}
+
+/// [`expand_f`] for any channel count.
+fn expand_f_dyn(frow: &[f32], fx: &mut [f32], tx: &[Tap], c: usize, floor: f32) -> u64 {
+    let mut floored_pixels = 0u64;
+    for (tp, fpx) in tx.iter().zip(fx.chunks_exact_mut(c)) {
+        let (i0, i1) = (tp.i0 as usize * c, tp.i1 as usize * c);
+        let mut floored = false;
+        for (ch, out) in fpx.iter_mut().enumerate() {
+            let (a, b) = (frow[i0 + ch], frow[i1 + ch]);
+            let mut f = a + (b - a) * tp.t;
+            if f < floor || f.is_nan() {
+                f = floor;
+                floored = true;
+            }
+            *out = f;
+        }
+        floored_pixels += floored as u64;
+    }
+    floored_pixels
+}
+
+/// `A = (I − S) / F` over one row, `F` already upsampled and floored; returns the clipped samples. A sample is
+/// clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
+#[inline(always)]
+fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &Curve) -> u64 {
+    let mut clipped = 0u64;
+    if curve.is_identity() {
+        // Linear codes: straight-line arithmetic the compiler can vectorise (no table look-ups).
+        let max = curve.max();
+        let mut one = |v: &mut T, f: f32, s: f32| {
+            let lin = v.to_u16() as f32 / max;
+            let a = (lin - s) / f;
+            #[allow(clippy::manual_range_contains)]
+            // NaN is not clipped; `contains` would say it is
+            let out = (a < 0.0) | (a > 1.0);
+            clipped += out as u64;
+            // In range after the clamp, so the (vectorisable) conversion to i32 gives the same code as to u16.
+            let code = (a * max + 0.5).clamp(0.0, max) as i32;
+            *v = T::from_code(code as u16);
+        };
+        match s {
+            Some(s) => {
+                for ((v, &f), &s) in row.iter_mut().zip(f).zip(s) {
+                    one(v, f, s);
+                }
+            }
+            None => {
+                for (v, &f) in row.iter_mut().zip(f) {
+                    one(v, f, 0.0);
+                }
+            }
+        }
+    } else {
+        for (i, (v, &f)) in row.iter_mut().zip(f).enumerate() {
+            let s = s.map_or(0.0, |s| s[i]);
+            let a = (curve.linear(v.to_u16()) - s) / f;
+            #[allow(clippy::manual_range_contains)]
+            // NaN is not clipped; `contains` would say it is
+            let out = (a < 0.0) | (a > 1.0);
+            clipped += out as u64;
+            *v = T::from_code(curve.code(a));
+        }
+    }
+    clipped
 }
 
 #[cfg(test)]
@@ -157,6 +286,31 @@ mod tests {
                 stats.floored_pixels > 0,
                 "the low-res F has values under the floor"
             );
+        }
+    }
+
+    #[test]
+    fn avx2_and_portable_rows_agree_bitwise() {
+        let c = 3;
+        let width = 301;
+        let tx = taps(width, 8);
+        let frow: Vec<f32> = (0..width.div_ceil(8) * c)
+            .map(|i| 0.01 + 0.37 * ((i * 7) % 11) as f32 / 10.0)
+            .collect();
+        let srow: Vec<f32> = (0..width * c).map(|i| 0.002 * (i % 29) as f32).collect();
+        let row8: Vec<u8> = (0..width * c).map(|i| ((i * 31) % 256) as u8).collect();
+        for curve in [
+            Curve::new(Transfer::Linear, 256),
+            Curve::new(Transfer::Srgb, 256),
+        ] {
+            for s in [None, Some(srow.as_slice())] {
+                let (mut a, mut b) = (row8.clone(), row8.clone());
+                let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
+                let sa = correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, &curve);
+                let sb = correct_row_portable(&mut b, &frow, &mut fb, &tx, c, 0.05, s, &curve);
+                assert_eq!(a, b);
+                assert_eq!(sa, sb);
+            }
         }
     }
 

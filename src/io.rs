@@ -255,15 +255,46 @@ pub fn photo_to_dynamic(photo: &Photo) -> DynamicImage {
     }
 }
 
+/// How hard the PNG writer compresses. Measured on 12 MP RGB 8-bit photos (docs/performance.md): `fast` writes
+/// about 13× quicker than `default` for files about 29 % larger; `best` is slower still for almost nothing less.
+/// Lossless either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PngCompression {
+    #[default]
+    Fast,
+    Default,
+    Best,
+}
+
+impl std::str::FromStr for PngCompression {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "fast" => Ok(PngCompression::Fast),
+            "default" => Ok(PngCompression::Default),
+            "best" => Ok(PngCompression::Best),
+            _ => Err(format!(
+                "invalid PNG compression {s:?}: expected fast, default or best"
+            )),
+        }
+    }
+}
+
 /// Encoder settings.
 #[derive(Debug, Clone, Copy)]
 pub struct EncodeSettings {
     pub jpeg_quality: u8,
+    /// PNG compression effort (TIFF is written uncompressed, the fastest).
+    pub png_compression: PngCompression,
 }
 
 impl Default for EncodeSettings {
     fn default() -> Self {
-        EncodeSettings { jpeg_quality: 95 }
+        EncodeSettings {
+            jpeg_quality: 95,
+            png_compression: PngCompression::Fast,
+        }
     }
 }
 
@@ -296,7 +327,11 @@ pub fn encode_to<W: Write>(
         ImageFormat::Png => {
             let enc = image::codecs::png::PngEncoder::new_with_quality(
                 w,
-                image::codecs::png::CompressionType::Fast,
+                match settings.png_compression {
+                    PngCompression::Fast => image::codecs::png::CompressionType::Fast,
+                    PngCompression::Default => image::codecs::png::CompressionType::Default,
+                    PngCompression::Best => image::codecs::png::CompressionType::Best,
+                },
                 image::codecs::png::FilterType::Adaptive,
             );
             photo_to_dynamic(photo)
@@ -505,7 +540,15 @@ mod tests {
             assert_eq!(&decode(&p).unwrap(), photo, "{name}");
         }
         let j = d.path().join("a.jpg");
-        write_atomic(&rgb8, &j, EncodeSettings { jpeg_quality: 100 }).unwrap();
+        write_atomic(
+            &rgb8,
+            &j,
+            EncodeSettings {
+                jpeg_quality: 100,
+                ..EncodeSettings::default()
+            },
+        )
+        .unwrap();
         let back = decode(&j).unwrap();
         assert_eq!(back.layout, rgb8.layout);
         assert!(write_atomic(&grey16, &d.path().join("g.jpg"), EncodeSettings::default()).is_err());

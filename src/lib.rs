@@ -25,6 +25,7 @@
 //! ```
 
 pub mod baseline;
+pub mod bench;
 pub mod correct;
 pub mod demo;
 pub mod draw;

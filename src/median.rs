@@ -59,8 +59,154 @@ pub fn blocks(len: usize, k: usize) -> usize {
     len.div_ceil(k)
 }
 
+/// Comparators `(i, j)`, `i < j`, of a sorting network for `n` values: Batcher's odd–even merge sort for the next
+/// power of two, without the comparators that touch the missing (conceptually `+∞`) values. Applying them in
+/// order with `(min, max)` sorts any input.
+pub fn sorting_network(n: usize) -> Vec<(u16, u16)> {
+    assert!(n <= u16::MAX as usize, "network too large");
+    let p2 = n.next_power_of_two();
+    let mut out = Vec::new();
+    let mut p = 1;
+    while p < p2 {
+        let mut k = p;
+        while k >= 1 {
+            let mut j = k % p;
+            while j + k < p2 {
+                for i in 0..k.min(p2 - j - k) {
+                    let (a, b) = (i + j, i + j + k);
+                    if (a / (2 * p)) == (b / (2 * p)) && b < n {
+                        out.push((a as u16, b as u16));
+                    }
+                }
+                j += 2 * k;
+            }
+            k /= 2;
+        }
+        p *= 2;
+    }
+    out
+}
+
+/// The comparators of `net` that can change the values ending at `positions` (the others are dropped).
+pub fn prune_network(net: &[(u16, u16)], positions: &[usize]) -> Vec<(u16, u16)> {
+    let size = net
+        .iter()
+        .map(|&(_, b)| b as usize + 1)
+        .chain(positions.iter().map(|&p| p + 1))
+        .max()
+        .unwrap_or(0);
+    let mut needed = vec![false; size];
+    for &p in positions {
+        needed[p] = true;
+    }
+    let mut kept: Vec<(u16, u16)> = Vec::new();
+    for &(a, b) in net.iter().rev() {
+        if needed[a as usize] || needed[b as usize] {
+            needed[a as usize] = true;
+            needed[b as usize] = true;
+            kept.push((a, b));
+        }
+    }
+    kept.reverse();
+    kept
+}
+
+/// Positions holding the median of `n` sorted values (one for odd `n`, two for even).
+fn median_positions(n: usize) -> Vec<usize> {
+    if n % 2 == 1 {
+        vec![n / 2]
+    } else {
+        vec![n / 2 - 1, n / 2]
+    }
+}
+
+/// Apply `net` to `lanes` independent columns stored as `v[e * lanes + lane]` (element `e` of column `lane`).
+/// The inner loop runs over lanes with `min`/`max` only, which the compiler vectorises.
+fn apply_network<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked above); the body is the same safe code, compiled for AVX2.
+        return unsafe { apply_network_avx2(net, v, lanes) };
+    }
+    apply_network_portable(net, v, lanes)
+}
+
+/// [`apply_network`] compiled with AVX2 enabled (twice the lanes per instruction).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn apply_network_avx2<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
+    apply_network_portable(net, v, lanes)
+}
+
+/// The portable body of [`apply_network`] (any CPU).
+#[inline(always)]
+fn apply_network_portable<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
+    for &(a, b) in net {
+        let (a, b) = (a as usize * lanes, b as usize * lanes);
+        let (lo, hi) = v.split_at_mut(b);
+        let (ra, rb) = (&mut lo[a..a + lanes], &mut hi[..lanes]);
+        for (x, y) in ra.iter_mut().zip(rb.iter_mut()) {
+            let (p, q) = (*x, *y);
+            let swap = q < p;
+            *x = if swap { q } else { p };
+            *y = if swap { p } else { q };
+        }
+    }
+}
+
+/// Per-column median of integer samples: `out[i]` = the median of `cols[j][i]` over `j` (in sample units, the
+/// mean of the two middle ones for an even count), as [`median_of_samples`] would give it, through a sorting
+/// network over many columns at once.
+pub fn column_median<T: Sample>(cols: &[&[T]], out: &mut [f32]) {
+    let n = cols.len();
+    assert!(n > 0, "median of no columns");
+    for c in cols {
+        assert_eq!(c.len(), out.len());
+    }
+    if n > NETWORK_MAX {
+        let mut scratch = vec![T::default(); n];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (s, c) in scratch.iter_mut().zip(cols) {
+                *s = c[i];
+            }
+            *o = median_of_samples(&mut scratch);
+        }
+        return;
+    }
+    let net = prune_network(&sorting_network(n), &median_positions(n));
+    let mut v = vec![T::default(); n * LANES];
+    for (chunk, o) in out.chunks_mut(LANES).enumerate() {
+        let (lanes, s0) = (o.len(), chunk * LANES);
+        let v = &mut v[..n * lanes];
+        for (e, c) in cols.iter().enumerate() {
+            v[e * lanes..(e + 1) * lanes].copy_from_slice(&c[s0..s0 + lanes]);
+        }
+        apply_network(&net, v, lanes);
+        if n % 2 == 1 {
+            for (o, &m) in o.iter_mut().zip(&v[(n / 2) * lanes..(n / 2 + 1) * lanes]) {
+                *o = m.to_u16() as f32;
+            }
+        } else {
+            let lo = &v[(n / 2 - 1) * lanes..(n / 2) * lanes];
+            let hi = &v[(n / 2) * lanes..(n / 2 + 1) * lanes];
+            for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                *o = (a.to_u16() as f32 + b.to_u16() as f32) * 0.5;
+            }
+        }
+    }
+}
+
+/// Largest block (`k²` values) done with a sorting network; larger blocks use selection.
+const NETWORK_MAX: usize = 256;
+/// Columns sorted at once by a network (sized so that the working set stays in L1).
+const LANES: usize = 128;
+
 /// Spatial median downsampling: every `k`×`k` block (partial blocks at the right and bottom border included) becomes
 /// one pixel holding the per-channel median of the block, normalised to `[0, 1]`.
+///
+/// Full blocks go through a pruned sorting network applied to many blocks at once (no per-block sort call);
+/// partial blocks and huge `k` use selection. Both give the same value: the middle sample, or the mean of the two
+/// middle ones.
 pub fn block_median<T: Sample>(
     samples: &[T],
     width: usize,
@@ -78,14 +224,65 @@ pub fn block_median<T: Sample>(
     }
     let scale = 1.0 / T::MAX;
     let row_len = width * channels;
+    let kk = k * k;
+    let net = if kk <= NETWORK_MAX {
+        prune_network(&sorting_network(kk), &median_positions(kk))
+    } else {
+        Vec::new()
+    };
+    // Blocks of a row that are complete (k wide); in complete block rows these go through the network.
+    let full_bx = if kk <= NETWORK_MAX { width / k } else { 0 };
     out.data
         .par_chunks_mut(bw * channels)
         .enumerate()
         .for_each(|(by, out_row)| {
             let y0 = by * k;
             let y1 = (y0 + k).min(height);
-            let mut scratch: Vec<T> = Vec::with_capacity(k * k);
-            for bx in 0..bw {
+            let first_scalar = if y1 - y0 == k { full_bx } else { 0 };
+            if first_scalar > 0 {
+                let total = first_scalar * channels;
+                let mut v: Vec<T> = vec![T::default(); kk * LANES];
+                let mut lane0 = 0;
+                while lane0 < total {
+                    let lanes = LANES.min(total - lane0);
+                    let v = &mut v[..kk * lanes];
+                    // Gather: element e = dy·k + dx of lane (bx, ch).
+                    for dy in 0..k {
+                        let row = &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len];
+                        // Lane `lane0 + l` is sample `(bx·k)·channels + ch` of the row, `lane = bx·channels + ch`.
+                        let (bx0, ch0) = (lane0 / channels, lane0 % channels);
+                        for dx in 0..k {
+                            let dst = &mut v[(dy * k + dx) * lanes..(dy * k + dx + 1) * lanes];
+                            let (mut bx, mut ch) = (bx0, ch0);
+                            for d in dst.iter_mut() {
+                                *d = row[(bx * k + dx) * channels + ch];
+                                ch += 1;
+                                if ch == channels {
+                                    ch = 0;
+                                    bx += 1;
+                                }
+                            }
+                        }
+                    }
+                    apply_network(&net, v, lanes);
+                    let o = &mut out_row[lane0..lane0 + lanes];
+                    if kk % 2 == 1 {
+                        let m = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
+                        for (o, &m) in o.iter_mut().zip(m) {
+                            *o = m.to_u16() as f32 * scale;
+                        }
+                    } else {
+                        let lo = &v[(kk / 2 - 1) * lanes..(kk / 2) * lanes];
+                        let hi = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
+                        for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                            *o = (a.to_u16() as f32 + b.to_u16() as f32) * 0.5 * scale;
+                        }
+                    }
+                    lane0 += lanes;
+                }
+            }
+            let mut scratch: Vec<T> = Vec::with_capacity(kk);
+            for bx in first_scalar..bw {
                 let x0 = bx * k;
                 let x1 = (x0 + k).min(width);
                 for c in 0..channels {
@@ -102,6 +299,9 @@ pub fn block_median<T: Sample>(
 }
 
 /// Per-sample median over a stack of rasters of the same layout (the temporal median).
+///
+/// A sorting network over the frames, applied to many samples at once (no per-sample sort call). NaN is treated
+/// as larger than every number, as in [`median_of_f32`].
 pub fn stack_median(frames: &[&Raster]) -> Raster {
     assert!(!frames.is_empty(), "median of an empty stack");
     let first = frames[0];
@@ -113,17 +313,48 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
     if row_len == 0 {
         return out;
     }
-    out.data
-        .par_chunks_mut(row_len)
-        .enumerate()
-        .for_each(|(y, out_row)| {
-            let mut scratch = vec![0.0f32; frames.len()];
-            let rows: Vec<&[f32]> = frames.iter().map(|f| f.row(y)).collect();
-            for (i, o) in out_row.iter_mut().enumerate() {
-                for (s, r) in scratch.iter_mut().zip(&rows) {
-                    *s = r[i];
+    let n = frames.len();
+    // NaN and −0 order differently under `total_cmp` than under `<`: those (rare) stacks take the scalar path.
+    let odd = |v: &f32| v.is_nan() || (*v == 0.0 && v.is_sign_negative());
+    if n > NETWORK_MAX || frames.iter().any(|f| f.data.iter().any(odd)) {
+        out.data
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .for_each(|(y, out_row)| {
+                let mut scratch = vec![0.0f32; n];
+                for (i, o) in out_row.iter_mut().enumerate() {
+                    for (s, f) in scratch.iter_mut().zip(frames) {
+                        *s = f.row(y)[i];
+                    }
+                    *o = median_of_f32(&mut scratch);
                 }
-                *o = median_of_f32(&mut scratch);
+            });
+        return out;
+    }
+    let net = prune_network(&sorting_network(n), &median_positions(n));
+    out.data
+        .par_chunks_mut(LANES * 16)
+        .enumerate()
+        .for_each(|(chunk, out_chunk)| {
+            let start = chunk * LANES * 16;
+            let mut v = vec![0.0f32; n * LANES];
+            for (sub, o) in out_chunk.chunks_mut(LANES).enumerate() {
+                let lanes = o.len();
+                let s0 = start + sub * LANES;
+                let v = &mut v[..n * lanes];
+                for (e, f) in frames.iter().enumerate() {
+                    v[e * lanes..(e + 1) * lanes].copy_from_slice(&f.data[s0..s0 + lanes]);
+                }
+                apply_network(&net, v, lanes);
+                if n % 2 == 1 {
+                    o.copy_from_slice(&v[(n / 2) * lanes..(n / 2 + 1) * lanes]);
+                } else {
+                    let lo = &v[(n / 2 - 1) * lanes..(n / 2) * lanes];
+                    let hi = &v[(n / 2) * lanes..(n / 2 + 1) * lanes];
+                    for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                        *o = 0.5 * (a + b);
+                    }
+                }
             }
         });
     out
@@ -250,6 +481,154 @@ mod tests {
                 prop_assert!((*g as f64 - e).abs() < 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn sorting_networks_sort_every_0_1_input() {
+        // The 0-1 principle: a comparator network sorts every input iff it sorts every 0/1 input.
+        for n in 1..=16usize {
+            let net = sorting_network(n);
+            for bits in 0u32..(1 << n) {
+                let mut v: Vec<u8> = (0..n).map(|i| ((bits >> i) & 1) as u8).collect();
+                apply_network(&net, &mut v, 1);
+                assert!(
+                    v.windows(2).all(|w| w[0] <= w[1]),
+                    "n = {n}, input {bits:b}"
+                );
+            }
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn pruned_networks_find_the_median(n in 1usize..=100, seed in any::<u64>()) {
+            let mut state = seed | 1;
+            let v: Vec<u16> = (0..n).map(|_| {
+                state ^= state << 13; state ^= state >> 7; state ^= state << 17;
+                (state % 50) as u16
+            }).collect();
+            let net = prune_network(&sorting_network(n), &median_positions(n));
+            let mut w = v.clone();
+            apply_network(&net, &mut w, 1);
+            let mut sorted = v.clone();
+            sorted.sort();
+            for p in median_positions(n) {
+                prop_assert_eq!(w[p], sorted[p]);
+            }
+        }
+
+        #[test]
+        fn block_median_network_matches_selection_bitwise(
+            w in 0usize..70, h in 0usize..30, c in prop_oneof![Just(1usize), Just(3usize)],
+            k in 1usize..11, seed in any::<u64>(), wide in any::<bool>()
+        ) {
+            // The network path (full blocks) against the per-block selection it replaced: identical bits.
+            let mut state = seed | 1;
+            let mut next = || { state ^= state << 13; state ^= state >> 7; state ^= state << 17; state };
+            let s8: Vec<u8> = (0..w * h * c).map(|_| (next() >> 24) as u8).collect();
+            let s16: Vec<u16> = (0..w * h * c)
+                .map(|_| if wide { (next() >> 20) as u16 } else { (next() % 7) as u16 })
+                .collect();
+            prop_assert_eq!(block_median(&s8, w, h, c, k), selection::block_median(&s8, w, h, c, k));
+            prop_assert_eq!(block_median(&s16, w, h, c, k), selection::block_median(&s16, w, h, c, k));
+        }
+
+        #[test]
+        fn stack_median_network_matches_selection_bitwise(
+            n in 1usize..20, len in 1usize..3000, seed in any::<u64>()
+        ) {
+            let mut state = seed | 1;
+            let frames: Vec<Raster> = (0..n).map(|_| Raster::from_fn(len, 1, 1, |_, _, _| {
+                state ^= state << 13; state ^= state >> 7; state ^= state << 17;
+                (state % 1000) as f32 / 999.0
+            })).collect();
+            let refs: Vec<&Raster> = frames.iter().collect();
+            let got = stack_median(&refs);
+            for (i, g) in got.data.iter().enumerate() {
+                let mut col: Vec<f32> = frames.iter().map(|f| f.data[i]).collect();
+                prop_assert_eq!(g.to_bits(), median_of_f32(&mut col).to_bits());
+            }
+        }
+    }
+
+    /// The per-block selection kernel the network replaced, kept as a bit-exact reference.
+    mod selection {
+        use super::super::*;
+        pub fn block_median<T: Sample>(
+            s: &[T],
+            width: usize,
+            height: usize,
+            c: usize,
+            k: usize,
+        ) -> Raster {
+            let (bw, bh) = (blocks(width, k), blocks(height, k));
+            let mut out = Raster::filled(bw, bh, c, 0.0);
+            let mut scratch = Vec::new();
+            for by in 0..bh {
+                for bx in 0..bw {
+                    for ch in 0..c {
+                        scratch.clear();
+                        for y in by * k..((by + 1) * k).min(height) {
+                            for x in bx * k..((bx + 1) * k).min(width) {
+                                scratch.push(s[(y * width + x) * c + ch]);
+                            }
+                        }
+                        out.data[(by * bw + bx) * c + ch] =
+                            median_of_samples(&mut scratch) * (1.0 / T::MAX);
+                    }
+                }
+            }
+            out
+        }
+    }
+
+    #[test]
+    fn avx2_and_portable_networks_agree() {
+        let net = sorting_network(64);
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let v: Vec<u8> = (0..64 * 200)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 40) as u8
+            })
+            .collect();
+        let (mut a, mut b) = (v.clone(), v.clone());
+        apply_network(&net, &mut a, 200);
+        apply_network_portable(&net, &mut b, 200);
+        assert_eq!(a, b);
+        let f: Vec<f32> = v.iter().map(|&x| x as f32 / 7.0).collect();
+        let (mut a, mut b) = (f.clone(), f.clone());
+        apply_network(&net, &mut a, 200);
+        apply_network_portable(&net, &mut b, 200);
+        assert_eq!(a, b);
+    }
+
+    proptest! {
+        #[test]
+        fn column_median_matches_sample_median(n in 1usize..20, len in 0usize..300, seed in any::<u64>()) {
+            let mut state = seed | 1;
+            let cols: Vec<Vec<u16>> = (0..n).map(|_| (0..len).map(|_| {
+                state ^= state << 13; state ^= state >> 7; state ^= state << 17;
+                (state >> 48) as u16
+            }).collect()).collect();
+            let refs: Vec<&[u16]> = cols.iter().map(|c| c.as_slice()).collect();
+            let mut out = vec![0.0f32; len];
+            column_median(&refs, &mut out);
+            for (i, o) in out.iter().enumerate() {
+                let mut col: Vec<u16> = cols.iter().map(|c| c[i]).collect();
+                prop_assert_eq!(o.to_bits(), median_of_samples(&mut col).to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn stack_median_with_nan_sorts_nan_last() {
+        let a = Raster::filled(3, 1, 1, f32::NAN);
+        let b = Raster::filled(3, 1, 1, 0.2);
+        let c = Raster::filled(3, 1, 1, 0.4);
+        assert_eq!(stack_median(&[&a, &b, &c]).data, vec![0.4; 3]);
     }
 
     #[test]

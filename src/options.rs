@@ -193,6 +193,9 @@ pub struct Options {
     pub save_factors: bool,
     /// JPEG output quality, 1–100. Default: 95.
     pub jpeg_quality: u8,
+    /// PNG output compression: `fast`, `default` or `best` (lossless either way; see docs/performance.md).
+    /// Default: fast.
+    pub png_compression: crate::io::PngCompression,
     /// Worker threads. Default: all cores.
     pub threads: Option<usize>,
     /// Memory the scatter estimate may hold at once, in MiB; more water-column frames than fit are processed in
@@ -247,6 +250,7 @@ impl Default for Options {
             save_scatter: false,
             save_factors: false,
             jpeg_quality: 95,
+            png_compression: crate::io::PngCompression::Fast,
             threads: None,
             scatter_memory_mib: 2048,
             resume: false,

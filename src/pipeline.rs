@@ -555,6 +555,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     };
     let settings = EncodeSettings {
         jpeg_quality: opts.jpeg_quality,
+        png_compression: opts.png_compression,
     };
     let done: Mutex<Vec<FrameReport>> = Mutex::new(Vec::new());
     let write_errors: Mutex<Vec<FileError>> = Mutex::new(Vec::new());

@@ -9,6 +9,8 @@ pub trait Sample: Copy + Ord + Default + Send + Sync + 'static {
     fn to_u16(self) -> u16;
     /// Round and clamp a value in sample units.
     fn from_f32(v: f32) -> Self;
+    /// A code already in range (`0..=MAX`).
+    fn from_code(c: u16) -> Self;
 }
 
 impl Sample for u8 {
@@ -22,6 +24,10 @@ impl Sample for u8 {
         // `as` saturates and maps NaN to 0.
         (v + 0.5) as u8
     }
+    #[inline]
+    fn from_code(c: u16) -> Self {
+        c as u8
+    }
 }
 
 impl Sample for u16 {
@@ -33,6 +39,10 @@ impl Sample for u16 {
     #[inline]
     fn from_f32(v: f32) -> Self {
         (v + 0.5) as u16
+    }
+    #[inline]
+    fn from_code(c: u16) -> Self {
+        c
     }
 }
 

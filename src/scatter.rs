@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::io::{decode, Entry};
-use crate::median::{block_median, median_of_samples};
+use crate::median::{block_median, column_median};
 use crate::raster::{Layout, Photo, Raster, Samples};
 
 /// The scatter image and how it was made.
@@ -132,13 +132,11 @@ pub fn estimate(
         out.par_chunks_mut(row_len)
             .enumerate()
             .for_each(|(r, out_row)| {
-                let mut scratch = vec![0u16; band_ref.len()];
                 let base = r * row_len;
-                for (i, o) in out_row.iter_mut().enumerate() {
-                    for (s, f) in scratch.iter_mut().zip(band_ref) {
-                        *s = f[base + i];
-                    }
-                    *o = median_of_samples(&mut scratch) / max;
+                let cols: Vec<&[u16]> = band_ref.iter().map(|f| &f[base..base + row_len]).collect();
+                column_median(&cols, out_row);
+                for o in out_row.iter_mut() {
+                    *o /= max;
                 }
             });
         passes += 1;

@@ -111,6 +111,13 @@ pub struct Curve {
     to_lin: Vec<f32>,
     /// `thresholds[k]`: linear light at the boundary between codes `k` and `k + 1` (empty when linear).
     thresholds: Vec<f32>,
+    /// Exact fast path of [`Curve::code`]: positive floats are bucketed by the top bits of their representation
+    /// (monotonic for positive floats); `start[b]` is the number of thresholds at or below the smallest float of
+    /// bucket `b`, so a few steps up the threshold table from there give the exact count.
+    start: Vec<u16>,
+    /// Bits dropped from a float's representation to get its bucket, and the bucket of `thresholds[0]`.
+    shift: u32,
+    base: u32,
 }
 
 impl Curve {
@@ -131,12 +138,52 @@ impl Curve {
                 .map(|k| transfer.to_linear((k as f32 + 0.5) / max))
                 .collect()
         };
+        // 256 buckets per octave for 8-bit codes, 4096 for 16-bit: about one code per bucket at most.
+        let shift = if levels <= 256 { 15 } else { 11 };
+        let (base, start) = match (thresholds.first(), thresholds.last()) {
+            (Some(&lo), Some(&hi)) if lo > 0.0 => {
+                let base = lo.to_bits() >> shift;
+                let top = hi.to_bits() >> shift;
+                let start = (base..=top)
+                    .map(|b| {
+                        let smallest = f32::from_bits(b << shift);
+                        thresholds.partition_point(|&t| t <= smallest) as u16
+                    })
+                    .collect();
+                (base, start)
+            }
+            _ => (0, Vec::new()),
+        };
         Curve {
             transfer,
             max,
             to_lin,
             thresholds,
+            start,
+            shift,
+            base,
         }
+    }
+
+    /// The stored code nearest to `l` by binary search over the thresholds (the definition [`Curve::code`] must
+    /// match exactly).
+    pub fn code_by_search(&self, l: f32) -> u16 {
+        if self.thresholds.is_empty() {
+            return self.code(l);
+        }
+        self.thresholds.partition_point(|&t| t <= l) as u16
+    }
+
+    /// True when codes are linear in light (no tables): `linear(c) = c / max`, `code(l) = round(l·max)`.
+    #[inline]
+    pub fn is_identity(&self) -> bool {
+        self.to_lin.is_empty() && self.thresholds.is_empty()
+    }
+
+    /// The largest code (255 or 65535).
+    #[inline]
+    pub fn max(&self) -> f32 {
+        self.max
     }
 
     pub fn transfer(&self) -> Transfer {
@@ -170,8 +217,20 @@ impl Curve {
             let v = l * self.max + 0.5;
             return v.clamp(0.0, self.max) as u16;
         }
-        // Number of thresholds at or below l: a binary search over a monotonic table.
-        self.thresholds.partition_point(|&t| t <= l) as u16
+        // Number of thresholds at or below l. Below the first threshold (and for NaN) that is 0; otherwise start
+        // from the count at the bottom of l's bucket and step up.
+        if l.is_nan() || l < self.thresholds[0] {
+            return 0;
+        }
+        let b = ((l.to_bits() >> self.shift) - self.base) as usize;
+        let mut i = match self.start.get(b) {
+            Some(&i) => i as usize,
+            None => return self.thresholds.len() as u16,
+        };
+        while i < self.thresholds.len() && self.thresholds[i] <= l {
+            i += 1;
+        }
+        i as u16
     }
 }
 
@@ -225,6 +284,31 @@ mod tests {
         }
         assert_eq!(c.code(-1.0), 0);
         assert_eq!(c.code(2.0), 255);
+    }
+
+    #[test]
+    fn bucketed_code_equals_binary_search_exactly() {
+        for t in [Transfer::Srgb, Transfer::Gamma(2.2), Transfer::Gamma(0.8)] {
+            for levels in [256usize, 65536] {
+                let c = Curve::new(t, levels);
+                let mut probe = vec![-1.0f32, -0.0, 0.0, 1.0, 1.5, f32::NAN, f32::INFINITY, 1e-30];
+                // Every threshold and its neighbouring floats: where an off-by-one would show.
+                for &th in c
+                    .thresholds
+                    .iter()
+                    .step_by(if levels == 256 { 1 } else { 7 })
+                {
+                    let b = th.to_bits();
+                    probe.extend([f32::from_bits(b - 1), th, f32::from_bits(b + 1)]);
+                }
+                for i in 0..=20_000 {
+                    probe.push(i as f32 / 20_000.0);
+                }
+                for l in probe {
+                    assert_eq!(c.code(l), c.code_by_search(l), "{t} {levels} {l:e}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -203,7 +203,15 @@ pub fn write_all(photos: &[Photo], dir: &Path, prefix: &str, ext: &str) -> Vec<P
         .enumerate()
         .map(|(i, p)| {
             let path = dir.join(format!("{prefix}{}.{ext}", i + 1));
-            write_atomic(p, &path, EncodeSettings { jpeg_quality: 98 }).unwrap();
+            write_atomic(
+                p,
+                &path,
+                EncodeSettings {
+                    jpeg_quality: 98,
+                    ..EncodeSettings::default()
+                },
+            )
+            .unwrap();
             path
         })
         .collect()

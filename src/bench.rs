@@ -1,0 +1,567 @@
+//! `abysslight bench`: a self-contained benchmark of a whole `correct` run against the codec floor.
+//!
+//! It generates a synthetic mission (lit seafloor texture under a light cone, plus backscatter, saved as camera-like
+//! JPEGs) in a temporary folder, then measures in one run on the same machine:
+//!
+//! - photos per second of `correct` over the long mission (whole run: scatter estimation, medians, correction,
+//!   encoding, atomic writes);
+//! - photos per second of decode + encode alone (the same photos, threads, writer and settings): the floor any
+//!   corrector pays;
+//! - their ratio;
+//! - peak memory (VmHWM) of a short and of a 10× longer mission, each `correct` run in a child process of the same
+//!   binary, so the two peaks are separate.
+//!
+//! Speed targets live here, never in timed unit tests.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::io::{self, EncodeSettings};
+use crate::options::Options;
+use crate::raster::{Layout, Photo, Samples};
+use crate::report::Silent;
+use crate::source::Sink;
+
+/// What to benchmark.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    pub width: usize,
+    pub height: usize,
+    /// Survey photos of the short mission; the long one has `long_factor` times as many.
+    pub photos: usize,
+    pub long_factor: usize,
+    /// Distinct synthetic photos generated (the mission cycles through them as hard links, so generating does not
+    /// dominate the run).
+    pub distinct: usize,
+    pub water_column: usize,
+    pub threads: usize,
+    pub window: usize,
+    pub jpeg_quality: u8,
+    /// Where the mission is generated (default: a temporary folder, removed afterwards).
+    pub dir: Option<PathBuf>,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            width: 4000,
+            height: 3000,
+            photos: 20,
+            long_factor: 10,
+            distinct: 12,
+            water_column: 5,
+            threads: 2,
+            window: 7,
+            jpeg_quality: 95,
+            dir: None,
+        }
+    }
+}
+
+/// What one child `correct` run measured.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct ChildResult {
+    pub photos: usize,
+    pub seconds: f64,
+    pub peak_kib: u64,
+}
+
+/// The whole benchmark's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchResult {
+    pub machine: String,
+    pub cores: usize,
+    pub rustc: String,
+    pub width: usize,
+    pub height: usize,
+    pub threads: usize,
+    pub generate_s: f64,
+    pub short: ChildResult,
+    pub long: ChildResult,
+    pub floor_photos: usize,
+    pub floor_s: f64,
+}
+
+impl BenchResult {
+    pub fn correct_rate(&self) -> f64 {
+        self.long.photos as f64 / self.long.seconds
+    }
+    pub fn floor_rate(&self) -> f64 {
+        self.floor_photos as f64 / self.floor_s
+    }
+    /// The table printed at the end (Markdown).
+    pub fn table(&self) -> String {
+        let mib = |k: u64| k as f64 / 1024.0;
+        let mut s = String::new();
+        s += &format!(
+            "machine: {} ({} cores), {}\n",
+            self.machine, self.cores, self.rustc
+        );
+        s += &format!(
+            "mission: {}x{} RGB JPEG, {} threads (generated in {:.1} s)\n\n",
+            self.width, self.height, self.threads, self.generate_s
+        );
+        s += "| measure | value |\n|---|---|\n";
+        s += &format!(
+            "| correct ({} photos) | {:.2} photos/s |\n",
+            self.long.photos,
+            self.correct_rate()
+        );
+        s += &format!(
+            "| floor: decode + encode ({} photos) | {:.2} photos/s |\n",
+            self.floor_photos,
+            self.floor_rate()
+        );
+        s += &format!(
+            "| ratio correct / floor | {:.2} |\n",
+            self.correct_rate() / self.floor_rate()
+        );
+        s += &format!(
+            "| peak memory, {} photos | {:.0} MiB |\n",
+            self.short.photos,
+            mib(self.short.peak_kib)
+        );
+        s += &format!(
+            "| peak memory, {} photos | {:.0} MiB ({:+.1} %) |\n",
+            self.long.photos,
+            mib(self.long.peak_kib),
+            100.0 * (self.long.peak_kib as f64 / self.short.peak_kib.max(1) as f64 - 1.0)
+        );
+        s
+    }
+}
+
+/// Peak resident memory of this process in KiB (`VmHWM`), or 0 where `/proc` is not available.
+pub fn peak_memory_kib() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|v| v.parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+fn machine() -> (String, usize, String) {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.into());
+    let cores = std::thread::available_parallelism().map_or(1, |p| p.get());
+    let rustc = Command::new("rustc")
+        .arg("-V")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .map(|s| s.trim().to_string())
+        .unwrap_or_else(|| "rustc unknown".into());
+    (cpu, cores, rustc)
+}
+
+/// A small, fast hash of three integers to `[0, 1)`.
+#[inline]
+fn hash(x: u32, y: u32, z: u32) -> f32 {
+    let mut h = x
+        .wrapping_mul(0x8da6_b343)
+        .wrapping_add(y.wrapping_mul(0xd816_3841))
+        .wrapping_add(z.wrapping_mul(0xcb1a_b31f));
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x2c1b_3c6d);
+    h ^= h >> 12;
+    (h >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// Smooth value noise at cell size `cell`.
+#[inline]
+fn value_noise(x: f32, y: f32, cell: f32, seed: u32) -> f32 {
+    let (gx, gy) = (x / cell, y / cell);
+    let (ix, iy) = (gx.floor(), gy.floor());
+    let (fx, fy) = (gx - ix, gy - iy);
+    let (ix, iy) = (ix as i32 as u32, iy as i32 as u32);
+    let a = hash(ix, iy, seed);
+    let b = hash(ix + 1, iy, seed);
+    let c = hash(ix, iy + 1, seed);
+    let d = hash(ix + 1, iy + 1, seed);
+    let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+    let top = a + (b - a) * sx;
+    let bottom = c + (d - c) * sx;
+    top + (bottom - top) * sy
+}
+
+/// Backscatter of the synthetic rig: brighter near the top, bluish.
+#[inline]
+fn backscatter(y: usize, h: usize, c: usize) -> f32 {
+    let up = 1.0 - y as f32 / h as f32;
+    [0.03, 0.05, 0.07][c] * (0.5 + up)
+}
+
+/// A synthetic survey photo number `j`: seafloor texture moving past under a light cone, plus backscatter, plus
+/// an occasional bright object (a fish) that the median has to ignore.
+pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool) -> Photo {
+    let colour = [0.45f32, 0.40, 0.32];
+    let (cx, cy) = (width as f32 * 0.5, height as f32 * 0.58);
+    let sigma2 = 2.0 * (0.38 * width as f32).powi(2);
+    let shift = (j * width / 9) as f32;
+    let fish = (
+        (hash(j as u32, 1, 7) * width as f32),
+        (hash(j as u32, 2, 7) * height as f32),
+    );
+    let mut data = vec![0u8; width * height * 3];
+    data.par_chunks_mut(width * 3)
+        .enumerate()
+        .for_each(|(y, row)| {
+            let yf = y as f32;
+            for x in 0..width {
+                let xf = x as f32;
+                let r2 = (xf - cx).powi(2) + (yf - cy).powi(2);
+                let f = 0.1 + 0.9 * (-r2 / sigma2).exp();
+                let (sx, sy) = (xf + shift, yf);
+                let tex = if water_column {
+                    0.0
+                } else {
+                    let coarse = value_noise(sx, sy, 180.0, 1);
+                    let mid = value_noise(sx, sy, 23.0, 2);
+                    let grain = hash(sx as u32, sy as u32, 3);
+                    0.45 + 0.5 * coarse + 0.35 * mid + 0.2 * grain
+                };
+                let in_fish = !water_column
+                    && (xf - fish.0).powi(2) + 4.0 * (yf - fish.1).powi(2)
+                        < (0.04 * width as f32).powi(2);
+                for c in 0..3 {
+                    let s = backscatter(y, height, c);
+                    let noise =
+                        (hash(x as u32, y as u32, 11 + c as u32 + 3 * j as u32) - 0.5) * 0.02;
+                    let a = if in_fish { 0.95 } else { colour[c] * tex };
+                    let v = if water_column {
+                        s + noise
+                    } else {
+                        a * f + s + noise
+                    };
+                    row[x * 3 + c] = (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+                }
+            }
+        });
+    Photo {
+        layout: Layout {
+            width,
+            height,
+            channels: 3,
+        },
+        samples: Samples::U8(data),
+        alpha: None,
+    }
+}
+
+/// Camera-like JPEG: quality 90, 4:2:0.
+fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
+    let Samples::U8(d) = &photo.samples else {
+        unreachable!("synthetic photos are 8-bit")
+    };
+    let l = photo.layout;
+    let enc_err = |e: String| Error::Encode {
+        path: path.to_owned(),
+        reason: e,
+    };
+    let mut buf = Vec::new();
+    let enc = jpeg_encoder::Encoder::new(&mut buf, 90);
+    enc.encode(
+        d,
+        l.width as u16,
+        l.height as u16,
+        jpeg_encoder::ColorType::Rgb,
+    )
+    .map_err(|e| enc_err(e.to_string()))?;
+    std::fs::write(path, buf).map_err(|e| Error::io(path, e))
+}
+
+/// The generated mission: water-column frames and the distinct survey photos.
+struct Mission {
+    water_column: PathBuf,
+    distinct: Vec<PathBuf>,
+}
+
+fn generate(o: &BenchOptions, root: &Path) -> Result<Mission> {
+    let wc = root.join("water-column");
+    let pool = root.join("distinct");
+    for d in [&wc, &pool] {
+        std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+    }
+    for j in 0..o.water_column {
+        let p = synthetic_photo(o.width, o.height, j, true);
+        save_camera_jpeg(&p, &wc.join(format!("wc{j:03}.jpg")))?;
+    }
+    let mut distinct = Vec::new();
+    for j in 0..o.distinct.max(1) {
+        let p = synthetic_photo(o.width, o.height, j, false);
+        let path = pool.join(format!("d{j:03}.jpg"));
+        save_camera_jpeg(&p, &path)?;
+        distinct.push(path);
+    }
+    Ok(Mission {
+        water_column: wc,
+        distinct,
+    })
+}
+
+/// A survey folder of `count` photos cycling through the distinct ones (hard links, copies where links fail).
+fn survey_folder(m: &Mission, dir: &Path, count: usize) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    for i in 0..count {
+        // Forth and back through the distinct photos, so neighbours stay neighbours.
+        let period = 2 * m.distinct.len().max(2) - 2;
+        let p = i % period.max(1);
+        let j = if p < m.distinct.len() { p } else { period - p };
+        let src = &m.distinct[j.min(m.distinct.len() - 1)];
+        let dst = dir.join(format!("img{i:05}.jpg"));
+        if std::fs::hard_link(src, &dst).is_err() {
+            std::fs::copy(src, &dst).map_err(|e| Error::io(&dst, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// Decode + encode every photo of `survey` into `out` with `threads` threads, the way `correct` reads and writes
+/// them (same decoder, writer and settings). Returns seconds.
+pub fn floor(survey: &Path, out: &Path, threads: usize, jpeg_quality: u8) -> Result<(usize, f64)> {
+    let found = io::find_photos(survey)?;
+    let settings = EncodeSettings {
+        jpeg_quality,
+        ..EncodeSettings::default()
+    };
+    let next = AtomicUsize::new(0);
+    let failed = AtomicUsize::new(0);
+    let t = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..threads.max(1) {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::SeqCst);
+                let Some(e) = found.photos.get(i) else { break };
+                let ok = io::decode(&e.path).and_then(|p| {
+                    Sink::Folder {
+                        carry_metadata: true,
+                    }
+                    .write(
+                        &p,
+                        &e.path,
+                        &out.join(&e.relative),
+                        settings,
+                        &|_| {},
+                    )
+                });
+                if ok.is_err() {
+                    failed.fetch_add(1, Ordering::SeqCst);
+                }
+            });
+        }
+    });
+    let secs = t.elapsed().as_secs_f64();
+    if failed.load(Ordering::SeqCst) > 0 {
+        return Err(Error::Usage("bench: decode + encode failed".into()));
+    }
+    Ok((found.photos.len(), secs))
+}
+
+/// The child side: run `correct` on one mission and print a [`ChildResult`] line on stdout.
+pub fn child(
+    water_column: &Path,
+    survey: &Path,
+    out: &Path,
+    threads: usize,
+    window: usize,
+    jpeg_quality: u8,
+) -> Result<ChildResult> {
+    let opts = Options {
+        water_column: Some(water_column.to_owned()),
+        survey: Some(survey.to_owned()),
+        out: Some(out.to_owned()),
+        threads: Some(threads),
+        window: Some(window),
+        jpeg_quality,
+        ..Options::default()
+    };
+    let t = Instant::now();
+    let report = crate::correct_mission(&opts, &Silent)?;
+    let seconds = t.elapsed().as_secs_f64();
+    if !report.all_ok() {
+        return Err(Error::Usage(format!(
+            "bench: {} photo(s) failed",
+            report.failed + report.water_column_failed
+        )));
+    }
+    Ok(ChildResult {
+        photos: report.corrected,
+        seconds,
+        peak_kib: peak_memory_kib(),
+    })
+}
+
+/// Prefix of the line a child prints.
+pub const CHILD_LINE: &str = "abysslight-bench-child ";
+
+fn run_child(
+    exe: &Path,
+    o: &BenchOptions,
+    wc: &Path,
+    survey: &Path,
+    out: &Path,
+) -> Result<ChildResult> {
+    let output = Command::new(exe)
+        .arg("bench")
+        .arg("--child")
+        .arg("--child-water-column")
+        .arg(wc)
+        .arg("--child-survey")
+        .arg(survey)
+        .arg("--child-out")
+        .arg(out)
+        .arg("--threads")
+        .arg(o.threads.to_string())
+        .arg("--window")
+        .arg(o.window.to_string())
+        .arg("--jpeg-quality")
+        .arg(o.jpeg_quality.to_string())
+        .output()
+        .map_err(|e| Error::io(exe, e))?;
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    stdout
+        .lines()
+        .find_map(|l| l.strip_prefix(CHILD_LINE))
+        .and_then(|j| serde_json::from_str(j).ok())
+        .ok_or_else(|| {
+            Error::Usage(format!(
+                "bench: child run failed: {}",
+                String::from_utf8_lossy(&output.stderr).trim()
+            ))
+        })
+}
+
+/// Run the whole benchmark; `exe` is the `abysslight` binary (children run `exe bench --child ...`).
+/// `say` hears progress lines.
+pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResult> {
+    if o.width > u16::MAX as usize || o.height > u16::MAX as usize || o.photos == 0 {
+        return Err(Error::Usage(
+            "bench: size must fit a JPEG and --photos be at least 1".into(),
+        ));
+    }
+    let tmp;
+    let root = match &o.dir {
+        Some(d) => d.clone(),
+        None => {
+            tmp = tempfile::Builder::new()
+                .prefix("abysslight-bench.")
+                .tempdir()
+                .map_err(|e| Error::io(Path::new("tempdir"), e))?;
+            tmp.path().to_owned()
+        }
+    };
+    let (machine, cores, rustc) = machine();
+    say(&format!(
+        "generating {} distinct {}x{} photos and {} water-column frames in {}",
+        o.distinct,
+        o.width,
+        o.height,
+        o.water_column,
+        root.display()
+    ));
+    let t = Instant::now();
+    let mission = generate(o, &root)?;
+    let short_dir = root.join("survey-short");
+    let long_dir = root.join("survey-long");
+    survey_folder(&mission, &short_dir, o.photos)?;
+    survey_folder(&mission, &long_dir, o.photos * o.long_factor.max(1))?;
+    let generate_s = t.elapsed().as_secs_f64();
+
+    say(&format!("correct, short mission ({} photos)", o.photos));
+    let short = run_child(
+        exe,
+        o,
+        &mission.water_column,
+        &short_dir,
+        &root.join("out-short"),
+    )?;
+    remove(&root.join("out-short"));
+    say(&format!(
+        "correct, long mission ({} photos)",
+        o.photos * o.long_factor
+    ));
+    let long = run_child(
+        exe,
+        o,
+        &mission.water_column,
+        &long_dir,
+        &root.join("out-long"),
+    )?;
+    remove(&root.join("out-long"));
+    say("floor: decode + encode of the long mission");
+    let floor_out = root.join("out-floor");
+    let (floor_photos, floor_s) = floor(&long_dir, &floor_out, o.threads, o.jpeg_quality)?;
+    remove(&floor_out);
+    Ok(BenchResult {
+        machine,
+        cores,
+        rustc,
+        width: o.width,
+        height: o.height,
+        threads: o.threads,
+        generate_s,
+        short,
+        long,
+        floor_photos,
+        floor_s,
+    })
+}
+
+fn remove(dir: &Path) {
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn synthetic_photos_differ_and_are_lit() {
+        let a = synthetic_photo(64, 48, 0, false);
+        let b = synthetic_photo(64, 48, 1, false);
+        assert_ne!(a.samples, b.samples);
+        let Samples::U8(d) = &a.samples else { panic!() };
+        // Brighter in the light cone than in the corner.
+        let centre = d[(28 * 64 + 32) * 3] as u32;
+        let corner = d[0] as u32;
+        assert!(centre > corner, "{centre} vs {corner}");
+    }
+
+    #[test]
+    fn floor_counts_photos() {
+        let d = tempfile::tempdir().unwrap();
+        let o = BenchOptions {
+            width: 48,
+            height: 32,
+            distinct: 3,
+            water_column: 1,
+            ..BenchOptions::default()
+        };
+        let m = generate(&o, d.path()).unwrap();
+        survey_folder(&m, &d.path().join("s"), 5).unwrap();
+        let (n, s) = floor(&d.path().join("s"), &d.path().join("o"), 2, 95).unwrap();
+        assert_eq!(n, 5);
+        assert!(s > 0.0);
+        assert_eq!(
+            io::find_photos(&d.path().join("o")).unwrap().photos.len(),
+            5
+        );
+    }
+}
