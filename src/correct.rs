@@ -186,6 +186,17 @@ fn expand_f_dyn(frow: &[f32], fx: &mut [f32], tx: &[Tap], c: usize, floor: f32) 
     floored_pixels
 }
 
+/// `x.clamp(0, max) as u16` (NaN gives 0), for `max` ≤ 65535, written so that it vectorises: the saturating
+/// float-to-integer cast (`as`) checks every lane for NaN and overflow, which made the compiler fall back to
+/// scalar code. `max(0.0)` returns 0 for NaN (as the saturating cast of a NaN does), then the value is an integer
+/// in `[0, 65535]` after `floor` (= truncation for non-negative values) and is read from the float's bits after
+/// adding 2²³ (exact below 2²⁴).
+#[inline(always)]
+fn code_of(x: f32, max: f32) -> u16 {
+    let x = x.max(0.0).min(max).floor();
+    ((x + 8_388_608.0).to_bits() - 0x4B00_0000) as u16
+}
+
 /// `A = (I − S) / F` over one row, `F` already upsampled and floored; returns the clipped samples. A sample is
 /// clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
 #[inline(always)]
@@ -201,9 +212,7 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
             // NaN is not clipped; `contains` would say it is
             let out = (a < 0.0) | (a > 1.0);
             clipped += out as u64;
-            // In range after the clamp, so the (vectorisable) conversion to i32 gives the same code as to u16.
-            let code = (a * max + 0.5).clamp(0.0, max) as i32;
-            *v = T::from_code(code as u16);
+            *v = T::from_code(code_of(a * max + 0.5, max));
         };
         match s {
             Some(s) => {
@@ -234,6 +243,61 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn code_of_is_the_saturating_cast() {
+        let specials = [
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            254.99998,
+            255.0,
+            255.5,
+            65534.996,
+            65535.0,
+            65535.5,
+            1e9,
+            -1e9,
+            f32::MIN_POSITIVE,
+        ];
+        for max in [255.0f32, 65535.0] {
+            let reference = |x: f32| x.clamp(0.0, max) as i32 as u16;
+            for &x in &specials {
+                assert_eq!(code_of(x, max), reference(x), "x = {x}, max = {max}");
+            }
+            // Every code, its neighbouring floats and the half-way points.
+            // (`next_up`/`next_down` by hand: the crate's MSRV predates them.)
+            let up = |x: f32| f32::from_bits(x.to_bits() + 1);
+            let down = |x: f32| {
+                if x > 0.0 {
+                    f32::from_bits(x.to_bits() - 1)
+                } else {
+                    -f32::MIN_POSITIVE
+                }
+            };
+            for c in 0..=(max as u32) {
+                let f = c as f32;
+                for x in [f, f + 0.5, down(f), up(f), down(f + 0.5)] {
+                    assert_eq!(code_of(x, max), reference(x), "x = {x}, max = {max}");
+                }
+            }
+        }
+        let mut r = 0x1234_5678u32;
+        for _ in 0..200_000 {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            let x = f32::from_bits(r);
+            for max in [255.0f32, 65535.0] {
+                assert_eq!(code_of(x, max), x.clamp(0.0, max) as i32 as u16, "x = {x}");
+            }
+        }
+    }
     use crate::factor::upsample;
     use crate::transfer::Transfer;
 
