@@ -501,7 +501,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             crate::watch::stop_flag(),
         ))
     } else {
-        Box::new(FileList::new(items))
+        // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
+        let decoders = opts
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
+            .clamp(1, 4);
+        Box::new(FileList::parallel(items, decoders))
     };
     let sink = if stdout {
         Sink::Stdout
@@ -567,7 +572,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut streamed = 0usize;
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
-        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
+        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(1);
         let (wr_tx, wr_rx) = bounded::<WriteJob<'_>>(writers);
         let live = &live;
         let mut source = source;
