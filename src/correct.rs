@@ -151,6 +151,8 @@ fn correct_row_portable<T: Sample>(
 /// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. Same operations, same bits as
 /// [`expand_f_dyn`] (tested).
 #[inline(always)]
+// `!(f >= floor)` on purpose: true for NaN too, in one comparison.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn expand_f<const C: usize, const N: usize>(
     frow: &[f32],
     fx: &mut [f32],
