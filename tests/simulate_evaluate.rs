@@ -197,38 +197,39 @@ fn simulated_truth_placements_give_consistent_albedo() {
     assert!(t < 0.15 && t < r / 3.0, "truth {t}, raw {r}");
 }
 
+type Score = (f64, f64);
+
+/// Albedo error and residual pattern of raw, mean, polynomial and paper on a simulated dive.
+fn scores(sim: &Simulation) -> [Score; 4] {
+    let d = tempfile::tempdir().unwrap();
+    let dive = d.path().join("dive");
+    sim.write(&dive).unwrap();
+    let mut sets = vec![("raw".to_string(), dive.join("survey"))];
+    for m in [Method::Mean, Method::Polynomial, Method::Paper] {
+        let out = d.path().join(m.to_string());
+        let opts = Options {
+            water_column: Some(dive.join("water")),
+            survey: Some(dive.join("survey")),
+            out: Some(out.clone()),
+            contamination: Some(0.2),
+            method: m,
+            ..Options::default()
+        };
+        correct_mission(&opts, &Silent).unwrap();
+        sets.push((m.to_string(), out));
+    }
+    let ev = evaluate(&sets, Some(&dive), None, &EvalSettings::default()).unwrap();
+    eprintln!("seed {} beam {}\n{}", sim.seed, sim.beam_deg, ev.table());
+    ["raw", "mean", "polynomial", "paper"].map(|label| {
+        let s = ev.sets.iter().find(|s| s.label == label).unwrap();
+        (s.albedo_error.unwrap(), s.residual_pattern.unwrap())
+    })
+}
+
 #[test]
 fn paper_beats_the_baselines_on_simulated_dives_with_20_percent_contamination() {
     for seed in [11u64, 12] {
-        let d = tempfile::tempdir().unwrap();
-        let dive = d.path().join("dive");
-        small(seed).write(&dive).unwrap();
-        let mut sets = vec![("raw".to_string(), dive.join("survey"))];
-        for m in [Method::Mean, Method::Polynomial, Method::Paper] {
-            let out = d.path().join(m.to_string());
-            let opts = Options {
-                water_column: Some(dive.join("water")),
-                survey: Some(dive.join("survey")),
-                out: Some(out.clone()),
-                contamination: Some(0.2),
-                method: m,
-                ..Options::default()
-            };
-            correct_mission(&opts, &Silent).unwrap();
-            sets.push((m.to_string(), out));
-        }
-        let ev = evaluate(&sets, Some(&dive), None, &EvalSettings::default()).unwrap();
-        eprintln!("seed {seed}\n{}", ev.table());
-        let score = |label: &str| {
-            let s = ev.sets.iter().find(|s| s.label == label).unwrap();
-            (s.albedo_error.unwrap(), s.residual_pattern.unwrap())
-        };
-        let (raw, mean, poly, paper) = (
-            score("raw"),
-            score("mean"),
-            score("polynomial"),
-            score("paper"),
-        );
+        let [raw, mean, poly, paper] = scores(&small(seed));
         assert!(
             paper.0 < raw.0 / 4.0 && paper.1 < raw.1 / 10.0,
             "paper {paper:?} raw {raw:?}"
@@ -237,9 +238,29 @@ fn paper_beats_the_baselines_on_simulated_dives_with_20_percent_contamination() 
             paper.0 < mean.0 && paper.1 < mean.1,
             "paper {paper:?} mean {mean:?}"
         );
-        // The issue also asks for paper < polynomial. On these smooth simulated light patterns the robust
-        // polynomial fit is as good as the paper's method (within ~5 %, either way depending on the seed; see
-        // docs/evaluation.md), so that is not asserted; both must beat the mission mean by a clear margin.
+        // With the default wide beams (36°) the light is smooth over the whole frame and the robust polynomial
+        // fit is as good as the paper's method (within ~10 %, either way depending on the seed and metric; see
+        // docs/evaluation.md), so paper < polynomial is asserted below for beams whose edges are in the frame.
         assert!(poly.0 < mean.0, "polynomial {poly:?} mean {mean:?}");
+    }
+}
+
+#[test]
+fn paper_beats_the_polynomial_when_the_light_cones_have_edges_in_the_frame() {
+    for seed in [11u64, 12] {
+        // 25°: the cone edges cross the frame, as on many real rigs; a degree-4 polynomial in log space cannot
+        // follow them, the temporal median can.
+        let [_, _, poly, paper] = scores(&Simulation {
+            beam_deg: 25.0,
+            ..small(seed)
+        });
+        assert!(
+            paper.1 < 0.7 * poly.1,
+            "paper {paper:?} polynomial {poly:?}"
+        );
+        assert!(
+            paper.0 < 1.02 * poly.0,
+            "paper {paper:?} polynomial {poly:?}"
+        );
     }
 }
