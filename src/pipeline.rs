@@ -1,6 +1,6 @@
 //! `correct`, top to bottom: find the photos, estimate `S`, then stream the survey once in order:
 //!
-//! 1. a decoder thread reads photos ahead (bounded queue);
+//! 1. decoder threads (as many as worker threads) read photos ahead, handed over in order (bounded queue);
 //! 2. each photo is block-median downsampled and its low-resolution image enters the ring buffer of the window;
 //! 3. once the window of the oldest waiting photo is complete, its `M` (temporal median), `F` and the corrected
 //!    photo are computed (rayon over rows);
