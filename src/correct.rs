@@ -134,8 +134,8 @@ fn correct_row_portable<T: Sample>(
     // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
     // made a constant for RGB and grey so the per-pixel loop unrolls.
     let floored_pixels = match c {
-        3 => expand_f::<3>(frow, fx, tx, floor),
-        1 => expand_f::<1>(frow, fx, tx, floor),
+        3 => expand_f::<3, 24>(frow, fx, tx, floor),
+        1 => expand_f::<1, 8>(frow, fx, tx, floor),
         _ => expand_f_dyn(frow, fx, tx, c, floor),
     };
     CorrectStats {
@@ -145,13 +145,58 @@ fn correct_row_portable<T: Sample>(
 }
 
 /// Upsample one low-resolution `F` row (`frow`, already interpolated between block rows) along x into `fx`,
-/// floored; returns the pixels where any channel was floored.
+/// floored; returns the pixels where any channel was floored. `N` = 8·`C`.
+///
+/// Runs of 8 pixels between the same two block centres (most of a row for 8×8 blocks) are done as one
+/// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. Same operations, same bits as
+/// [`expand_f_dyn`] (tested).
 #[inline(always)]
-fn expand_f<const C: usize>(frow: &[f32], fx: &mut [f32], tx: &[Tap], floor: f32) -> u64 {
+// `!(f >= floor)` on purpose: true for NaN too, in one comparison.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn expand_f<const C: usize, const N: usize>(
+    frow: &[f32],
+    fx: &mut [f32],
+    tx: &[Tap],
+    floor: f32,
+) -> u64 {
+    debug_assert_eq!(N, 8 * C);
     let mut floored_pixels = 0u64;
-    for (tp, fpx) in tx.iter().zip(fx.chunks_exact_mut(C)) {
+    let w = tx.len();
+    let mut x = 0;
+    while x < w {
+        // i0 and i1 never decrease along x: equal at both ends of the run means equal throughout.
+        if x + 8 <= w && tx[x].i0 == tx[x + 7].i0 && tx[x].i1 == tx[x + 7].i1 {
+            let (i0, i1) = (tx[x].i0 as usize * C, tx[x].i1 as usize * C);
+            let (a, b) = (&frow[i0..i0 + C], &frow[i1..i1 + C]);
+            let mut av = [0.0f32; C];
+            let mut dv = [0.0f32; C];
+            for ch in 0..C {
+                av[ch] = a[ch];
+                dv[ch] = b[ch] - a[ch];
+            }
+            let taps: &[Tap; 8] = tx[x..x + 8].try_into().unwrap();
+            let out: &mut [f32; N] = (&mut fx[x * C..x * C + N]).try_into().unwrap();
+            let mut any_low = false;
+            for q in 0..N {
+                let f = av[q % C] + dv[q % C] * taps[q / C].t;
+                // `f < floor || f.is_nan()`
+                let low = !(f >= floor);
+                out[q] = if low { floor } else { f };
+                any_low |= low;
+            }
+            if any_low {
+                // Rare (dark corners): count the floored pixels of the group again, one by one.
+                for tp in taps {
+                    floored_pixels += (0..C).any(|ch| !(av[ch] + dv[ch] * tp.t >= floor)) as u64;
+                }
+            }
+            x += 8;
+            continue;
+        }
+        let tp = tx[x];
         let (i0, i1) = (tp.i0 as usize * C, tp.i1 as usize * C);
         let (a, b) = (&frow[i0..i0 + C], &frow[i1..i1 + C]);
+        let fpx = &mut fx[x * C..x * C + C];
         let mut floored = false;
         for ch in 0..C {
             let mut f = a[ch] + (b[ch] - a[ch]) * tp.t;
@@ -162,6 +207,7 @@ fn expand_f<const C: usize>(frow: &[f32], fx: &mut [f32], tx: &[Tap], floor: f32
             fpx[ch] = f;
         }
         floored_pixels += floored as u64;
+        x += 1;
     }
     floored_pixels
 }
@@ -186,6 +232,17 @@ fn expand_f_dyn(frow: &[f32], fx: &mut [f32], tx: &[Tap], c: usize, floor: f32) 
     floored_pixels
 }
 
+/// `x.clamp(0, max) as u16` (NaN gives 0), for `max` ≤ 65535, written so that it vectorises: the saturating
+/// float-to-integer cast (`as`) checks every lane for NaN and overflow, which made the compiler fall back to
+/// scalar code. `max(0.0)` returns 0 for NaN (as the saturating cast of a NaN does), then the value is an integer
+/// in `[0, 65535]` after `floor` (= truncation for non-negative values) and is read from the float's bits after
+/// adding 2²³ (exact below 2²⁴).
+#[inline(always)]
+fn code_of(x: f32, max: f32) -> u16 {
+    let x = x.max(0.0).min(max).floor();
+    ((x + 8_388_608.0).to_bits() - 0x4B00_0000) as u16
+}
+
 /// `A = (I − S) / F` over one row, `F` already upsampled and floored; returns the clipped samples. A sample is
 /// clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
 #[inline(always)]
@@ -201,9 +258,7 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
             // NaN is not clipped; `contains` would say it is
             let out = (a < 0.0) | (a > 1.0);
             clipped += out as u64;
-            // In range after the clamp, so the (vectorisable) conversion to i32 gives the same code as to u16.
-            let code = (a * max + 0.5).clamp(0.0, max) as i32;
-            *v = T::from_code(code as u16);
+            *v = T::from_code(code_of(a * max + 0.5, max));
         };
         match s {
             Some(s) => {
@@ -234,6 +289,98 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn grouped_expansion_matches_pixel_by_pixel() {
+        let mut r = 0x9E37_79B9u32;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            r
+        };
+        for width in [1usize, 5, 7, 8, 9, 16, 23, 37, 64, 100, 333] {
+            for k in [1usize, 2, 3, 5, 8, 13, 16] {
+                let tx = taps(width, k);
+                let nb = crate::median::blocks(width, k);
+                for c in [1usize, 3] {
+                    let frow: Vec<f32> = (0..nb * c)
+                        .map(|_| match next() % 10 {
+                            0 => f32::NAN,
+                            1 => -0.5,
+                            2 => 0.01,
+                            _ => (next() % 1000) as f32 / 997.0,
+                        })
+                        .collect();
+                    let mut got = vec![0.0f32; width * c];
+                    let mut want = vec![0.0f32; width * c];
+                    let n_got = match c {
+                        3 => expand_f::<3, 24>(&frow, &mut got, &tx, 0.05),
+                        _ => expand_f::<1, 8>(&frow, &mut got, &tx, 0.05),
+                    };
+                    let n_want = expand_f_dyn(&frow, &mut want, &tx, c, 0.05);
+                    assert_eq!(n_got, n_want, "width {width}, k {k}, c {c}");
+                    let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "width {width}, k {k}, c {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn code_of_is_the_saturating_cast() {
+        let specials = [
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            254.99998,
+            255.0,
+            255.5,
+            65534.996,
+            65535.0,
+            65535.5,
+            1e9,
+            -1e9,
+            f32::MIN_POSITIVE,
+        ];
+        for max in [255.0f32, 65535.0] {
+            let reference = |x: f32| x.clamp(0.0, max) as i32 as u16;
+            for &x in &specials {
+                assert_eq!(code_of(x, max), reference(x), "x = {x}, max = {max}");
+            }
+            // Every code, its neighbouring floats and the half-way points.
+            // (`next_up`/`next_down` by hand: the crate's MSRV predates them.)
+            let up = |x: f32| f32::from_bits(x.to_bits() + 1);
+            let down = |x: f32| {
+                if x > 0.0 {
+                    f32::from_bits(x.to_bits() - 1)
+                } else {
+                    -f32::MIN_POSITIVE
+                }
+            };
+            for c in 0..=(max as u32) {
+                let f = c as f32;
+                for x in [f, f + 0.5, down(f), up(f), down(f + 0.5)] {
+                    assert_eq!(code_of(x, max), reference(x), "x = {x}, max = {max}");
+                }
+            }
+        }
+        let mut r = 0x1234_5678u32;
+        for _ in 0..200_000 {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            let x = f32::from_bits(r);
+            for max in [255.0f32, 65535.0] {
+                assert_eq!(code_of(x, max), x.clamp(0.0, max) as i32 as u16, "x = {x}");
+            }
+        }
+    }
     use crate::factor::upsample;
     use crate::transfer::Transfer;
 

@@ -1,6 +1,6 @@
 //! `correct`, top to bottom: find the photos, estimate `S`, then stream the survey once in order:
 //!
-//! 1. a decoder thread reads photos ahead (bounded queue);
+//! 1. decoder threads (as many as worker threads) read photos ahead, handed over in order (bounded queue);
 //! 2. each photo is block-median downsampled and its low-resolution image enters the ring buffer of the window;
 //! 3. once the window of the oldest waiting photo is complete, its `M` (temporal median), `F` and the corrected
 //!    photo are computed (rayon over rows);
@@ -501,7 +501,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             crate::watch::stop_flag(),
         ))
     } else {
-        Box::new(FileList::new(items))
+        // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
+        let decoders = opts
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
+            .clamp(1, 4);
+        Box::new(FileList::parallel(items, decoders))
     };
     let sink = if stdout {
         Sink::Stdout
@@ -567,7 +572,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let mut streamed = 0usize;
 
     let stream_result: Result<()> = std::thread::scope(|scope| {
-        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(2);
+        let (dec_tx, dec_rx) = bounded::<Decoded<'_>>(1);
         let (wr_tx, wr_rx) = bounded::<WriteJob<'_>>(writers);
         let live = &live;
         let mut source = source;

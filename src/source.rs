@@ -39,25 +39,62 @@ pub trait Source: Send {
     fn next_photo(&mut self) -> Option<(Item, Result<Photo>, f64)>;
 }
 
-/// Photos listed up front (a folder scan), decoded one by one.
+/// Photos listed up front (a folder scan), decoded ahead by one or more threads and handed out in order.
+///
+/// With `w` decoders, decoder `j` decodes items `j`, `j + w`, `j + 2w`, … in turn and hands each over through
+/// its own rendezvous channel; `next_photo` takes item `i` from decoder `i mod w`. The order is the list's
+/// whatever the timing, and at most `w` decoded photos wait here (one in each decoder's hands).
 pub struct FileList {
-    items: std::vec::IntoIter<Item>,
+    decoders: Vec<crossbeam_channel::Receiver<(Item, Result<Photo>, f64)>>,
+    next: usize,
+    total: usize,
 }
 
 impl FileList {
+    /// One decoder thread.
     pub fn new(items: Vec<Item>) -> Self {
+        Self::parallel(items, 1)
+    }
+
+    /// `decoders` decoder threads (at least one).
+    pub fn parallel(items: Vec<Item>, decoders: usize) -> Self {
+        let w = decoders.max(1);
+        let total = items.len();
+        let items = std::sync::Arc::new(items);
+        let decoders = (0..w)
+            .map(|j| {
+                let (tx, rx) = crossbeam_channel::bounded(0);
+                let items = std::sync::Arc::clone(&items);
+                std::thread::spawn(move || {
+                    for item in items.iter().skip(j).step_by(w) {
+                        let t = Instant::now();
+                        let photo = decode(&item.entry.path);
+                        let ms = t.elapsed().as_secs_f64() * 1000.0;
+                        // The reader stopped (end of a shard, an error): stop decoding.
+                        if tx.send((item.clone(), photo, ms)).is_err() {
+                            break;
+                        }
+                    }
+                });
+                rx
+            })
+            .collect();
         FileList {
-            items: items.into_iter(),
+            decoders,
+            next: 0,
+            total,
         }
     }
 }
 
 impl Source for FileList {
     fn next_photo(&mut self) -> Option<(Item, Result<Photo>, f64)> {
-        let item = self.items.next()?;
-        let t = Instant::now();
-        let photo = decode(&item.entry.path);
-        Some((item, photo, t.elapsed().as_secs_f64() * 1000.0))
+        if self.next >= self.total {
+            return None;
+        }
+        let got = self.decoders[self.next % self.decoders.len()].recv().ok()?;
+        self.next += 1;
+        Some(got)
     }
 }
 
@@ -107,5 +144,54 @@ impl Sink {
                     })
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parallel_file_list_keeps_the_order() {
+        let d = tempfile::tempdir().unwrap();
+        let mut items = Vec::new();
+        for i in 0..11usize {
+            let path = d.path().join(format!("p{i}.png"));
+            // Sizes differ, so decoding times differ too; one file is damaged.
+            if i == 4 {
+                std::fs::write(&path, b"not a png").unwrap();
+            } else {
+                let img = image::RgbImage::from_pixel(
+                    3 + 7 * (i as u32 % 3),
+                    2,
+                    image::Rgb([i as u8; 3]),
+                );
+                img.save(&path).unwrap();
+            }
+            items.push(Item {
+                index: i,
+                entry: Entry {
+                    relative: path.file_name().unwrap().into(),
+                    path,
+                },
+                role: Role::Write,
+            });
+        }
+        for w in [1, 2, 3, 5, 16] {
+            let mut list = FileList::parallel(items.clone(), w);
+            let mut seen = Vec::new();
+            while let Some((item, photo, _)) = list.next_photo() {
+                assert_eq!(photo.is_err(), item.index == 4);
+                if let Ok(p) = photo {
+                    assert_eq!(p.layout.width, 3 + 7 * (item.index % 3));
+                }
+                seen.push(item.index);
+            }
+            assert_eq!(seen, (0..11).collect::<Vec<_>>(), "{w} decoders");
+        }
+        // Dropped half-way: the decoders stop.
+        let mut list = FileList::parallel(items, 2);
+        assert!(list.next_photo().is_some());
+        drop(list);
     }
 }
