@@ -326,6 +326,12 @@ fn survey_folder(m: &Mission, dir: &Path, count: usize) -> Result<()> {
         let j = if p < m.distinct.len() { p } else { period - p };
         let src = &m.distinct[j.min(m.distinct.len() - 1)];
         let dst = dir.join(format!("img{i:05}.jpg"));
+        // A folder left by an earlier `--dir` run: its entries may be links to `src` itself, and copying a file
+        // onto itself empties it. Start from a clean name.
+        match std::fs::remove_file(&dst) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(Error::io(&dst, e)),
+            _ => {}
+        }
         if std::fs::hard_link(src, &dst).is_err() {
             std::fs::copy(src, &dst).map_err(|e| Error::io(&dst, e))?;
         }
@@ -542,6 +548,26 @@ mod tests {
         let centre = d[(28 * 64 + 32) * 3] as u32;
         let corner = d[0] as u32;
         assert!(centre > corner, "{centre} vs {corner}");
+    }
+
+    #[test]
+    fn a_mission_folder_can_be_made_again_in_place() {
+        // `bench --dir DIR` twice: the second run must not empty the photos the first one linked.
+        let d = tempfile::tempdir().unwrap();
+        let o = BenchOptions {
+            width: 48,
+            height: 32,
+            distinct: 3,
+            water_column: 1,
+            ..BenchOptions::default()
+        };
+        for _ in 0..2 {
+            let m = generate(&o, d.path()).unwrap();
+            survey_folder(&m, &d.path().join("s"), 5).unwrap();
+            for e in io::find_photos(&d.path().join("s")).unwrap().photos {
+                io::decode(&e.path).unwrap_or_else(|err| panic!("{err}"));
+            }
+        }
     }
 
     #[test]
