@@ -127,91 +127,145 @@ pub const MIN_ROUGHNESS_SIZE: (usize, usize) = (32, 24);
 /// Factor images smaller than [`MIN_ROUGHNESS_SIZE`] get 0: on a handful of pixels the curvature of the light
 /// cone itself cannot be told from texture.
 pub fn roughness(f: &Raster) -> f32 {
-    let (w, h, c) = (f.width, f.height, f.channels);
-    if w < MIN_ROUGHNESS_SIZE.0 || h < MIN_ROUGHNESS_SIZE.1 {
-        return 0.0;
-    }
-    let lum: Vec<f32> = (0..w * h)
-        .map(|p| f.data[p * c..(p + 1) * c].iter().sum::<f32>() / c as f32)
-        .collect();
-    let mut finite: Vec<f32> = lum.iter().copied().filter(|v| v.is_finite()).collect();
-    if finite.is_empty() {
-        return 0.0;
-    }
-    finite.sort_by(f32::total_cmp);
-    let top = finite[(finite.len() - 1) * 99 / 100];
-    let dark = (0.1 * top).max(1e-6);
-    let log: Vec<f32> = lum
-        .iter()
-        .map(|&v| {
+    Scratch::default().roughness(f)
+}
+
+/// Buffers for [`roughness`], kept by the [`Monitor`] from photo to photo: a few low-resolution images a photo,
+/// allocated once instead of page-faulted in afresh every time.
+#[derive(Debug, Default)]
+struct Scratch {
+    lum: Vec<f32>,
+    sorted: Vec<f32>,
+    log: Vec<f32>,
+    sums: Vec<f32>,
+    counts: Vec<f32>,
+    smooth: Vec<f32>,
+}
+
+impl Scratch {
+    fn roughness(&mut self, f: &Raster) -> f32 {
+        let (w, h, c) = (f.width, f.height, f.channels);
+        if w < MIN_ROUGHNESS_SIZE.0 || h < MIN_ROUGHNESS_SIZE.1 {
+            return 0.0;
+        }
+        let lum = &mut self.lum;
+        lum.clear();
+        lum.extend(
+            f.data
+                .chunks_exact(c)
+                .map(|px| px.iter().sum::<f32>() / c as f32),
+        );
+        let finite = &mut self.sorted;
+        finite.clear();
+        finite.extend(lum.iter().copied().filter(|v| v.is_finite()));
+        if finite.is_empty() {
+            return 0.0;
+        }
+        let at = (finite.len() - 1) * 99 / 100;
+        let top = *finite.select_nth_unstable_by(at, f32::total_cmp).1;
+        let dark = (0.1 * top).max(1e-6);
+        let log = &mut self.log;
+        log.clear();
+        log.extend(lum.iter().map(|&v| {
             if v.is_finite() {
                 v.max(dark).ln()
             } else {
                 f32::NAN
             }
-        })
-        .collect();
-    let r = (w / 16).max(2);
-    let smooth = box_average(&log, w, h, r);
-    let mut dev: Vec<f32> = (0..w * h)
-        .filter(|&p| lum[p].is_finite() && lum[p] >= dark && smooth[p].is_finite())
-        .map(|p| (log[p] - smooth[p]).abs())
-        .collect();
-    if dev.is_empty() {
-        return 0.0;
+        }));
+        let r = (w / 16).max(2);
+        box_average_into(
+            log,
+            w,
+            h,
+            r,
+            &mut self.sums,
+            &mut self.counts,
+            &mut self.smooth,
+        );
+        let dev = &mut self.sorted;
+        dev.clear();
+        dev.extend(
+            (0..w * h)
+                .filter(|&p| lum[p].is_finite() && lum[p] >= dark && self.smooth[p].is_finite())
+                .map(|p| (log[p] - self.smooth[p]).abs()),
+        );
+        if dev.is_empty() {
+            return 0.0;
+        }
+        let mid = dev.len() / 2;
+        *dev.select_nth_unstable_by(mid, f32::total_cmp).1
     }
-    let mid = dev.len() / 2;
-    *dev.select_nth_unstable_by(mid, f32::total_cmp).1
 }
 
 /// Mean over the `(2r + 1)²` square around each pixel, coordinates clamped to the image; `NaN` values are left
 /// out of the mean (`NaN` where all are).
+#[cfg(test)]
 fn box_average(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    // One dimension at a time: sums over a sliding window of the line padded by clamping (prefix sums, f64 so
-    // the differences stay exact enough), O(1) per pixel whatever r.
-    let line_sums = |line: &[(f32, f32)], out: &mut Vec<(f32, f32)>| {
-        let n = line.len();
-        let mut prefix = Vec::with_capacity(n + 2 * r + 1);
-        prefix.push((0.0f64, 0.0f64));
-        for i in 0..n + 2 * r {
-            let (s, k) = line[(i as isize - r as isize).clamp(0, n as isize - 1) as usize];
+    let mut out = Vec::new();
+    box_average_into(v, w, h, r, &mut Vec::new(), &mut Vec::new(), &mut out);
+    out
+}
+
+/// [`box_average`] into `out`, with `sums` and `counts` as scratch. Along rows: window sums from prefix sums of
+/// the line padded by clamping; down the columns: a running window sum over whole rows (`f64`), so every pass
+/// reads memory in order and costs O(1) per pixel whatever `r`.
+fn box_average_into(
+    v: &[f32],
+    w: usize,
+    h: usize,
+    r: usize,
+    sums: &mut Vec<f32>,
+    counts: &mut Vec<f32>,
+    out: &mut Vec<f32>,
+) {
+    sums.clear();
+    counts.clear();
+    let mut prefix: Vec<(f64, f64)> = Vec::with_capacity(w + 2 * r + 1);
+    for line in v.chunks_exact(w) {
+        prefix.clear();
+        prefix.push((0.0, 0.0));
+        for i in 0..w + 2 * r {
+            let x = line[(i as isize - r as isize).clamp(0, w as isize - 1) as usize];
+            let (s, k) = if x.is_finite() {
+                (x as f64, 1.0)
+            } else {
+                (0.0, 0.0)
+            };
             let last = prefix[i];
-            prefix.push((last.0 + s as f64, last.1 + k as f64));
+            prefix.push((last.0 + s, last.1 + k));
         }
-        out.clear();
-        out.extend((0..n).map(|x| {
+        for x in 0..w {
             let (a, b) = (prefix[x], prefix[x + 2 * r + 1]);
-            ((b.0 - a.0) as f32, (b.1 - a.1) as f32)
-        }));
-    };
-    let pass = |src: &[(f32, f32)], horizontal: bool| -> Vec<(f32, f32)> {
-        let mut out = vec![(0.0, 0.0); w * h];
-        let (mut line, mut sums) = (Vec::new(), Vec::new());
-        if horizontal {
-            for y in 0..h {
-                line_sums(&src[y * w..(y + 1) * w], &mut sums);
-                out[y * w..(y + 1) * w].copy_from_slice(&sums);
-            }
-        } else {
-            for x in 0..w {
-                line.clear();
-                line.extend((0..h).map(|y| src[y * w + x]));
-                line_sums(&line, &mut sums);
-                for (y, v) in sums.iter().enumerate() {
-                    out[y * w + x] = *v;
-                }
-            }
+            sums.push((b.0 - a.0) as f32);
+            counts.push((b.1 - a.1) as f32);
         }
-        out
-    };
-    let start: Vec<(f32, f32)> = v
-        .iter()
-        .map(|&x| if x.is_finite() { (x, 1.0) } else { (0.0, 0.0) })
-        .collect();
-    pass(&pass(&start, true), false)
-        .into_iter()
-        .map(|(s, n)| if n > 0.0 { s / n } else { f32::NAN })
-        .collect()
+    }
+    let row = |y: isize| y.clamp(0, h as isize - 1) as usize * w;
+    let mut acc_s = vec![0.0f64; w];
+    let mut acc_n = vec![0.0f64; w];
+    for y in -(r as isize)..=(r as isize) {
+        let o = row(y);
+        for x in 0..w {
+            acc_s[x] += sums[o + x] as f64;
+            acc_n[x] += counts[o + x] as f64;
+        }
+    }
+    out.clear();
+    out.reserve(w * h);
+    for y in 0..h as isize {
+        out.extend(
+            acc_s
+                .iter()
+                .zip(&acc_n)
+                .map(|(&s, &n)| if n > 0.0 { (s / n) as f32 } else { f32::NAN }),
+        );
+        let (add, sub) = (row(y + r as isize + 1), row(y - r as isize));
+        for x in 0..w {
+            acc_s[x] += sums[add + x] as f64 - sums[sub + x] as f64;
+            acc_n[x] += counts[add + x] as f64 - counts[sub + x] as f64;
+        }
+    }
 }
 
 /// Follows the mission photo by photo and flags photos whose estimate is likely broken.
@@ -223,6 +277,8 @@ pub struct Monitor {
     /// Balances of the first photos, whose median is the mission's reference balance.
     start: Vec<Vec<f32>>,
     reference: Option<Vec<f32>>,
+    scratch: Scratch,
+    sorted_changes: Vec<f32>,
 }
 
 /// Photos whose balance makes up the mission's reference.
@@ -252,9 +308,16 @@ impl Monitor {
         if let Some(prev) = &self.previous {
             let change = factor_change(f, prev);
             h.factor_change = change;
-            let mut sorted = self.changes.clone();
-            sorted.sort_by(f32::total_cmp);
-            let typical = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+            // The median change so far, by selection (linear in the mission's length, not n log n a photo).
+            let sorted = &mut self.sorted_changes;
+            sorted.clear();
+            sorted.extend_from_slice(&self.changes);
+            let typical = if sorted.is_empty() {
+                0.0
+            } else {
+                let mid = sorted.len() / 2;
+                *sorted.select_nth_unstable_by(mid, f32::total_cmp).1
+            };
             if change > t.factor_change && change > t.factor_change_ratio * typical {
                 h.flags.push(format!(
                     "F changed {:.0} % from the previous photo (altitude or attitude jump, or a seafloor change)",
@@ -263,7 +326,7 @@ impl Monitor {
             }
             self.changes.push(change);
         }
-        h.roughness = roughness(f);
+        h.roughness = self.scratch.roughness(f);
         if h.roughness > t.roughness {
             h.flags.push(format!(
                 "F shows the scene ({:.0} % fine structure; lights make smooth patterns): the window holds too \
@@ -294,7 +357,10 @@ impl Monitor {
                 100.0 * h.colour_shift
             ));
         }
-        self.previous = Some(f.clone());
+        match &mut self.previous {
+            Some(p) if p.layout() == f.layout() => p.data.copy_from_slice(&f.data),
+            p => *p = Some(f.clone()),
+        }
         h
     }
 }
@@ -470,15 +536,31 @@ mod tests {
 
     #[test]
     fn box_average_matches_brute_force() {
-        let (w, h) = (13, 7);
-        let mut v: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 11) as f32 * 0.3).collect();
-        v[20] = f32::NAN;
-        for r in [1, 2, 4] {
-            let got = box_average(&v, w, h, r);
-            let want = box_brute(&v, w, h, r);
-            for (g, e) in got.iter().zip(&want) {
-                assert!((g - e).abs() < 1e-5, "r={r}: {g} vs {e}");
+        for (w, h) in [(13usize, 7usize), (40, 25), (5, 31), (1, 9)] {
+            let mut v: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 11) as f32 * 0.3).collect();
+            v[(w * h) / 3] = f32::NAN;
+            v[w * h - 1] = f32::INFINITY;
+            for r in [1, 2, 4, 9] {
+                let got = box_average(&v, w, h, r);
+                let want = box_brute(&v, w, h, r);
+                for (g, e) in got.iter().zip(&want) {
+                    assert!((g - e).abs() < 1e-5, "{w}x{h}, r={r}: {g} vs {e}");
+                }
             }
+        }
+    }
+
+    #[test]
+    fn monitor_scratch_gives_a_fresh_roughness_whatever_came_before() {
+        let a = Raster::from_fn(64, 40, 3, |x, y, c| {
+            0.2 + 0.01 * ((x * 7 + y * 3 + c) % 13) as f32
+        });
+        let b = Raster::from_fn(48, 30, 3, |x, y, _| {
+            0.1 + 0.05 * ((x / 4 + y / 4) % 2) as f32
+        });
+        let mut m = Monitor::new(Thresholds::default());
+        for f in [&a, &b, &a, &b] {
+            assert_eq!(m.observe(f, 0.0).roughness, roughness(f));
         }
     }
 
