@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::factor::{lerp_rows, taps, Tap};
 use crate::raster::{Layout, Raster, Sample};
+use crate::scatter::Prepared;
 use crate::transfer::Curve;
 
 /// What the correction of one photo did.
@@ -26,13 +27,18 @@ impl std::ops::AddAssign for CorrectStats {
 }
 
 /// Correct `samples` (interleaved, `layout`) in place: `A = (I − S) / max(F, floor)`, where `F` is `factor_low`
-/// (one sample per `k`×`k` block) upsampled bilinearly between block centres, and `S` is `scatter` at full
-/// resolution (`None`: `S = 0`), both in linear light. `curve` converts stored codes to linear light and back.
+/// (one sample per `k`×`k` block) upsampled bilinearly between block centres, in linear light, and `S` is
+/// `scatter` at full resolution (`None`: `S = 0`). `curve` converts stored codes to linear light and back; it must
+/// follow the transfer `scatter` was prepared for.
+///
+/// With linear codes the arithmetic is done in units of the output code, `(m·I − q) / (m·F)` with `m = 65535 /
+/// max` (257 for 8-bit photos, 1 for 16-bit ones) and `q` the grid index of `S`: the numerator is an exact
+/// integer and the one rounding left before the output code is the division's (then `+ 0.5` and the floor).
 #[allow(clippy::too_many_arguments)]
 pub fn correct_in_place<T: Sample>(
     samples: &mut [T],
     layout: Layout,
-    scatter: Option<&Raster>,
+    scatter: Option<&Prepared>,
     factor_low: &Raster,
     k: usize,
     floor: f32,
@@ -47,11 +53,16 @@ pub fn correct_in_place<T: Sample>(
     assert_eq!(factor_low.channels, c);
     if let Some(s) = scatter {
         assert_eq!(
-            s.layout(),
-            layout,
+            s.layout, layout,
             "scatter image size differs from the photo"
         );
+        assert_eq!(
+            s.linear_table().is_none(),
+            curve.is_identity(),
+            "scatter prepared for another transfer"
+        );
     }
+    let s_linear = scatter.and_then(|s| s.linear_table()).unwrap_or(&[]);
     let row_len = width * c;
     if row_len == 0 {
         return CorrectStats::default();
@@ -72,7 +83,7 @@ pub fn correct_in_place<T: Sample>(
                     frow,
                 );
                 let srow = scatter.map(|s| s.row(y));
-                correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, curve)
+                correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
             },
         )
         .reduce(CorrectStats::default, |mut a, b| {
@@ -92,15 +103,16 @@ fn correct_row_dispatch<T: Sample>(
     tx: &[Tap],
     c: usize,
     floor: f32,
-    srow: Option<&[f32]>,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
-        return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, curve) };
+        return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, s_linear, curve) };
     }
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, curve)
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -113,10 +125,11 @@ unsafe fn correct_row_avx2<T: Sample>(
     tx: &[Tap],
     c: usize,
     floor: f32,
-    srow: Option<&[f32]>,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, curve)
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -128,7 +141,8 @@ fn correct_row_portable<T: Sample>(
     tx: &[Tap],
     c: usize,
     floor: f32,
-    srow: Option<&[f32]>,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
     // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
@@ -140,7 +154,7 @@ fn correct_row_portable<T: Sample>(
     };
     CorrectStats {
         floored_pixels,
-        clipped_samples: correct_row(row, fx, srow, curve),
+        clipped_samples: correct_row(row, fx, srow, s_linear, curve),
     }
 }
 
@@ -243,27 +257,38 @@ fn code_of(x: f32, max: f32) -> u16 {
     ((x + 8_388_608.0).to_bits() - 0x4B00_0000) as u16
 }
 
-/// `A = (I − S) / F` over one row, `F` already upsampled and floored; returns the clipped samples. A sample is
-/// clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
+/// `A = (I − S) / F` over one row, `F` already upsampled and floored, `S` given by its grid indices `q` (and
+/// `s_linear`, `S` in linear light by grid index, for a non-linear `curve`); returns the clipped samples. A
+/// sample is clipped when `A` falls outside `[0, 1]` (then its code is 0 or the largest code).
 #[inline(always)]
-fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &Curve) -> u64 {
-    let mut clipped = 0u64;
+fn correct_row<T: Sample>(
+    row: &mut [T],
+    f: &[f32],
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> u64 {
+    // Counted in `u32` (a row has fewer than 2³² samples): a `u64` counter made the compiler vectorise the whole
+    // loop 4 lanes wide (to match the 64-bit accumulator) instead of 8.
+    let mut clipped = 0u32;
     if curve.is_identity() {
-        // Linear codes: straight-line arithmetic the compiler can vectorise (no table look-ups).
+        // Linear codes, in units of the output code: A·max = (I − S)/F·max = (m·code − q) / (m·F) with
+        // m = 65535 / max, an integer for 8- and 16-bit codes, so the numerator is exact. Straight-line arithmetic
+        // the compiler vectorises (no table look-ups).
         let max = curve.max();
-        let mut one = |v: &mut T, f: f32, s: f32| {
-            let lin = v.to_u16() as f32 / max;
-            let a = (lin - s) / f;
+        let m = 65535.0 / max;
+        let mut one = |v: &mut T, f: f32, q: f32| {
+            let a = (v.to_u16() as f32 * m - q) / (f * m);
             #[allow(clippy::manual_range_contains)]
             // NaN is not clipped; `contains` would say it is
-            let out = (a < 0.0) | (a > 1.0);
-            clipped += out as u64;
-            *v = T::from_code(code_of(a * max + 0.5, max));
+            let out = (a < 0.0) | (a > max);
+            clipped += out as u32;
+            *v = T::from_code(code_of(a + 0.5, max));
         };
-        match s {
-            Some(s) => {
-                for ((v, &f), &s) in row.iter_mut().zip(f).zip(s) {
-                    one(v, f, s);
+        match q {
+            Some(q) => {
+                for ((v, &f), &q) in row.iter_mut().zip(f).zip(q) {
+                    one(v, f, q as f32);
                 }
             }
             None => {
@@ -274,16 +299,16 @@ fn correct_row<T: Sample>(row: &mut [T], f: &[f32], s: Option<&[f32]>, curve: &C
         }
     } else {
         for (i, (v, &f)) in row.iter_mut().zip(f).enumerate() {
-            let s = s.map_or(0.0, |s| s[i]);
+            let s = q.map_or(0.0, |q| s_linear[q[i] as usize]);
             let a = (curve.linear(v.to_u16()) - s) / f;
             #[allow(clippy::manual_range_contains)]
             // NaN is not clipped; `contains` would say it is
             let out = (a < 0.0) | (a > 1.0);
-            clipped += out as u64;
+            clipped += out as u32;
             *v = T::from_code(curve.code(a));
         }
     }
-    clipped
+    clipped as u64
 }
 
 #[cfg(test)]
@@ -388,7 +413,7 @@ mod tests {
     fn reference(
         samples: &[u16],
         layout: Layout,
-        scatter: Option<&Raster>,
+        scatter: Option<&Prepared>,
         low: &Raster,
         k: usize,
         floor: f32,
@@ -399,7 +424,7 @@ mod tests {
             .enumerate()
             .map(|(i, &v)| {
                 let fv = (f.data[i] as f64).max(floor as f64);
-                let s = scatter.map_or(0.0, |s| s.data[i] as f64);
+                let s = scatter.map_or(0.0, |s| s.q[i] as f64 / 65535.0);
                 let a = (v as f64 / 65535.0 - s) / fv * 65535.0;
                 a.round().clamp(0.0, 65535.0) as u16
             })
@@ -418,6 +443,7 @@ mod tests {
             0.02 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
         });
         let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
+        let scatter = Prepared::new(&scatter, Transfer::Linear);
         let samples: Vec<u16> = (0..29 * 17 * 3)
             .map(|i| ((i * 7919) % 65536) as u16)
             .collect();
@@ -444,17 +470,19 @@ mod tests {
         let frow: Vec<f32> = (0..width.div_ceil(8) * c)
             .map(|i| 0.01 + 0.37 * ((i * 7) % 11) as f32 / 10.0)
             .collect();
-        let srow: Vec<f32> = (0..width * c).map(|i| 0.002 * (i % 29) as f32).collect();
+        let srow = Raster::from_fn(width, 1, c, |x, _, ch| 0.002 * ((x * c + ch) % 29) as f32);
         let row8: Vec<u8> = (0..width * c).map(|i| ((i * 31) % 256) as u8).collect();
-        for curve in [
-            Curve::new(Transfer::Linear, 256),
-            Curve::new(Transfer::Srgb, 256),
-        ] {
-            for s in [None, Some(srow.as_slice())] {
+        for t in [Transfer::Linear, Transfer::Srgb] {
+            let curve = Curve::new(t, 256);
+            let prepared = Prepared::new(&srow, t);
+            let table = prepared.linear_table().unwrap_or(&[]);
+            for s in [None, Some(prepared.row(0))] {
                 let (mut a, mut b) = (row8.clone(), row8.clone());
                 let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
-                let sa = correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, &curve);
-                let sb = correct_row_portable(&mut b, &frow, &mut fb, &tx, c, 0.05, s, &curve);
+                let sa =
+                    correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, table, &curve);
+                let sb =
+                    correct_row_portable(&mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve);
                 assert_eq!(a, b);
                 assert_eq!(sa, sb);
             }
@@ -476,7 +504,7 @@ mod tests {
             .map(|&a| u8::from_f32((a as f32 / 255.0 * f + s) * 255.0))
             .collect();
         let low = Raster::filled(2, 1, 1, f);
-        let sc = Raster::filled(16, 8, 1, s);
+        let sc = Prepared::new(&Raster::filled(16, 8, 1, s), Transfer::Linear);
         let curve = Curve::new(Transfer::Linear, 256);
         let stats = correct_in_place(&mut photo, layout, Some(&sc), &low, 8, 0.05, &curve);
         for (g, a) in photo.iter().zip(&albedo) {
@@ -504,7 +532,11 @@ mod tests {
         correct_in_place(
             &mut photo,
             layout,
-            Some(&Raster::filled(8, 2, 1, s)),
+            // S is given in stored (sRGB) units, as estimated from the water-column frames.
+            Some(&Prepared::new(
+                &Raster::filled(8, 2, 1, t.from_linear(s)),
+                t,
+            )),
             &Raster::filled(1, 1, 1, f),
             8,
             0.05,
@@ -513,6 +545,73 @@ mod tests {
         for (i, (&g, &a)) in photo.iter().zip(&albedo).enumerate() {
             let expect = t.from_linear(a) * 255.0;
             assert!((g as f32 - expect).abs() <= 1.5, "{i}: {g} vs {expect}");
+        }
+    }
+
+    /// Every 8-bit code against an exact calculation in `f64`: the output code is `round(clamp((m·I − q) /
+    /// (m·F)))`, with a tolerance of one code only where the exact value lies within 10⁻³ of a rounding boundary
+    /// (there `f32`'s rounding of the division may land on either side), and a sample counts as clipped exactly
+    /// when the exact value is outside `[0, max]` (away from the two ends by the same margin).
+    #[test]
+    fn linear_codes_match_exact_arithmetic() {
+        for (levels, codes) in [
+            (256usize, (0..=255u32).collect::<Vec<_>>()),
+            (65536, {
+                let mut c: Vec<u32> = (0..=65535u32).step_by(97).collect();
+                c.extend([1, 2, 65534, 65535]);
+                c
+            }),
+        ] {
+            let curve = Curve::new(Transfer::Linear, levels);
+            let max = curve.max() as f64;
+            let m = 65535.0 / max;
+            let qs = [0u16, 1, 257, 3000, 12_345, 40_000, 65_535];
+            let fs = [0.05f32, 0.1, 0.3333, 0.5, 0.77, 1.0, 1.9];
+            let width = codes.len();
+            for &q in &qs {
+                for &fv in &fs {
+                    let layout = Layout {
+                        width,
+                        height: 1,
+                        channels: 1,
+                    };
+                    let mut row: Vec<u16> = codes.iter().map(|&c| c as u16).collect();
+                    let mut s = Raster::filled(width, 1, 1, 0.0);
+                    s.data.iter_mut().for_each(|v| *v = q as f32 / 65535.0);
+                    let prepared = Prepared::new(&s, Transfer::Linear);
+                    assert!(
+                        prepared.q.iter().all(|&g| g == q),
+                        "grid index kept exactly"
+                    );
+                    let low = Raster::filled(width.div_ceil(8), 1, 1, fv);
+                    let stats =
+                        correct_in_place(&mut row, layout, Some(&prepared), &low, 8, 0.01, &curve);
+                    let mut clipped = 0u64;
+                    let mut unsure = 0u64;
+                    for (&c, &got) in codes.iter().zip(&row) {
+                        let exact = (m * c as f64 - q as f64) / (m * fv as f64);
+                        let near_edge = exact.abs() < 1e-3 || (exact - max).abs() < 1e-3;
+                        if (exact < 0.0 || exact > max) && !near_edge {
+                            clipped += 1;
+                        }
+                        unsure += near_edge as u64;
+                        let want = (exact + 0.5).floor().clamp(0.0, max) as i64;
+                        let frac = (exact + 0.5) - (exact + 0.5).floor();
+                        let tie = !(1e-3..=1.0 - 1e-3).contains(&frac);
+                        let d = (got as i64 - want).abs();
+                        assert!(
+                            d == 0 || (tie && d == 1),
+                            "levels {levels}, code {c}, q {q}, F {fv}: {got} vs exact {exact}"
+                        );
+                    }
+                    assert!(
+                        stats.clipped_samples >= clipped
+                            && stats.clipped_samples <= clipped + unsure,
+                        "levels {levels}, q {q}, F {fv}: {} clipped vs {clipped} (+{unsure})",
+                        stats.clipped_samples
+                    );
+                }
+            }
         }
     }
 }

@@ -29,7 +29,7 @@ use crate::options::{Method, Options};
 use crate::overview;
 use crate::raster::{Layout, Photo, Raster, Samples};
 use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
-use crate::scatter::{self, Scatter};
+use crate::scatter::{self, Prepared, Scatter};
 use crate::source::{FileList, Item, Role, Sink, Source};
 use crate::stream::StreamFrames;
 use crate::transfer::Curve;
@@ -396,9 +396,9 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         )?;
     }
 
-    // --- S in linear light, at full and at block resolution ---------------------------------------------------
+    // --- S at block resolution in linear light, and at full resolution prepared for the correction pass -------
     let transfer = opts.transfer;
-    let scatter_low = scatter.as_ref().map(|s| {
+    let scatter_low_codes = scatter.as_ref().map(|s| {
         let codes = s.full.to_u16();
         let mut low = match &mask {
             Some(m) => block_median_masked(&codes, s.full.layout(), k, m),
@@ -407,28 +407,30 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             }
         };
         fill_missing(&mut low);
+        low
+    });
+    let scatter_low = scatter_low_codes.as_ref().map(|low| {
+        let mut low = low.clone();
         for v in &mut low.data {
             *v = transfer.to_linear(*v);
         }
         low
     });
-    let scatter_lin: Option<Raster> = scatter.as_ref().map(|s| {
-        let mut full = s.full.clone();
-        if !transfer.is_linear() {
-            for v in &mut full.data {
-                *v = transfer.to_linear(*v);
+    let scatter_prepared: Option<Prepared> =
+        scatter.as_ref().map(|s| match (&mask, &scatter_low_codes) {
+            // Under the mask, S holds whatever is burned into the water-column frames too: use the smooth fill.
+            (Some(m), Some(low)) => {
+                let mut full = s.full.clone();
+                let smooth = crate::factor::upsample(low, k, full.width, full.height);
+                let c = full.channels;
+                for (p, _) in m.ignore.iter().enumerate().filter(|(_, &i)| i) {
+                    full.data[p * c..(p + 1) * c].copy_from_slice(&smooth.data[p * c..(p + 1) * c]);
+                }
+                Prepared::new(&full, transfer)
             }
-        }
-        // Under the mask, S holds whatever is burned into the water-column frames too: use the smooth fill.
-        if let (Some(m), Some(low)) = (&mask, &scatter_low) {
-            let smooth = crate::factor::upsample(low, k, full.width, full.height);
-            let c = full.channels;
-            for (p, _) in m.ignore.iter().enumerate().filter(|(_, &i)| i) {
-                full.data[p * c..(p + 1) * c].copy_from_slice(&smooth.data[p * c..(p + 1) * c]);
-            }
-        }
-        full
-    });
+            _ => Prepared::new(&s.full, transfer),
+        });
+    drop(scatter_low_codes);
     drop(scatter);
     let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
     // Baseline `--method mean` needs the whole mission's mean before the stream.
@@ -628,7 +630,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             k,
             opts,
             colour: Vec::new(),
-            scatter: scatter_lin.as_ref(),
+            scatter: scatter_prepared.as_ref(),
             scatter_low: scatter_low.as_ref(),
             mask: mask.as_ref(),
             curves: &curves,
@@ -658,14 +660,14 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                 Ok((photo, photo_live)) => {
                     let mismatch = match layout {
                         None => {
-                            if let Some(s) = &scatter_lin {
-                                if s.layout() != photo.layout {
+                            if let Some(s) = &scatter_prepared {
+                                if s.layout != photo.layout {
                                     return Err(Error::Mismatch {
                                         path: scatter_info.path.clone().unwrap_or_default(),
                                         reason: format!(
                                             "scatter estimate is {}, but the survey photos are {} ({}): \
                                              water-column frames and survey photos must come from the same camera",
-                                            s.layout(),
+                                            s.layout,
                                             photo.layout,
                                             path.display()
                                         ),
@@ -891,7 +893,7 @@ struct Ctx<'a> {
     k: usize,
     opts: &'a Options,
     colour: Vec<f32>,
-    scatter: Option<&'a Raster>,
+    scatter: Option<&'a Prepared>,
     scatter_low: Option<&'a Raster>,
     out: &'a Path,
     /// `None` with `--out -`.
