@@ -119,11 +119,27 @@ fn quantise_16(v: &mut [f32]) {
     }
 }
 
-fn widen(samples: &Samples) -> (Vec<u16>, f32) {
+/// Samples `range` of a photo as `u16`, and the photo's largest code.
+fn widen(samples: &Samples, range: std::ops::Range<usize>) -> (Vec<u16>, f32) {
     match samples {
-        Samples::U8(v) => (v.iter().map(|&s| s as u16).collect(), 255.0),
-        Samples::U16(v) => (v.clone(), 65535.0),
+        Samples::U8(v) => (v[range].iter().map(|&s| s as u16).collect(), 255.0),
+        Samples::U16(v) => (v[range].to_vec(), 65535.0),
     }
+}
+
+/// Decode `frames` a few at a time on the worker threads, handing each result to `each` in the frames' order;
+/// at most as many decoded photos as there are threads are held at once.
+fn decode_in_order<'e>(
+    frames: &[&'e Entry],
+    mut each: impl FnMut(&'e Entry, Result<Photo>) -> Result<()>,
+) -> Result<()> {
+    for group in frames.chunks(rayon::current_num_threads().max(1)) {
+        let decoded: Vec<Result<Photo>> = group.par_iter().map(|e| decode(&e.path)).collect();
+        for (e, photo) in group.iter().zip(decoded) {
+            each(e, photo)?;
+        }
+    }
+    Ok(())
 }
 
 /// Estimate `S` from water-column frames. Frames that cannot be read or do not match the first readable frame
@@ -139,12 +155,13 @@ pub fn estimate(
     let mut band: Vec<Vec<u16>> = Vec::new();
     let mut rows_per_band = 0usize;
     let mut max = 255.0f32;
-    for e in frames {
-        let photo = match decode(&e.path) {
+    let all: Vec<&Entry> = frames.iter().collect();
+    decode_in_order(&all, |e, photo| {
+        let photo = match photo {
             Ok(p) => p,
             Err(err) => {
                 on_error(err);
-                continue;
+                return Ok(());
             }
         };
         match layout {
@@ -166,17 +183,18 @@ pub fn estimate(
                         d.bits()
                     ),
                 });
-                continue;
+                return Ok(());
             }
             _ => {}
         }
         let (l, _) = layout.unwrap();
-        let (wide, m) = widen(&photo.samples);
-        max = m;
         let n = rows_per_band.min(l.height) * l.width * l.channels;
-        band.push(wide[..n].to_vec());
+        let (wide, m) = widen(&photo.samples, 0..n);
+        max = m;
+        band.push(wide);
         usable.push(e);
-    }
+        Ok(())
+    })?;
     let Some((l, _)) = layout else {
         return Ok(None);
     };
@@ -188,11 +206,10 @@ pub fn estimate(
         let y1 = (y0 + rows_per_band).min(l.height);
         if passes > 0 {
             band.clear();
-            for e in &usable {
-                let photo: Photo = decode(&e.path)?;
-                let (wide, _) = widen(&photo.samples);
-                band.push(wide[y0 * row_len..y1 * row_len].to_vec());
-            }
+            decode_in_order(&usable, |_, photo| {
+                band.push(widen(&photo?.samples, y0 * row_len..y1 * row_len).0);
+                Ok(())
+            })?;
         }
         let out = &mut full.data[y0 * row_len..y1 * row_len];
         let band_ref = &band;
