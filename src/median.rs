@@ -258,8 +258,8 @@ pub fn block_median<T: Sample>(
                     let rows =
                         (0..k).map(|dy| &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]);
                     match channels {
-                        3 => gather_blocks::<T, 3>(rows, v, k, lanes, lane0),
-                        1 => gather_blocks::<T, 1>(rows, v, k, lanes, lane0),
+                        3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lane0),
+                        1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lane0),
                         _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
                     }
                     apply_network(&net, v, lanes);
@@ -299,23 +299,36 @@ pub fn block_median<T: Sample>(
 /// Gather the rows of a band of blocks for the network: element `e = dy·k + dx` of lane `l` (lane `l` = sample
 /// `lane0 + l` of the block row, i.e. block `bx`, channel `ch` with `lane0 + l = bx·C + ch`) is the sample of
 /// pixel `(bx·k + dx, dy)`, channel `ch`. `lane0` and `lanes` are multiples of `C`.
+///
+/// Each pixel is moved as `C1 = C + 1` samples (one 4-byte move for 8-bit RGB instead of a 2 + 1): the extra
+/// sample lands on the next block's first lane, which the next move overwrites; the last block of each
+/// element row is moved exactly, so nothing outside the band is read or written.
 #[inline(always)]
-fn gather_blocks<'a, T: Sample, const C: usize>(
+fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
     rows: impl Iterator<Item = &'a [T]>,
     v: &mut [T],
     k: usize,
     lanes: usize,
     lane0: usize,
 ) {
-    debug_assert!(lane0 % C == 0 && lanes % C == 0);
+    debug_assert!(lane0 % C == 0 && lanes % C == 0 && C1 == C + 1);
     let (bx0, nb) = (lane0 / C, lanes / C);
+    if nb == 0 {
+        return;
+    }
     for (dy, row) in rows.enumerate() {
         let band = &row[bx0 * k * C..(bx0 + nb) * k * C];
-        for (b, block) in band.chunks_exact(k * C).enumerate() {
-            for (dx, px) in block.chunks_exact(C).enumerate() {
-                let at = (dy * k + dx) * lanes + b * C;
-                v[at..at + C].copy_from_slice(px);
+        for dx in 0..k {
+            let e = &mut v[(dy * k + dx) * lanes..(dy * k + dx + 1) * lanes];
+            for b in 0..nb - 1 {
+                let src: &[T; C1] = band[(b * k + dx) * C..(b * k + dx) * C + C1]
+                    .try_into()
+                    .unwrap();
+                let dst: &mut [T; C1] = (&mut e[b * C..b * C + C1]).try_into().unwrap();
+                *dst = *src;
             }
+            let b = nb - 1;
+            e[b * C..b * C + C].copy_from_slice(&band[(b * k + dx) * C..(b * k + dx) * C + C]);
         }
     }
 }
