@@ -257,10 +257,20 @@ pub fn block_median<T: Sample>(
                     // Gather: element e = dy·k + dx of lane (bx, ch).
                     let rows =
                         (0..k).map(|dy| &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]);
-                    match channels {
-                        3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lane0),
-                        1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lane0),
-                        _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
+                    let rgb8 = (k == 8 && channels == 3)
+                        .then(|| T::as_bytes(samples).zip(T::as_bytes_mut(v)))
+                        .flatten();
+                    if let Some((bytes, vb)) = rgb8 {
+                        let rows: [&[u8]; 8] = std::array::from_fn(|dy| {
+                            &bytes[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]
+                        });
+                        gather_rgb8_k8(&rows, vb, lanes, lane0);
+                    } else {
+                        match channels {
+                            3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lane0),
+                            1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lane0),
+                            _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
+                        }
                     }
                     apply_network(&net, v, lanes);
                     let o = &mut out_row[lane0..lane0 + lanes];
@@ -329,6 +339,108 @@ fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
             }
             let b = nb - 1;
             e[b * C..b * C + C].copy_from_slice(&band[(b * k + dx) * C..(b * k + dx) * C + C]);
+        }
+    }
+}
+
+/// [`gather_blocks`] for the common case of 8-bit RGB photos in 8×8 blocks: with AVX2, eight blocks at a time
+/// as an 8×8 transpose of pixels held in 32-bit lanes (16 loads, 8 + 8 byte shuffles, 24 lane shuffles and 16
+/// stores for 64 pixels, instead of 64 loads and 64 stores); the blocks left over, and CPUs without AVX2, take
+/// [`gather_blocks`]. Same result (tested bit for bit).
+fn gather_rgb8_k8(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked above).
+        return unsafe { gather_rgb8_k8_avx2(rows, v, lanes, lane0) };
+    }
+    gather_blocks::<u8, 3, 4>(rows.iter().copied(), v, 8, lanes, lane0)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn gather_rgb8_k8_avx2(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
+    use std::arch::x86_64::*;
+    debug_assert!(lane0 % 3 == 0 && lanes % 3 == 0);
+    let (bx0, nb) = (lane0 / 3, lanes / 3);
+    // 3-byte pixels to 32-bit lanes (the fourth byte zero), within each 128-bit half: pixels 0–3 of a block
+    // row from its bytes 0–11 in the low half, pixels 4–7 from bytes 12–23 in the high half.
+    let widen = _mm256_setr_epi8(
+        0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, 9, 10, 11, -1, 0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8,
+        -1, 9, 10, 11, -1,
+    );
+    // And back: 12 bytes at the start of each half, then the two halves' 3 + 3 words made contiguous.
+    let narrow = _mm256_setr_epi8(
+        0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13,
+        14, -1, -1, -1, -1,
+    );
+    let join = _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7);
+    let mut g = 0;
+    // A group of 8 blocks reads 28 bytes from its last block's row start (4 past it): stay inside the row.
+    let row_len = rows[0].len();
+    while g + 8 <= nb && (bx0 + g + 7) * 24 + 28 <= row_len {
+        for (dy, row) in rows.iter().enumerate() {
+            let mut r = [_mm256_setzero_si256(); 8];
+            for (j, rj) in r.iter_mut().enumerate() {
+                let src = &row[(bx0 + g + j) * 24..(bx0 + g + j) * 24 + 28];
+                // SAFETY: `src` holds 28 bytes; the loads read bytes 0–15 and 12–27.
+                let lo = _mm_loadu_si128(src.as_ptr() as *const __m128i);
+                let hi = _mm_loadu_si128(src.as_ptr().add(12) as *const __m128i);
+                *rj = _mm256_shuffle_epi8(_mm256_set_m128i(hi, lo), widen);
+            }
+            // 8×8 transpose of 32-bit lanes: t[dx] = pixel dx of blocks g..g+8.
+            let a0 = _mm256_unpacklo_epi32(r[0], r[1]);
+            let a1 = _mm256_unpackhi_epi32(r[0], r[1]);
+            let a2 = _mm256_unpacklo_epi32(r[2], r[3]);
+            let a3 = _mm256_unpackhi_epi32(r[2], r[3]);
+            let a4 = _mm256_unpacklo_epi32(r[4], r[5]);
+            let a5 = _mm256_unpackhi_epi32(r[4], r[5]);
+            let a6 = _mm256_unpacklo_epi32(r[6], r[7]);
+            let a7 = _mm256_unpackhi_epi32(r[6], r[7]);
+            let b0 = _mm256_unpacklo_epi64(a0, a2);
+            let b1 = _mm256_unpackhi_epi64(a0, a2);
+            let b2 = _mm256_unpacklo_epi64(a1, a3);
+            let b3 = _mm256_unpackhi_epi64(a1, a3);
+            let b4 = _mm256_unpacklo_epi64(a4, a6);
+            let b5 = _mm256_unpackhi_epi64(a4, a6);
+            let b6 = _mm256_unpacklo_epi64(a5, a7);
+            let b7 = _mm256_unpackhi_epi64(a5, a7);
+            let t = [
+                _mm256_permute2x128_si256(b0, b4, 0x20),
+                _mm256_permute2x128_si256(b1, b5, 0x20),
+                _mm256_permute2x128_si256(b2, b6, 0x20),
+                _mm256_permute2x128_si256(b3, b7, 0x20),
+                _mm256_permute2x128_si256(b0, b4, 0x31),
+                _mm256_permute2x128_si256(b1, b5, 0x31),
+                _mm256_permute2x128_si256(b2, b6, 0x31),
+                _mm256_permute2x128_si256(b3, b7, 0x31),
+            ];
+            for (dx, &tx) in t.iter().enumerate() {
+                let packed = _mm256_permutevar8x32_epi32(_mm256_shuffle_epi8(tx, narrow), join);
+                let at = (dy * 8 + dx) * lanes + g * 3;
+                let dst = &mut v[at..at + 24];
+                // SAFETY: `dst` holds 24 bytes; the stores write bytes 0–15 and 16–23.
+                _mm_storeu_si128(
+                    dst.as_mut_ptr() as *mut __m128i,
+                    _mm256_castsi256_si128(packed),
+                );
+                _mm_storel_epi64(
+                    dst.as_mut_ptr().add(16) as *mut __m128i,
+                    _mm256_extracti128_si256(packed, 1),
+                );
+            }
+        }
+        g += 8;
+    }
+    if g < nb {
+        // The blocks left over: lanes g·3.. of every element row.
+        for (dy, row) in rows.iter().enumerate() {
+            for dx in 0..8 {
+                let e = &mut v[(dy * 8 + dx) * lanes..(dy * 8 + dx + 1) * lanes];
+                for b in g..nb {
+                    let s = (bx0 + b) * 24 + dx * 3;
+                    e[b * 3..b * 3 + 3].copy_from_slice(&row[s..s + 3]);
+                }
+            }
         }
     }
 }
@@ -483,6 +595,86 @@ mod tests {
         assert_eq!(median_of_f32(&mut [0.5, 0.1]), 0.3);
         // A single outlier cannot move the median (breakdown point 50 %).
         assert_eq!(median_of_samples(&mut [10u8, 10, 255, 10, 0]), 10.0);
+    }
+
+    /// The AVX2 gather for 8-bit RGB in 8×8 blocks against the portable one, bit for bit: groups of eight blocks,
+    /// blocks left over, chunks that start inside the row and bands that end at the row's end (where the
+    /// 28-byte loads must fall back).
+    #[test]
+    fn rgb8_gather_matches_the_portable_gather() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        for width_blocks in [8usize, 9, 15, 16, 64, 70] {
+            for extra_px in [0usize, 3, 7] {
+                let row_len = (width_blocks * 8 + extra_px) * 3;
+                let rows_data: Vec<Vec<u8>> = (0..8)
+                    .map(|_| {
+                        (0..row_len)
+                            .map(|_| {
+                                state ^= state << 13;
+                                state ^= state >> 7;
+                                state ^= state << 17;
+                                (state >> 32) as u8
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let rows: [&[u8]; 8] = std::array::from_fn(|i| rows_data[i].as_slice());
+                for (lane0, nb) in [
+                    (0, width_blocks),
+                    (3 * 8, width_blocks - 8),
+                    (3, width_blocks - 1),
+                ] {
+                    if nb == 0 {
+                        continue;
+                    }
+                    let lanes = nb * 3;
+                    let mut got = vec![0u8; 64 * lanes];
+                    let mut want = vec![0u8; 64 * lanes];
+                    gather_rgb8_k8(&rows, &mut got, lanes, lane0);
+                    gather_blocks::<u8, 3, 4>(rows.iter().copied(), &mut want, 8, lanes, lane0);
+                    assert_eq!(
+                        got, want,
+                        "{width_blocks} blocks + {extra_px} px, lane0 {lane0}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn wide_rgb8_block_median_matches_brute_force() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        for (w, h) in [
+            (8 * 64, 16usize),
+            (8 * 70 + 5, 19),
+            (8 * 8 + 7, 8),
+            (8 * 8, 9),
+        ] {
+            let samples: Vec<u8> = (0..w * h * 3)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 40) as u8
+                })
+                .collect();
+            let got = block_median(&samples, w, h, 3, 8);
+            let expected = reference::block_median(
+                &samples.iter().map(|&s| s as f64).collect::<Vec<_>>(),
+                w,
+                h,
+                3,
+                8,
+                255.0,
+            );
+            assert_eq!(got.data.len(), expected.len());
+            for (i, (g, e)) in got.data.iter().zip(&expected).enumerate() {
+                assert!(
+                    (*g as f64 - e).abs() < 1e-6,
+                    "{w}x{h} sample {i}: {g} vs {e}"
+                );
+            }
+        }
     }
 
     proptest! {

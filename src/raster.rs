@@ -11,6 +11,10 @@ pub trait Sample: Copy + Ord + Default + Send + Sync + 'static {
     fn from_f32(v: f32) -> Self;
     /// A code already in range (`0..=MAX`).
     fn from_code(c: u16) -> Self;
+    /// The samples as bytes, for 8-bit samples (kernels specialised for them); `None` for wider ones.
+    fn as_bytes(s: &[Self]) -> Option<&[u8]>;
+    /// [`Sample::as_bytes`], mutable.
+    fn as_bytes_mut(s: &mut [Self]) -> Option<&mut [u8]>;
 }
 
 impl Sample for u8 {
@@ -28,6 +32,12 @@ impl Sample for u8 {
     fn from_code(c: u16) -> Self {
         c as u8
     }
+    fn as_bytes(s: &[Self]) -> Option<&[u8]> {
+        Some(s)
+    }
+    fn as_bytes_mut(s: &mut [Self]) -> Option<&mut [u8]> {
+        Some(s)
+    }
 }
 
 impl Sample for u16 {
@@ -43,6 +53,12 @@ impl Sample for u16 {
     #[inline]
     fn from_code(c: u16) -> Self {
         c
+    }
+    fn as_bytes(_: &[Self]) -> Option<&[u8]> {
+        None
+    }
+    fn as_bytes_mut(_: &mut [Self]) -> Option<&mut [u8]> {
+        None
     }
 }
 
