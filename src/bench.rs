@@ -575,17 +575,22 @@ mod tests {
         assert!(centre > corner, "{centre} vs {corner}");
     }
 
-    #[test]
-    fn a_mission_folder_can_be_made_again_in_place() {
-        // `bench --dir DIR` twice: the second run must not empty the photos the first one linked.
-        let d = tempfile::tempdir().unwrap();
-        let o = BenchOptions {
+    /// A mission small enough for a unit test.
+    fn tiny() -> BenchOptions {
+        BenchOptions {
             width: 48,
             height: 32,
             distinct: 3,
             water_column: 1,
             ..BenchOptions::default()
-        };
+        }
+    }
+
+    #[test]
+    fn a_mission_folder_can_be_made_again_in_place() {
+        // `bench --dir DIR` twice: the second run must not empty the photos the first one linked.
+        let d = tempfile::tempdir().unwrap();
+        let o = tiny();
         for _ in 0..2 {
             let m = generate(&o, d.path()).unwrap();
             survey_folder(&m, &d.path().join("s"), 5).unwrap();
@@ -598,13 +603,7 @@ mod tests {
     #[test]
     fn floor_counts_photos() {
         let d = tempfile::tempdir().unwrap();
-        let o = BenchOptions {
-            width: 48,
-            height: 32,
-            distinct: 3,
-            water_column: 1,
-            ..BenchOptions::default()
-        };
+        let o = tiny();
         let m = generate(&o, d.path()).unwrap();
         survey_folder(&m, &d.path().join("s"), 5).unwrap();
         let (n, s) = floor(&d.path().join("s"), &d.path().join("o"), 2, 95).unwrap();

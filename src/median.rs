@@ -597,6 +597,18 @@ mod tests {
         assert_eq!(median_of_samples(&mut [10u8, 10, 255, 10, 0]), 10.0);
     }
 
+    /// `n` pseudo-random bytes (xorshift64 from `state`).
+    fn random_bytes(state: &mut u64, n: usize) -> Vec<u8> {
+        (0..n)
+            .map(|_| {
+                *state ^= *state << 13;
+                *state ^= *state >> 7;
+                *state ^= *state << 17;
+                (*state >> 40) as u8
+            })
+            .collect()
+    }
+
     /// The AVX2 gather for 8-bit RGB in 8×8 blocks against the portable one, bit for bit: groups of eight blocks,
     /// blocks left over, chunks that start inside the row and bands that end at the row's end (where the
     /// 28-byte loads must fall back).
@@ -606,18 +618,8 @@ mod tests {
         for width_blocks in [8usize, 9, 15, 16, 64, 70] {
             for extra_px in [0usize, 3, 7] {
                 let row_len = (width_blocks * 8 + extra_px) * 3;
-                let rows_data: Vec<Vec<u8>> = (0..8)
-                    .map(|_| {
-                        (0..row_len)
-                            .map(|_| {
-                                state ^= state << 13;
-                                state ^= state >> 7;
-                                state ^= state << 17;
-                                (state >> 32) as u8
-                            })
-                            .collect()
-                    })
-                    .collect();
+                let rows_data: Vec<Vec<u8>> =
+                    (0..8).map(|_| random_bytes(&mut state, row_len)).collect();
                 let rows: [&[u8]; 8] = std::array::from_fn(|i| rows_data[i].as_slice());
                 for (lane0, nb) in [
                     (0, width_blocks),
@@ -650,14 +652,7 @@ mod tests {
             (8 * 8 + 7, 8),
             (8 * 8, 9),
         ] {
-            let samples: Vec<u8> = (0..w * h * 3)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 40) as u8
-                })
-                .collect();
+            let samples = random_bytes(&mut state, w * h * 3);
             let got = block_median(&samples, w, h, 3, 8);
             let expected = reference::block_median(
                 &samples.iter().map(|&s| s as f64).collect::<Vec<_>>(),
@@ -833,15 +828,7 @@ mod tests {
     #[test]
     fn avx2_and_portable_networks_agree() {
         let net = sorting_network(64);
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let v: Vec<u8> = (0..64 * 200)
-            .map(|_| {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                (state >> 40) as u8
-            })
-            .collect();
+        let v = random_bytes(&mut 0x9e37_79b9_7f4a_7c15u64, 64 * 200);
         let (mut a, mut b) = (v.clone(), v.clone());
         apply_network(&net, &mut a, 200);
         apply_network_portable(&net, &mut b, 200);
