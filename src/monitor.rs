@@ -135,7 +135,7 @@ pub fn roughness(f: &Raster) -> f32 {
 #[derive(Debug, Default)]
 struct Scratch {
     lum: Vec<f32>,
-    sorted: Vec<f32>,
+    selection: Vec<f32>,
     log: Vec<f32>,
     sums: Vec<f32>,
     counts: Vec<f32>,
@@ -155,7 +155,7 @@ impl Scratch {
                 .chunks_exact(c)
                 .map(|px| px.iter().sum::<f32>() / c as f32),
         );
-        let finite = &mut self.sorted;
+        let finite = &mut self.selection;
         finite.clear();
         finite.extend(lum.iter().copied().filter(|v| v.is_finite()));
         if finite.is_empty() {
@@ -183,7 +183,7 @@ impl Scratch {
             &mut self.counts,
             &mut self.smooth,
         );
-        let dev = &mut self.sorted;
+        let dev = &mut self.selection;
         dev.clear();
         dev.extend(
             (0..w * h)

@@ -57,7 +57,6 @@ pub struct Prepared {
     pub layout: Layout,
     /// Grid index of each sample, interleaved like the photos.
     pub q: Vec<u16>,
-    transfer: Transfer,
     /// `S` in linear light by grid index, for a transfer that is not linear (empty for linear codes).
     linear: Vec<f32>,
 }
@@ -78,7 +77,6 @@ impl Prepared {
         Prepared {
             layout: full.layout(),
             q,
-            transfer,
             linear,
         }
     }
@@ -89,22 +87,9 @@ impl Prepared {
         &self.q[y * n..(y + 1) * n]
     }
 
-    /// The transfer the photos' codes follow.
-    pub fn transfer(&self) -> Transfer {
-        self.transfer
-    }
-
     /// `S` in linear light by grid index (non-linear transfers), or `None` when `S = q / 65535` is linear already.
     pub fn linear_table(&self) -> Option<&[f32]> {
         (!self.linear.is_empty()).then_some(self.linear.as_slice())
-    }
-
-    /// `S` of sample `i` in linear light.
-    pub fn linear(&self, i: usize) -> f32 {
-        match self.linear_table() {
-            Some(t) => t[self.q[i] as usize],
-            None => self.q[i] as f32 / 65535.0,
-        }
     }
 }
 
