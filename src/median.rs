@@ -267,8 +267,8 @@ pub fn block_median<T: Sample>(
                         gather_rgb8_k8(&rows, vb, lanes, lane0);
                     } else {
                         match channels {
-                            3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lane0),
-                            1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lane0),
+                            3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lanes, lane0),
+                            1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lanes, lane0),
                             _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
                         }
                     }
@@ -308,7 +308,8 @@ pub fn block_median<T: Sample>(
 
 /// Gather the rows of a band of blocks for the network: element `e = dy·k + dx` of lane `l` (lane `l` = sample
 /// `lane0 + l` of the block row, i.e. block `bx`, channel `ch` with `lane0 + l = bx·C + ch`) is the sample of
-/// pixel `(bx·k + dx, dy)`, channel `ch`. `lane0` and `lanes` are multiples of `C`.
+/// pixel `(bx·k + dx, dy)`, channel `ch`. `lane0` and `lanes` are multiples of `C`. Element rows are `stride`
+/// samples apart in `v` (`stride ≥ lanes`; `lanes` itself for a whole chunk).
 ///
 /// Each pixel is moved as `C1 = C + 1` samples (one 4-byte move for 8-bit RGB instead of a 2 + 1): the extra
 /// sample lands on the next block's first lane, which the next move overwrites; the last block of each
@@ -318,10 +319,11 @@ fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
     rows: impl Iterator<Item = &'a [T]>,
     v: &mut [T],
     k: usize,
+    stride: usize,
     lanes: usize,
     lane0: usize,
 ) {
-    debug_assert!(lane0 % C == 0 && lanes % C == 0 && C1 == C + 1);
+    debug_assert!(lane0 % C == 0 && lanes % C == 0 && C1 == C + 1 && stride >= lanes);
     let (bx0, nb) = (lane0 / C, lanes / C);
     if nb == 0 {
         return;
@@ -329,7 +331,7 @@ fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
     for (dy, row) in rows.enumerate() {
         let band = &row[bx0 * k * C..(bx0 + nb) * k * C];
         for dx in 0..k {
-            let e = &mut v[(dy * k + dx) * lanes..(dy * k + dx + 1) * lanes];
+            let e = &mut v[(dy * k + dx) * stride..(dy * k + dx) * stride + lanes];
             for b in 0..nb - 1 {
                 let src: &[T; C1] = band[(b * k + dx) * C..(b * k + dx) * C + C1]
                     .try_into()
@@ -353,7 +355,7 @@ fn gather_rgb8_k8(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
         // SAFETY: the CPU has AVX2 (checked above).
         return unsafe { gather_rgb8_k8_avx2(rows, v, lanes, lane0) };
     }
-    gather_blocks::<u8, 3, 4>(rows.iter().copied(), v, 8, lanes, lane0)
+    gather_blocks::<u8, 3, 4>(rows.iter().copied(), v, 8, lanes, lanes, lane0)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -432,16 +434,9 @@ unsafe fn gather_rgb8_k8_avx2(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lan
         g += 8;
     }
     if g < nb {
-        // The blocks left over: lanes g·3.. of every element row.
-        for (dy, row) in rows.iter().enumerate() {
-            for dx in 0..8 {
-                let e = &mut v[(dy * 8 + dx) * lanes..(dy * 8 + dx + 1) * lanes];
-                for b in g..nb {
-                    let s = (bx0 + b) * 24 + dx * 3;
-                    e[b * 3..b * 3 + 3].copy_from_slice(&row[s..s + 3]);
-                }
-            }
-        }
+        // The blocks left over, into lanes g·3.. of every element row.
+        let rest = rows.iter().copied();
+        gather_blocks::<u8, 3, 4>(rest, &mut v[g * 3..], 8, lanes, (nb - g) * 3, lane0 + g * 3);
     }
 }
 
@@ -633,7 +628,14 @@ mod tests {
                     let mut got = vec![0u8; 64 * lanes];
                     let mut want = vec![0u8; 64 * lanes];
                     gather_rgb8_k8(&rows, &mut got, lanes, lane0);
-                    gather_blocks::<u8, 3, 4>(rows.iter().copied(), &mut want, 8, lanes, lane0);
+                    gather_blocks::<u8, 3, 4>(
+                        rows.iter().copied(),
+                        &mut want,
+                        8,
+                        lanes,
+                        lanes,
+                        lane0,
+                    );
                     assert_eq!(
                         got, want,
                         "{width_blocks} blocks + {extra_px} px, lane0 {lane0}"
