@@ -399,21 +399,11 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     // --- S at block resolution in linear light, and at full resolution prepared for the correction pass -------
     let transfer = opts.transfer;
     let scatter_low_codes = scatter.as_ref().map(|s| {
-        let codes = s.full.to_u16();
         let mut low = match &mask {
-            Some(m) => block_median_masked(&codes, s.full.layout(), k, m),
-            None => {
-                crate::median::block_median(&codes, s.full.width, s.full.height, s.full.channels, k)
-            }
+            Some(m) => block_median_masked(&s.full.to_u16(), s.full.layout(), k, m),
+            None => s.downsampled(k),
         };
         fill_missing(&mut low);
-        low
-    });
-    let scatter_low = scatter_low_codes.as_ref().map(|low| {
-        let mut low = low.clone();
-        for v in &mut low.data {
-            *v = transfer.to_linear(*v);
-        }
         low
     });
     let scatter_prepared: Option<Prepared> =
@@ -430,7 +420,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             }
             _ => Prepared::new(&s.full, transfer),
         });
-    drop(scatter_low_codes);
+    let scatter_low = scatter_low_codes.map(|mut low| {
+        for v in &mut low.data {
+            *v = transfer.to_linear(*v);
+        }
+        low
+    });
     drop(scatter);
     let curves = (Curve::new(transfer, 256), Curve::new(transfer, 65536));
     // Baseline `--method mean` needs the whole mission's mean before the stream.
