@@ -18,14 +18,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let rows: usize = args.get(3).map_or(Ok(4), |s| s.parse())?;
     let width: u32 = args.get(4).map_or(Ok(480), |s| s.parse())?;
-    let sheet = abysslight::overview::before_after_sheet(
+    let sheet = abysslight::run::pictures::before_after_sheet(
         &PathBuf::from(&args[0]),
         &PathBuf::from(&args[1]),
         rows,
         width,
     )?;
     let path = PathBuf::from(&args[2]);
-    abysslight::overview::save_png(&sheet, &path)?;
+    abysslight::run::pictures::save_png(&sheet, &path)?;
     eprintln!("wrote {} (input | corrected | F·C)", path.display());
     Ok(())
 }

@@ -11,9 +11,9 @@
 
 use std::path::PathBuf;
 
-use abysslight::options::Options;
-use abysslight::report::Silent;
-use abysslight::transfer::Transfer;
+use abysslight::method::transfer::Transfer;
+use abysslight::run::options::Options;
+use abysslight::run::report::Silent;
 
 struct Set {
     name: &'static str,
@@ -112,15 +112,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..Options::default()
         };
         let started = std::time::Instant::now();
-        let report = abysslight::pipeline::correct_mission(&opts, &Silent)?;
+        let report = abysslight::run::correct_mission(&opts, &Silent)?;
         let flagged = report
             .frames
             .iter()
             .filter(|f| !f.health.flags.is_empty())
             .count();
-        let sheet = abysslight::overview::before_after_sheet(&survey, &corrected, 4, 360)?;
+        let sheet = abysslight::run::pictures::before_after_sheet(&survey, &corrected, 4, 360)?;
         let sheet_path = out.join(format!("{}.png", set.name));
-        abysslight::overview::save_png(&sheet, &sheet_path)?;
+        abysslight::run::pictures::save_png(&sheet, &sheet_path)?;
         println!(
             "{:<18} {:>4} photos, {:>3} failed, {:>3} flagged, {:>6.1} s -> {}  ({})",
             set.name,

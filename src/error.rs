@@ -43,6 +43,37 @@ impl Error {
         }
     }
 
+    /// The file this error is about (`None` for usage errors).
+    pub fn path(&self) -> Option<&std::path::Path> {
+        match self {
+            Error::Io { path, .. }
+            | Error::Decode { path, .. }
+            | Error::Mismatch { path, .. }
+            | Error::Encode { path, .. }
+            | Error::Config { path, .. } => Some(path),
+            Error::Usage(_) => None,
+        }
+    }
+
+    /// The same error about `file` (for errors made without knowing the file, e.g. by the in-memory engine).
+    pub fn about(self, file: &std::path::Path) -> Self {
+        match self {
+            Error::Mismatch { reason, .. } => Error::Mismatch {
+                path: file.to_owned(),
+                reason,
+            },
+            Error::Decode { reason, .. } => Error::Decode {
+                path: file.to_owned(),
+                reason,
+            },
+            Error::Encode { reason, .. } => Error::Encode {
+                path: file.to_owned(),
+                reason,
+            },
+            other => other,
+        }
+    }
+
     /// Short machine-readable kind, used in the run report.
     pub fn kind(&self) -> &'static str {
         match self {

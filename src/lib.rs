@@ -2,14 +2,34 @@
 //! Köser et al., "Robustly Removing Deep Sea Lighting Effects for Visual Mapping of Abyssal Plains".
 //!
 //! A pixel sees `I = A·F + S`: seafloor albedo `A` times a factor image `F` (light cones, attenuation, vehicle
-//! pose) plus additive backscatter `S`. The modules follow the method:
+//! pose) plus additive backscatter `S`. The crate is layered; each layer uses only those before it:
 //!
-//! - [`scatter`]: `S`, the temporal median of water-column frames;
-//! - [`median`]: the spatial (block) and temporal median kernels;
-//! - [`window`]: the sliding window and its size `n` from the contamination rate;
-//! - [`factor`]: `F = (M − S) / C` and its upsampling;
-//! - [`correct`]: `A = (I − S) / F`;
-//! - [`pipeline`]: a whole mission, streamed in one pass.
+//! - [`method`]: the paper on photos in memory — `S` ([`method::scatter`]), block and temporal medians, the
+//!   sliding window, `F` ([`method::factor`]), `A` ([`method::correct`]), and the [`Engine`] that runs them over a
+//!   stream of photos with memory bounded by the window;
+//! - [`io`]: finding, decoding and writing photos (atomically, with their metadata);
+//! - [`run`]: a whole mission from folders to folders as `abysslight correct` runs it ([`correct_mission`]);
+//! - [`eval`]: a renderer of dives with known truth, scores, the demo and the speed bench.
+//!
+//! In memory, without files:
+//!
+//! ```
+//! use abysslight::eval::simulate::Simulation;
+//! use abysslight::{Engine, Params, Scatter};
+//!
+//! let dive = Simulation { frames: 9, width: 64, height: 48, ..Simulation::default() }.render()?;
+//! let scatter = Scatter::from_frames(&dive.water)?;
+//! let mut engine = Engine::new(Params { window: 5, ..Params::default() }, scatter.as_ref(), None)?;
+//! let mut corrected = Vec::new();
+//! for (i, photo) in dive.survey.into_iter().enumerate() {
+//!     corrected.extend(engine.push(photo, i)?);
+//! }
+//! corrected.extend(engine.finish());
+//! assert_eq!(corrected.len(), 9);
+//! # Ok::<(), abysslight::Error>(())
+//! ```
+//!
+//! A mission on disk:
 //!
 //! ```no_run
 //! use abysslight::{correct_mission, Options, Silent};
@@ -24,36 +44,19 @@
 //! # Ok::<(), abysslight::Error>(())
 //! ```
 
-pub mod baseline;
-pub mod bench;
-pub mod correct;
-pub mod demo;
-pub mod draw;
 pub mod error;
-pub mod evaluate;
-pub mod factor;
+pub mod eval;
 pub mod io;
-pub mod mask;
-pub mod median;
-pub mod metadata;
-pub mod monitor;
-pub mod options;
-pub mod overview;
-pub mod pipeline;
-pub mod raster;
-pub mod report;
-pub mod scatter;
-pub mod simulate;
-pub mod source;
-pub mod stream;
-pub mod transfer;
-pub mod watch;
-pub mod window;
+pub mod method;
+pub mod run;
 
 pub use error::{Error, Result};
-pub use metadata::Metadata;
-pub use options::{Options, SeafloorColour, Shard};
-pub use pipeline::correct_mission;
-pub use raster::{Photo, Raster};
-pub use report::{Progress, Report, Silent};
-pub use window::{choose_window, p_half};
+pub use io::metadata::Metadata;
+pub use method::engine::{Corrected, Engine, Use};
+pub use method::params::{Params, SeafloorColour};
+pub use method::raster::{Photo, Raster};
+pub use method::scatter::Scatter;
+pub use method::window::{choose_window, p_half};
+pub use run::correct_mission;
+pub use run::options::{Options, Shard};
+pub use run::report::{Progress, Report, Silent};

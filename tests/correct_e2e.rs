@@ -3,7 +3,7 @@
 mod common;
 
 use abysslight::io::decode;
-use abysslight::raster::{BitDepth, Samples};
+use abysslight::method::raster::{BitDepth, Samples};
 use abysslight::{correct_mission, Options, Silent};
 use common::*;
 

@@ -3,8 +3,8 @@
 mod common;
 
 use abysslight::io::decode;
-use abysslight::mask::Mask;
-use abysslight::raster::{Photo, Samples};
+use abysslight::method::mask::Mask;
+use abysslight::method::raster::{Photo, Samples};
 use abysslight::{correct_mission, Options, Silent};
 use common::*;
 

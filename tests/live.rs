@@ -9,8 +9,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use abysslight::io::decode;
-use abysslight::raster::{Layout, Photo, Samples};
-use abysslight::stream::{decode_frame, FrameSplitter};
+use abysslight::io::pnm::{decode_frame, FrameSplitter};
+use abysslight::method::raster::{Layout, Photo, Samples};
 use common::*;
 
 fn bin() -> Command {

@@ -3,12 +3,12 @@
 
 use std::path::Path;
 
-use abysslight::baseline::Method;
-use abysslight::evaluate::{
+use abysslight::eval::evaluate::{
     albedo_error, consistency, evaluate, parse_placements, residual_pattern, EvalSettings,
 };
-use abysslight::raster::Raster;
-use abysslight::simulate::Simulation;
+use abysslight::eval::simulate::Simulation;
+use abysslight::method::baseline::Method;
+use abysslight::method::raster::Raster;
 use abysslight::{correct_mission, Options, Silent};
 
 fn translation(tx: f64, ty: f64) -> [f64; 9] {
@@ -157,9 +157,9 @@ fn simulator_is_deterministic_by_seed() {
     assert_ne!(a.survey, c.survey);
     // Consecutive photos overlap: the homographies put photo 2's top edge inside photo 1's footprint.
     let h = &a.truth.poses;
-    let (_, y1_bottom) = abysslight::simulate::apply_h(&h[0].homography, 24.0, 32.0);
-    let (_, y2_top) = abysslight::simulate::apply_h(&h[1].homography, 24.0, 0.0);
-    let (_, y1_top) = abysslight::simulate::apply_h(&h[0].homography, 24.0, 0.0);
+    let (_, y1_bottom) = abysslight::eval::simulate::apply_h(&h[0].homography, 24.0, 32.0);
+    let (_, y2_top) = abysslight::eval::simulate::apply_h(&h[1].homography, 24.0, 0.0);
+    let (_, y1_top) = abysslight::eval::simulate::apply_h(&h[0].homography, 24.0, 0.0);
     assert!(
         y2_top < y1_top && y1_top < y1_bottom,
         "{y2_top} {y1_top} {y1_bottom}"

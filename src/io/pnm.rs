@@ -9,13 +9,9 @@
 //! reading stops there.
 
 use std::io::{BufRead, ErrorKind, Read, Write};
-use std::path::PathBuf;
-use std::time::Instant;
 
-use crate::error::{Error, Result};
-use crate::io::{photo_from_dynamic, Entry};
-use crate::raster::{Layout, Photo, Samples};
-use crate::source::{Item, Role, Source};
+use crate::io::photo_from_dynamic;
+use crate::method::raster::{Layout, Photo, Samples};
 
 /// Container of a frame on the stream.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -331,48 +327,6 @@ pub fn write_pnm(photo: &Photo, w: &mut impl Write) -> std::io::Result<()> {
             }
             w.write_all(&buf)
         }
-    }
-}
-
-/// Survey photos read as frames from a stream (stdin for `--survey -`). Frame `i` is named
-/// `frame-<i>.<ppm|pgm|png>` (6 digits, 0-based), the name its output gets in an output folder.
-pub struct StreamFrames<R> {
-    splitter: FrameSplitter<R>,
-}
-
-impl<R: BufRead> StreamFrames<R> {
-    pub fn new(r: R) -> Self {
-        StreamFrames {
-            splitter: FrameSplitter::new(r),
-        }
-    }
-}
-
-impl<R: BufRead + Send> Source for StreamFrames<R> {
-    fn next_photo(&mut self) -> Option<(Item, Result<Photo>, f64)> {
-        let t = Instant::now();
-        let index = self.splitter.frames;
-        let frame = self.splitter.next_frame()?;
-        let path = PathBuf::from(frame_name(index));
-        let (relative, photo) = match frame {
-            Ok(f) => {
-                let photo = decode_frame(&f);
-                let channels = photo.as_ref().map_or(3, |p| p.layout.channels);
-                let name = format!("frame-{index:06}.{}", f.format.extension(channels));
-                (PathBuf::from(name), photo)
-            }
-            Err(e) => (PathBuf::from(format!("frame-{index:06}")), Err(e)),
-        };
-        let photo = photo.map_err(|reason| Error::Decode {
-            path: path.clone(),
-            reason,
-        });
-        let item = Item {
-            index,
-            entry: Entry { path, relative },
-            role: Role::Write,
-        };
-        Some((item, photo, t.elapsed().as_secs_f64() * 1000.0))
     }
 }
 

@@ -5,10 +5,10 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::factor::{lerp_rows, taps, Tap};
-use crate::raster::{Layout, Raster, Sample};
-use crate::scatter::Prepared;
-use crate::transfer::Curve;
+use crate::method::factor::{lerp_rows, taps, Tap};
+use crate::method::raster::{Layout, Raster, Sample};
+use crate::method::scatter::Prepared;
+use crate::method::transfer::Curve;
 
 /// What the correction of one photo did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -327,7 +327,7 @@ mod tests {
         for width in [1usize, 5, 7, 8, 9, 16, 23, 37, 64, 100, 333] {
             for k in [1usize, 2, 3, 5, 8, 13, 16] {
                 let tx = taps(width, k);
-                let nb = crate::median::blocks(width, k);
+                let nb = crate::method::median::blocks(width, k);
                 for c in [1usize, 3] {
                     let frow: Vec<f32> = (0..nb * c)
                         .map(|_| match next() % 10 {
@@ -406,8 +406,8 @@ mod tests {
             }
         }
     }
-    use crate::factor::upsample;
-    use crate::transfer::Transfer;
+    use crate::method::factor::upsample;
+    use crate::method::transfer::Transfer;
 
     /// Unfused reference: build the full-size F first, then apply the formula pixel by pixel in f64.
     fn reference(
@@ -443,7 +443,7 @@ mod tests {
             0.02 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
         });
         let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
-        let scatter = Prepared::new(&scatter, Transfer::Linear);
+        let scatter = Prepared::from_raster(&scatter, Transfer::Linear);
         let samples: Vec<u16> = (0..29 * 17 * 3)
             .map(|i| ((i * 7919) % 65536) as u16)
             .collect();
@@ -474,7 +474,7 @@ mod tests {
         let row8: Vec<u8> = (0..width * c).map(|i| ((i * 31) % 256) as u8).collect();
         for t in [Transfer::Linear, Transfer::Srgb] {
             let curve = Curve::new(t, 256);
-            let prepared = Prepared::new(&srow, t);
+            let prepared = Prepared::from_raster(&srow, t);
             let table = prepared.linear_table().unwrap_or(&[]);
             for s in [None, Some(prepared.row(0))] {
                 let (mut a, mut b) = (row8.clone(), row8.clone());
@@ -504,7 +504,7 @@ mod tests {
             .map(|&a| u8::from_f32((a as f32 / 255.0 * f + s) * 255.0))
             .collect();
         let low = Raster::filled(2, 1, 1, f);
-        let sc = Prepared::new(&Raster::filled(16, 8, 1, s), Transfer::Linear);
+        let sc = Prepared::from_raster(&Raster::filled(16, 8, 1, s), Transfer::Linear);
         let curve = Curve::new(Transfer::Linear, 256);
         let stats = correct_in_place(&mut photo, layout, Some(&sc), &low, 8, 0.05, &curve);
         for (g, a) in photo.iter().zip(&albedo) {
@@ -533,7 +533,7 @@ mod tests {
             &mut photo,
             layout,
             // S is given in stored (sRGB) units, as estimated from the water-column frames.
-            Some(&Prepared::new(
+            Some(&Prepared::from_raster(
                 &Raster::filled(8, 2, 1, t.from_linear(s)),
                 t,
             )),
@@ -578,7 +578,7 @@ mod tests {
                     let mut row: Vec<u16> = codes.iter().map(|&c| c as u16).collect();
                     let mut s = Raster::filled(width, 1, 1, 0.0);
                     s.data.iter_mut().for_each(|v| *v = q as f32 / 65535.0);
-                    let prepared = Prepared::new(&s, Transfer::Linear);
+                    let prepared = Prepared::from_raster(&s, Transfer::Linear);
                     assert!(
                         prepared.q.iter().all(|&g| g == q),
                         "grid index kept exactly"

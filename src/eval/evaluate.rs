@@ -22,10 +22,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::eval::simulate::{apply_h, invert3, load_truth};
 use crate::io::decode;
-use crate::raster::Raster;
-use crate::simulate::{apply_h, invert3, load_truth};
-use crate::transfer::Transfer;
+use crate::method::raster::Raster;
+use crate::method::transfer::Transfer;
 
 /// Placement of one photo in the mosaic.
 #[derive(Debug, Clone, PartialEq)]

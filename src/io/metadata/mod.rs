@@ -51,7 +51,7 @@ use image::ImageFormat;
 
 use crate::error::{Error, Result};
 use crate::io::{self, EncodeSettings};
-use crate::raster::Photo;
+use crate::method::raster::Photo;
 
 /// A text entry: a PNG text chunk, or a JPEG comment (keyword `Comment`).
 #[derive(Debug, Clone, PartialEq, Eq)]

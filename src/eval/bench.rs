@@ -23,10 +23,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::io::{self, EncodeSettings};
-use crate::options::Options;
-use crate::raster::{Layout, Photo, Samples};
-use crate::report::Silent;
-use crate::source::Sink;
+use crate::method::raster::{Layout, Photo, Samples};
+use crate::run::options::Options;
+use crate::run::report::Silent;
+use crate::run::source::Sink;
 
 /// What to benchmark.
 #[derive(Debug, Clone)]

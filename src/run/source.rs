@@ -10,7 +10,7 @@ use std::io::Write;
 
 use crate::error::{Error, Result};
 use crate::io::{decode, EncodeSettings, Entry};
-use crate::raster::Photo;
+use crate::method::raster::Photo;
 
 /// What to do with a survey photo the stream reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -110,7 +110,7 @@ pub enum Sink {
 
 impl Sink {
     /// Write one corrected photo, with the metadata (EXIF, XMP, ICC, ...) of the file `input` it was corrected
-    /// from; `warn` hears what of it could not be read or carried (see [`crate::metadata`]).
+    /// from; `warn` hears what of it could not be read or carried (see [`crate::io::metadata`]).
     pub fn write(
         &self,
         photo: &Photo,
@@ -122,7 +122,7 @@ impl Sink {
         match self {
             Sink::Folder {
                 carry_metadata: true,
-            } => crate::metadata::write_carrying(photo, input, output, settings, warn),
+            } => crate::io::metadata::write_carrying(photo, input, output, settings, warn),
             Sink::Folder {
                 carry_metadata: false,
             } => crate::io::write_atomic(photo, output, settings),

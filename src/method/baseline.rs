@@ -13,12 +13,8 @@ use std::str::FromStr;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
-use crate::io::{decode, Entry};
-use crate::median::blocks;
-use crate::raster::{Layout, Raster};
-use crate::report::Progress;
-use crate::transfer::Transfer;
+use crate::method::median::blocks;
+use crate::method::raster::Raster;
 
 /// How the lighting is estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -90,54 +86,6 @@ pub fn block_mean(r: &Raster, k: usize) -> Raster {
         }
     }
     out
-}
-
-/// The mission's mean image at block resolution, in linear light, over every photo that decodes with the layout of
-/// the first one (others are skipped here and reported by the correction stream).
-pub fn mission_mean(
-    photos: &[Entry],
-    k: usize,
-    transfer: Transfer,
-    progress: &dyn Progress,
-) -> Result<Raster> {
-    progress.stage(&format!(
-        "method mean: averaging all {} survey photos",
-        photos.len()
-    ));
-    let lows: Vec<Option<(Layout, Raster)>> = photos
-        .par_iter()
-        .map(|e| {
-            let p = decode(&e.path).ok()?;
-            let mut r = Raster::from_photo(&p);
-            if !transfer.is_linear() {
-                for v in &mut r.data {
-                    *v = transfer.to_linear(*v);
-                }
-            }
-            Some((p.layout, block_mean(&r, k)))
-        })
-        .collect();
-    let first = lows.iter().flatten().next().map(|(l, _)| *l);
-    let Some(layout) = first else {
-        return Err(Error::Usage(
-            "method mean: no survey photo could be decoded".into(),
-        ));
-    };
-    let mut n = 0usize;
-    let mut sum: Option<Raster> = None;
-    for (l, r) in lows.into_iter().flatten() {
-        if l != layout {
-            continue;
-        }
-        n += 1;
-        match &mut sum {
-            None => sum = Some(r),
-            Some(s) => s.data.iter_mut().zip(&r.data).for_each(|(a, b)| *a += b),
-        }
-    }
-    let mut mean = sum.expect("at least one photo");
-    mean.data.iter_mut().for_each(|v| *v /= n as f32);
-    Ok(mean)
 }
 
 /// Exponents `(i, j)` of the monomials `x^i·y^j` with `i + j ≤ degree`.

@@ -22,8 +22,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::io::{write_atomic, EncodeSettings};
-use crate::raster::{Layout, Photo, Raster, Samples};
-use crate::transfer::Transfer;
+use crate::method::raster::{Layout, Photo, Raster, Samples};
+use crate::method::transfer::Transfer;
 
 /// Light rig layouts (positions in the camera frame: x right, y towards the image bottom = behind, z forward).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -916,7 +916,7 @@ impl Dive {
             })
         })?;
         let placements = out.join("truth").join("placements.txt");
-        let text = crate::evaluate::placements_text(
+        let text = crate::eval::evaluate::placements_text(
             self.truth
                 .poses
                 .iter()

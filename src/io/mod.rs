@@ -1,6 +1,11 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+pub mod mask;
+pub mod metadata;
+pub mod pnm;
+pub mod scatter;
+
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -8,7 +13,7 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, ImageFormat};
 
 use crate::error::{Error, Result};
-use crate::raster::{BitDepth, Layout, Photo, Raster, Samples};
+use crate::method::raster::{BitDepth, Layout, Photo, Raster, Samples};
 
 /// File name extensions taken as photos (case-insensitive).
 pub const PHOTO_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "tif", "tiff"];
@@ -348,7 +353,7 @@ pub fn encode_to<W: Write>(
         }
         ImageFormat::Pnm => {
             let mut w = w;
-            crate::stream::write_pnm(photo, &mut w).map_err(|e| e.to_string())
+            crate::io::pnm::write_pnm(photo, &mut w).map_err(|e| e.to_string())
         }
         other => Err(format!("writing {other:?} is not supported")),
     }
@@ -370,12 +375,12 @@ pub fn write_atomic(photo: &Photo, path: &Path, settings: EncodeSettings) -> Res
 }
 
 /// Like [`write_atomic`], and carries `meta` into the output as far as its format allows (see
-/// [`crate::metadata`]). Returns what could not be carried, each a short sentence; that never fails the write.
+/// [`crate::io::metadata`]). Returns what could not be carried, each a short sentence; that never fails the write.
 pub fn write_atomic_with_metadata(
     photo: &Photo,
     path: &Path,
     settings: EncodeSettings,
-    meta: &crate::metadata::Metadata,
+    meta: &crate::io::metadata::Metadata,
 ) -> Result<Vec<String>> {
     if meta.is_empty() {
         return write_atomic(photo, path, settings).map(|()| Vec::new());

@@ -10,7 +10,7 @@ use image::ImageDecoder;
 
 use super::ifd::Order;
 use super::*;
-use crate::raster::{Layout, Samples};
+use crate::method::raster::{Layout, Samples};
 
 const XMP: &str = r#"<?xpacket begin="" id="W5M0MpCehiHzreSzNTczkc9d"?><x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#"><rdf:Description rdf:about="" xmlns:tiff="http://ns.adobe.com/tiff/1.0/" xmlns:auv="http://example.org/auv/1.0/" tiff:Orientation="6" auv:Depth="4123.5" auv:Heading="271.25"/></rdf:RDF></x:xmpmeta><?xpacket end="w"?>"#;
 const THUMB: &[u8] = b"\xff\xd8\xff\xdbthe uncorrected photo, small\xff\xd9";

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
-use abysslight::options::{Method, Transfer};
+use abysslight::run::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -116,7 +116,7 @@ struct SimulateArgs {
     encode: Transfer,
     /// Light rig: two (beside the camera), three (two beside, one behind) or four (ring).
     #[arg(long, value_name = "RIG", default_value = "three")]
-    rig: abysslight::simulate::Rig,
+    rig: abysslight::eval::simulate::Rig,
     /// Mean altitude above the seafloor, metres.
     #[arg(long, value_name = "M", default_value_t = 3.0)]
     altitude: f32,
@@ -520,7 +520,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
         // Ctrl-C or SIGTERM ends the watch cleanly (the last photos are finished, the report is written); a
         // second one kills at once. signal-hook rather than raw libc: its handlers only set an atomic flag, which
         // is what is safe in a signal handler, and it keeps unsafe code out of abysslight.
-        let stop = abysslight::watch::stop_flag();
+        let stop = abysslight::run::watch::stop_flag();
         for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
             signal_hook::flag::register_conditional_shutdown(sig, 1, stop.clone())
                 .and_then(|_| signal_hook::flag::register(sig, stop.clone()))
@@ -559,7 +559,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
 
 fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
     let console = Console::new(args.quiet);
-    let s = abysslight::pipeline::estimate_scatter_file(
+    let s = abysslight::run::estimate_scatter_file(
         &args.water_column,
         &args.out,
         args.memory,
@@ -581,7 +581,7 @@ fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
 }
 
 fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
-    use abysslight::bench;
+    use abysslight::eval::bench;
     if a.child {
         let need = |p: &Option<PathBuf>| {
             p.clone()
@@ -626,7 +626,7 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
-    let sim = abysslight::simulate::Simulation {
+    let sim = abysslight::eval::simulate::Simulation {
         frames: a.frames,
         water_column: a.water_column,
         width: a.size.0,
@@ -669,7 +669,7 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
             }
         })
         .collect();
-    let settings = abysslight::evaluate::EvalSettings {
+    let settings = abysslight::eval::evaluate::EvalSettings {
         cell: a.cell,
         transfer: a.transfer,
         ..Default::default()
@@ -680,7 +680,7 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
             a.cell
         )));
     }
-    let ev = abysslight::evaluate::evaluate(
+    let ev = abysslight::eval::evaluate::evaluate(
         &sets,
         a.truth.as_deref(),
         a.placements.as_deref(),
@@ -693,13 +693,13 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
 }
 
 fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
-    let sim = abysslight::simulate::Simulation {
+    let sim = abysslight::eval::simulate::Simulation {
         seed: a.seed,
         encode: a.encode,
-        ..abysslight::demo::demo_simulation()
+        ..abysslight::eval::demo::demo_simulation()
     };
     let console = Console::new(false);
-    let r = abysslight::demo::run_demo(&a.out, &sim, &console)?;
+    let r = abysslight::eval::demo::run_demo(&a.out, &sim, &console)?;
     print!("{}", r.evaluation.table());
     eprintln!(
         "abysslight: demo done in {:.1} s: contact sheet {}, scores {}",

@@ -1,115 +1,18 @@
 //! [`Options`]: every setting of `abysslight correct`, shared by the library, the TOML config file and the CLI.
 
-use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::baseline::Method;
 use crate::error::Error;
-pub use crate::transfer::Transfer;
-use crate::window::{choose_window, p_half, WindowChoice};
-
-/// Grey level of the default seafloor colour `C`. Below mid-grey, so that objects brighter than the sediment
-/// (corals, sponges, white shells, litter) keep 2.5× headroom before they clip.
-pub const DEFAULT_GREY: f32 = 0.4;
+pub use crate::method::baseline::Method;
+pub use crate::method::params::{SeafloorColour, DEFAULT_GREY};
+pub use crate::method::transfer::Transfer;
+use crate::method::window::{choose_window, p_half, WindowChoice};
 
 /// Window size used when neither `window` nor `contamination` is given.
 pub const DEFAULT_WINDOW: usize = 7;
-
-/// The colour the seafloor is assumed to have after correction (`C` in `F = (M − S) / C`). It acts as a white
-/// balance: a measured sediment colour gives photos in that colour, grey gives neutral ones.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "String", into = "String")]
-pub struct SeafloorColour(pub [f32; 3]);
-
-impl Default for SeafloorColour {
-    fn default() -> Self {
-        SeafloorColour([DEFAULT_GREY; 3])
-    }
-}
-
-impl SeafloorColour {
-    /// `C` for a photo with `channels` colour channels (grey photos use the mean of the three).
-    pub fn for_channels(&self, channels: usize) -> Vec<f32> {
-        if channels == 3 {
-            self.0.to_vec()
-        } else {
-            vec![(self.0[0] + self.0[1] + self.0[2]) / 3.0; channels]
-        }
-    }
-}
-
-impl FromStr for SeafloorColour {
-    type Err = String;
-
-    /// Accepts `grey` (or `gray`), `grey:0.5`, a single level `0.5`, three components `0.42,0.36,0.28` (in
-    /// `(0, 1]`, or 8-bit `107,92,71` when any exceeds 1) or a hex colour `#8a7560`.
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let t = s.trim().to_ascii_lowercase();
-        let bad = || {
-            format!(
-                "invalid seafloor colour {s:?}: expected grey, grey:0.4, 0.42,0.36,0.28, 107,92,71 or #8a7560"
-            )
-        };
-        let rgb: [f32; 3] = if t == "grey" || t == "gray" {
-            [DEFAULT_GREY; 3]
-        } else if let Some(level) = t.strip_prefix("grey:").or_else(|| t.strip_prefix("gray:")) {
-            let v: f32 = level.trim().parse().map_err(|_| bad())?;
-            [v; 3]
-        } else if let Some(hex) = t.strip_prefix('#') {
-            if hex.len() != 6 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
-                return Err(bad());
-            }
-            let byte = |i: usize| u8::from_str_radix(&hex[i..i + 2], 16).unwrap() as f32 / 255.0;
-            [byte(0), byte(2), byte(4)]
-        } else {
-            let parts: Vec<f32> = t
-                .split(',')
-                .map(|p| p.trim().parse::<f32>())
-                .collect::<Result<_, _>>()
-                .map_err(|_| bad())?;
-            let mut rgb = match parts.as_slice() {
-                [v] => [*v; 3],
-                [r, g, b] => [*r, *g, *b],
-                _ => return Err(bad()),
-            };
-            if rgb.iter().any(|&v| v > 1.0) {
-                for v in &mut rgb {
-                    *v /= 255.0;
-                }
-            }
-            rgb
-        };
-        if rgb.iter().any(|&v| !(v > 0.0 && v <= 1.0)) {
-            return Err(format!(
-                "invalid seafloor colour {s:?}: every component must be above 0 and at most 1 (or 255)"
-            ));
-        }
-        Ok(SeafloorColour(rgb))
-    }
-}
-
-impl TryFrom<String> for SeafloorColour {
-    type Error = String;
-    fn try_from(s: String) -> Result<Self, Self::Error> {
-        s.parse()
-    }
-}
-
-impl From<SeafloorColour> for String {
-    fn from(c: SeafloorColour) -> String {
-        c.to_string()
-    }
-}
-
-impl fmt::Display for SeafloorColour {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let [r, g, b] = self.0;
-        write!(f, "{r},{g},{b}")
-    }
-}
 
 /// One of `count` contiguous chunks of a survey (`--shard K/N`, `K` from 1 to `N`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -223,13 +126,16 @@ pub struct Options {
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
     pub degree: usize,
     /// Watch the survey folder during a dive: correct photos as they arrive (each once the `n/2` photos after it
-    /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See [`crate::watch`].
+    /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See [`crate::run::watch`].
     /// Default: false.
     pub watch: bool,
     /// With `watch`: stop after this many seconds without a new or changed file. Default: none (until stopped).
     pub idle_timeout: Option<f64>,
     /// With `watch`: milliseconds between two scans of the survey folder. Default: 500.
     pub poll_interval: u64,
+    /// Correct only the first `limit` photos of the survey (or of the shard), with the same windows as a whole
+    /// run (the photos after them are read for the windows): a quick look at a new rig. Default: none (all).
+    pub limit: Option<usize>,
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
 }
@@ -263,6 +169,7 @@ impl Default for Options {
             watch: false,
             idle_timeout: None,
             poll_interval: 500,
+            limit: None,
             report: None,
         }
     }
@@ -332,6 +239,9 @@ impl Options {
         }
         if self.downsample == 0 {
             return usage("--downsample must be at least 1".into());
+        }
+        if self.limit == Some(0) {
+            return usage("--limit must be at least 1 photo".into());
         }
         if !(self.factor_floor > 0.0 && self.factor_floor.is_finite()) {
             return usage(format!(

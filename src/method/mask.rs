@@ -7,9 +7,9 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::factor::upsample;
-use crate::median::{blocks, median_of_samples};
-use crate::raster::{Layout, Photo, Raster, Sample, Samples};
+use crate::method::factor::upsample;
+use crate::method::median::{blocks, median_of_samples};
+use crate::method::raster::{Layout, Raster, Sample};
 
 /// Which pixels to ignore (`true`), one per pixel, row by row.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -26,41 +26,6 @@ impl Mask {
             height,
             ignore: vec![false; width * height],
         }
-    }
-
-    /// Load a mask image: white (brighter than mid-grey) = ignore.
-    pub fn load(path: &Path) -> Result<Mask> {
-        let photo = crate::io::decode(path)?;
-        let r = Raster::from_photo(&photo);
-        let ignore = r
-            .data
-            .chunks_exact(r.channels)
-            .map(|px| px.iter().sum::<f32>() / px.len() as f32 > 0.5)
-            .collect();
-        Ok(Mask {
-            width: r.width,
-            height: r.height,
-            ignore,
-        })
-    }
-
-    /// Save as an 8-bit grey PNG (white = ignored).
-    pub fn save(&self, path: &Path) -> Result<()> {
-        let photo = Photo {
-            layout: Layout {
-                width: self.width,
-                height: self.height,
-                channels: 1,
-            },
-            samples: Samples::U8(
-                self.ignore
-                    .iter()
-                    .map(|&m| if m { 255 } else { 0 })
-                    .collect(),
-            ),
-            alpha: None,
-        };
-        crate::io::write_atomic(&photo, path, Default::default())
     }
 
     pub fn count(&self) -> usize {
@@ -305,7 +270,7 @@ fn sharp_structure(median: &Raster, settings: DetectSettings) -> Mask {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::median::{block_median, reference};
+    use crate::method::median::{block_median, reference};
 
     #[test]
     fn masked_block_median_matches_brute_force() {

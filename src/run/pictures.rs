@@ -6,11 +6,11 @@ use std::path::Path;
 
 use image::RgbImage;
 
-use crate::draw::{self, BLACK, BLUE, GREY, RED, WHITE};
 use crate::error::{Error, Result};
-use crate::monitor::Thresholds;
-use crate::raster::Raster;
-use crate::report::FrameReport;
+use crate::method::monitor::Thresholds;
+use crate::method::raster::Raster;
+use crate::run::draw::{self, BLACK, BLUE, GREY, RED, WHITE};
+use crate::run::report::FrameReport;
 
 /// One plotted series.
 struct Series<'a> {

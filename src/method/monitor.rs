@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use crate::raster::Raster;
+use crate::method::raster::Raster;
 
 /// Thresholds for the flags.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -4,11 +4,11 @@
 //! sliding window is `M`, a virtual "all-seafloor" photo. Then `F = (M − S) / C`, with `C` the assumed seafloor
 //! colour. `F` lives at the low resolution and is upsampled bilinearly, with samples at the block centres.
 
-use crate::median::blocks;
-use crate::raster::Raster;
+use crate::method::median::blocks;
+use crate::method::raster::Raster;
 
 /// `F = (M − S_low) / C` per channel (`S_low = 0` when there is no scatter estimate). Not floored: the floor is
-/// applied per full-resolution pixel in [`crate::correct`].
+/// applied per full-resolution pixel in [`crate::method::correct`].
 pub fn factor(m: &Raster, s_low: Option<&Raster>, colour: &[f32]) -> Raster {
     let c = m.channels;
     assert_eq!(colour.len(), c, "one seafloor colour component per channel");

@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::error::Error;
-use crate::options::Options;
-use crate::raster::Layout;
-use crate::window::WindowChoice;
+use crate::method::raster::Layout;
+use crate::method::window::WindowChoice;
+use crate::run::options::Options;
 
 /// Receives what happens during a run. The library prints nothing itself; the CLI draws a progress bar on a
 /// terminal and plain log lines otherwise.
@@ -75,8 +75,11 @@ pub struct FrameReport {
     pub floored_pixels: u64,
     /// Samples clipped to the output range (objects brighter than the seafloor colour allows).
     pub clipped_samples: u64,
+    /// The output existed already (`--resume`): this photo was read for the windows and its health measured, but
+    /// it was not written again (its timings and pixel counts are 0).
+    pub resumed: bool,
     /// Contamination, change of F, and flags when the estimate is likely broken.
-    pub health: crate::monitor::Health,
+    pub health: crate::method::monitor::Health,
 }
 
 /// Where `S` came from.
@@ -117,7 +120,7 @@ pub struct Report {
     pub floored_pixels: u64,
     pub clipped_samples: u64,
     /// How many photos were flagged, by reason.
-    pub monitor: crate::monitor::Summary,
+    pub monitor: crate::method::monitor::Summary,
     pub frames: Vec<FrameReport>,
     pub errors: Vec<FileError>,
     pub warnings: Vec<String>,
@@ -127,6 +130,29 @@ pub struct Report {
 }
 
 impl Report {
+    /// Write the report as JSON to `opts.report`, or else to `report.json` in `work_dir` (per shard:
+    /// `report-shard-K-of-N.json`), and remember where.
+    pub fn write(&mut self, opts: &Options, work_dir: Option<&Path>) -> Result<(), Error> {
+        let path = opts.report.clone().or_else(|| {
+            work_dir.map(|w| {
+                w.join(match opts.shard {
+                    Some(s) => format!("report-shard-{}-of-{}.json", s.index, s.count),
+                    None => "report.json".into(),
+                })
+            })
+        });
+        let Some(path) = path else {
+            return Ok(());
+        };
+        self.report_path = Some(path.clone());
+        crate::io::write_with(&path, |w| {
+            serde_json::to_writer_pretty(w, &*self).map_err(|e| Error::Encode {
+                path: path.clone(),
+                reason: e.to_string(),
+            })
+        })
+    }
+
     /// True when every photo was corrected.
     pub fn all_ok(&self) -> bool {
         self.failed == 0 && self.water_column_failed == 0

@@ -27,8 +27,8 @@ use std::time::{Duration, Instant, SystemTime};
 
 use crate::error::{Error, Result};
 use crate::io::{decode, find_photos, Entry};
-use crate::raster::Photo;
-use crate::source::{Item, Role, Source};
+use crate::method::raster::Photo;
+use crate::run::source::{Item, Role, Source};
 
 /// Raised to end a watch cleanly (photos waiting for their window are finished, the report is written).
 pub fn stop_flag() -> Arc<AtomicBool> {

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::raster::{Raster, Sample};
+use crate::method::raster::{Raster, Sample};
 
 /// Median of integer samples, reordering `v`. Returns the value in sample units. `v` must not be empty.
 pub fn median_of_samples<T: Sample>(v: &mut [T]) -> f32 {
@@ -526,7 +526,7 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
 #[cfg(test)]
 pub(crate) mod reference {
     //! Brute-force twins of the kernels above, written to be obviously right.
-    use crate::raster::Raster;
+    use crate::method::raster::Raster;
 
     /// Sort everything, take the middle (or the mean of the two middles).
     pub fn median(values: &[f64]) -> f64 {

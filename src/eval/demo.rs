@@ -6,17 +6,17 @@ use std::time::Instant;
 
 use image::{Rgb, RgbImage};
 
-use crate::baseline::Method;
-use crate::draw::{self, BLACK, WHITE};
 use crate::error::{Error, Result};
-use crate::evaluate::{evaluate, EvalSettings, Evaluation};
+use crate::eval::evaluate::{evaluate, EvalSettings, Evaluation};
+use crate::eval::simulate::Simulation;
 use crate::io::decode;
-use crate::options::Options;
-use crate::overview::save_png;
-use crate::raster::Raster;
-use crate::report::Progress;
-use crate::simulate::Simulation;
-use crate::transfer::Transfer;
+use crate::method::baseline::Method;
+use crate::method::raster::Raster;
+use crate::method::transfer::Transfer;
+use crate::run::draw::{self, BLACK, WHITE};
+use crate::run::options::Options;
+use crate::run::pictures::save_png;
+use crate::run::report::Progress;
 
 /// What the demo did.
 #[derive(Debug, Clone)]
@@ -119,7 +119,7 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
 
 /// An RGB picture for people: linearised with `transfer`, optionally scaled so each channel's median is `level`,
 /// then sRGB-encoded.
-fn display(p: &crate::raster::Photo, transfer: Transfer, level: Option<f32>) -> RgbImage {
+fn display(p: &crate::method::raster::Photo, transfer: Transfer, level: Option<f32>) -> RgbImage {
     let mut r = Raster::from_photo(p);
     for v in &mut r.data {
         *v = transfer.to_linear(*v);

@@ -1,0 +1,393 @@
+//! The whole method over a stream of photos in memory: photos go in one at a time, in mission order, and come out
+//! corrected once the window around them is complete.
+//!
+//! ```
+//! use abysslight::method::engine::{Engine, Params};
+//! use abysslight::method::raster::{Layout, Photo, Samples};
+//!
+//! let layout = Layout { width: 32, height: 24, channels: 3 };
+//! let photo = |level: u8| Photo { layout, samples: Samples::U8(vec![level; 32 * 24 * 3]), alpha: None };
+//! let mut engine = Engine::new(Params { window: 3, ..Params::default() }, None, None)?;
+//! let mut out = Vec::new();
+//! for (i, level) in [100u8, 110, 120, 130].into_iter().enumerate() {
+//!     out.extend(engine.push(photo(level), i)?); // photos come out once their window is complete
+//! }
+//! out.extend(engine.finish());
+//! assert_eq!(out.iter().map(|c| c.tag).collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+//! # Ok::<(), abysslight::Error>(())
+//! ```
+//!
+//! Memory: at most `n` low-resolution images in the ring buffer and at most `n/2 + 1` full-resolution photos
+//! waiting for the photos after them (`n` at the start of a mission), whatever the mission's length.
+
+use std::collections::VecDeque;
+use std::ops::Range;
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::method::baseline::{polynomial_m, Method};
+use crate::method::correct::{correct_in_place, CorrectStats};
+use crate::method::factor::{factor, lit_seafloor, upsample};
+use crate::method::mask::{block_median_masked, fill_missing, Mask};
+use crate::method::median::{block_median, stack_median};
+use crate::method::monitor::{contamination, Health, Monitor, Thresholds};
+pub use crate::method::params::Params;
+use crate::method::raster::{Layout, Photo, Raster, Samples};
+use crate::method::scatter::{Prepared, Scatter};
+use crate::method::transfer::Curve;
+use crate::method::window::window_range;
+
+/// What the engine does with a photo it is given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Use {
+    /// Estimate its `F` and health, and correct it.
+    Correct,
+    /// Estimate its `F` and health, but do not correct it (an output that exists already, `--resume`): it comes
+    /// out with `photo: None`.
+    Estimate,
+    /// Only a neighbour for the windows of other photos (a shard's halo): it never comes out.
+    Context,
+}
+
+/// One photo out of the [`Engine`].
+#[derive(Debug)]
+pub struct Corrected<T> {
+    /// What the caller pushed with the photo.
+    pub tag: T,
+    /// Position among the photos the engine accepted (0-based).
+    pub index: usize,
+    /// Photos (by `index`) whose median gave this photo's `F`.
+    pub window: Range<usize>,
+    /// The corrected photo (`None` for photos pushed with [`Use::Estimate`]).
+    pub photo: Option<Photo>,
+    /// `F` at block resolution, in linear light.
+    pub factor: Raster,
+    /// `F·C = M − S`: the seafloor as the lights show it, without backscatter (what `--save-factors` writes).
+    pub lit: Raster,
+    /// Health figures and flags of the estimate.
+    pub health: Health,
+    /// Floored pixels and clipped samples of the correction.
+    pub stats: CorrectStats,
+    /// Milliseconds spent on this photo's block median, temporal median and `F`.
+    pub estimate_ms: f64,
+    /// Milliseconds spent correcting it.
+    pub correct_ms: f64,
+}
+
+struct Waiting<T> {
+    seq: usize,
+    tag: T,
+    photo: Option<Photo>,
+    use_: Use,
+    downsample_ms: f64,
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1000.0
+}
+
+/// The method of Köser et al. on a stream of photos (see the [module documentation](self)).
+pub struct Engine<T> {
+    params: Params,
+    /// `S` at full resolution, prepared for the correction pass.
+    scatter: Option<Prepared>,
+    /// `S` at block resolution, linear light.
+    scatter_low: Option<Raster>,
+    mask: Option<Mask>,
+    /// `M` of [`Method::Mean`] (block resolution, linear light).
+    mission_mean: Option<Raster>,
+    /// Transfer tables for 8- and 16-bit photos.
+    curves: (Curve, Curve),
+    /// `C` in linear light, for the mission's channel count (set by the first photo).
+    colour: Vec<f32>,
+    layout: Option<Layout>,
+    monitor: Monitor,
+    ring: VecDeque<(usize, Raster)>,
+    waiting: VecDeque<Waiting<T>>,
+    seq: usize,
+}
+
+impl<T> Engine<T> {
+    /// An engine for one mission. `scatter` is `S` (`None`: no backscatter removal); `mask` marks static pixels
+    /// (overlays, vehicle parts), left out of every median, with `F` and `S` filled in smoothly beneath them.
+    pub fn new(params: Params, scatter: Option<&Scatter>, mask: Option<Mask>) -> Result<Engine<T>> {
+        let n = params.window;
+        if n == 0 || n % 2 == 0 {
+            return Err(Error::Usage(format!(
+                "the window must be an odd number of photos, got {n}"
+            )));
+        }
+        if params.downsample == 0 {
+            return Err(Error::Usage("the block size must be at least 1".into()));
+        }
+        let k = params.downsample;
+        let transfer = params.transfer;
+        if let (Some(m), Some(s)) = (&mask, scatter) {
+            if (m.width, m.height) != (s.layout.width, s.layout.height) {
+                return Err(Error::Usage(format!(
+                    "the mask is {}x{} but the scatter image is {}",
+                    m.width, m.height, s.layout
+                )));
+            }
+        }
+        let scatter_low_codes = scatter.map(|s| {
+            let mut low = match &mask {
+                Some(m) => block_median_masked(&s.q, s.layout, k, m),
+                None => s.downsampled(k),
+            };
+            fill_missing(&mut low);
+            low
+        });
+        let prepared = scatter.map(|s| match (&mask, &scatter_low_codes) {
+            // Under the mask, S holds whatever is burned into the water-column frames too: use the smooth fill.
+            (Some(m), Some(low)) => {
+                let smooth = upsample(low, k, s.layout.width, s.layout.height);
+                s.with_pixels_from(&smooth, &m.ignore).prepare(transfer)
+            }
+            _ => s.prepare(transfer),
+        });
+        let scatter_low = scatter_low_codes.map(|mut low| {
+            for v in &mut low.data {
+                *v = transfer.to_linear(*v);
+            }
+            low
+        });
+        Ok(Engine {
+            params,
+            scatter: prepared,
+            scatter_low,
+            mask,
+            mission_mean: None,
+            curves: (Curve::new(transfer, 256), Curve::new(transfer, 65536)),
+            colour: Vec::new(),
+            layout: None,
+            monitor: Monitor::new(Thresholds::default()),
+            ring: VecDeque::with_capacity(n + 1),
+            waiting: VecDeque::new(),
+            seq: 0,
+        })
+    }
+
+    /// `M` of [`Method::Mean`]: the mission's mean image at block resolution, in linear light.
+    pub fn set_mission_mean(&mut self, mean: Raster) {
+        self.mission_mean = Some(mean);
+    }
+
+    /// The method's parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Size of the mission's photos, once the first was accepted.
+    pub fn layout(&self) -> Option<Layout> {
+        self.layout
+    }
+
+    /// Photos accepted so far.
+    pub fn accepted(&self) -> usize {
+        self.seq
+    }
+
+    /// Photos accepted but not yet out (waiting for the photos after them).
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
+    }
+
+    /// Give the next photo of the mission, to be corrected. Returns the photos whose window became complete, in
+    /// order. A photo of another size than the first is refused with [`Error::Mismatch`] (its path empty: the
+    /// caller knows it) and leaves the engine as it was; a first photo that does not fit `S` or the mask is
+    /// refused with [`Error::Usage`].
+    pub fn push(&mut self, photo: Photo, tag: T) -> Result<Vec<Corrected<T>>> {
+        self.push_as(photo, tag, Use::Correct)
+    }
+
+    /// [`push`](Self::push), saying what to do with the photo.
+    pub fn push_as(&mut self, photo: Photo, tag: T, use_: Use) -> Result<Vec<Corrected<T>>> {
+        self.accept(&photo)?;
+        let t = Instant::now();
+        let low = self.block_medians(&photo);
+        let n = self.params.window;
+        self.ring.push_back((self.seq, low));
+        if self.ring.len() > n {
+            self.ring.pop_front();
+        }
+        self.waiting.push_back(Waiting {
+            seq: self.seq,
+            tag,
+            photo: (use_ == Use::Correct).then_some(photo),
+            use_,
+            downsample_ms: ms(t),
+        });
+        self.seq += 1;
+        Ok(self.flush(false))
+    }
+
+    /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
+    pub fn finish(&mut self) -> Vec<Corrected<T>> {
+        self.flush(true)
+    }
+
+    /// Check a photo against the mission's size (the first photo sets it).
+    fn accept(&mut self, photo: &Photo) -> Result<()> {
+        match self.layout {
+            Some(l) if l != photo.layout => Err(Error::Mismatch {
+                path: Default::default(),
+                reason: format!(
+                    "photo is {}, the mission's photos are {}; skipped (split mixed missions into one folder per \
+                     camera setting)",
+                    photo.layout, l
+                ),
+            }),
+            Some(_) => Ok(()),
+            None => {
+                if let Some(s) = &self.scatter {
+                    if s.layout != photo.layout {
+                        return Err(Error::Usage(format!(
+                            "scatter estimate is {}, but the survey photos are {}: water-column frames and \
+                             survey photos must come from the same camera",
+                            s.layout, photo.layout
+                        )));
+                    }
+                }
+                if let Some(m) = &self.mask {
+                    if (m.width, m.height) != (photo.layout.width, photo.layout.height) {
+                        return Err(Error::Usage(format!(
+                            "the mask is {}x{} but the photos are {}",
+                            m.width, m.height, photo.layout
+                        )));
+                    }
+                }
+                self.layout = Some(photo.layout);
+                self.colour = self
+                    .params
+                    .seafloor_colour
+                    .for_channels(photo.layout.channels)
+                    .into_iter()
+                    .map(|c| self.params.transfer.to_linear(c))
+                    .collect();
+                Ok(())
+            }
+        }
+    }
+
+    /// The photo's `K`×`K` block medians, in linear light (masked pixels left out).
+    fn block_medians(&self, photo: &Photo) -> Raster {
+        let (l, k) = (photo.layout, self.params.downsample);
+        let mut low = match (&photo.samples, &self.mask) {
+            (Samples::U8(v), None) => block_median(v, l.width, l.height, l.channels, k),
+            (Samples::U16(v), None) => block_median(v, l.width, l.height, l.channels, k),
+            (Samples::U8(v), Some(m)) => block_median_masked(v, l, k, m),
+            (Samples::U16(v), Some(m)) => block_median_masked(v, l, k, m),
+        };
+        let transfer = self.params.transfer;
+        if !transfer.is_linear() {
+            for v in &mut low.data {
+                *v = transfer.to_linear(*v);
+            }
+        }
+        low
+    }
+
+    /// Every waiting photo whose window is complete (all of them at the end of the mission).
+    fn flush(&mut self, eof: bool) -> Vec<Corrected<T>> {
+        let n = self.params.window;
+        let mut out = Vec::new();
+        while let Some(front) = self.waiting.front() {
+            let i = front.seq;
+            let range = if eof {
+                window_range(i, n, self.seq)
+            } else {
+                let s = i.saturating_sub(n / 2);
+                s..s + n
+            };
+            if !eof && self.seq < range.end {
+                break;
+            }
+            let Some(w) = self.waiting.pop_front() else {
+                break;
+            };
+            if w.use_ == Use::Context {
+                continue;
+            }
+            out.push(self.estimate_and_correct(w, range, eof));
+        }
+        out
+    }
+
+    /// `M`, `F`, the health figures and (for [`Use::Correct`]) the correction of one photo.
+    fn estimate_and_correct(
+        &mut self,
+        w: Waiting<T>,
+        range: Range<usize>,
+        eof: bool,
+    ) -> Corrected<T> {
+        let t = Instant::now();
+        let i = w.seq;
+        let stack: Vec<&Raster> = self
+            .ring
+            .iter()
+            .filter(|(s, _)| range.contains(s))
+            .map(|(_, r)| r)
+            .collect();
+        debug_assert_eq!(
+            stack.len(),
+            range.len(),
+            "ring buffer lost a frame of the window"
+        );
+        let own = self
+            .ring
+            .iter()
+            .find(|(s, _)| *s == i)
+            .map(|(_, r)| r)
+            .expect("a photo's own low-resolution image is in its window");
+        let m = match (self.params.method, &self.mission_mean) {
+            (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
+            (Method::Polynomial, _) => {
+                polynomial_m(own, self.scatter_low.as_ref(), self.params.degree)
+            }
+            _ => stack_median(&stack),
+        };
+        let mut f = factor(&m, self.scatter_low.as_ref(), &self.colour);
+        if self.mask.is_some() {
+            fill_missing(&mut f);
+        }
+        let lit = lit_seafloor(&f, &self.colour);
+        let contaminated = contamination(
+            own,
+            &lit,
+            self.scatter_low.as_ref(),
+            self.monitor.thresholds.block_deviation,
+        );
+        let mut health = self.monitor.observe(&f, contaminated);
+        if eof && self.seq < self.params.window {
+            health.flags.push(format!(
+                "only {} photos in the mission, fewer than the window n = {}",
+                self.seq, self.params.window
+            ));
+        }
+        let estimate_ms = w.downsample_ms + ms(t);
+        let t = Instant::now();
+        let mut stats = CorrectStats::default();
+        let mut photo = w.photo;
+        if let Some(p) = &mut photo {
+            let (l, k, floor) = (p.layout, self.params.downsample, self.params.factor_floor);
+            let s = self.scatter.as_ref();
+            stats = match &mut p.samples {
+                Samples::U8(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.0),
+                Samples::U16(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.1),
+            };
+        }
+        Corrected {
+            tag: w.tag,
+            index: i,
+            window: range,
+            photo,
+            factor: f,
+            lit,
+            health,
+            stats,
+            estimate_ms,
+            correct_ms: ms(t),
+        }
+    }
+}

@@ -1,0 +1,30 @@
+//! The method of Köser et al. on photos in memory: no files, no threads visible to the caller.
+//!
+//! A pixel sees `I = A·F + S`. The modules follow the paper:
+//!
+//! - [`scatter`]: `S`, the temporal median of water-column frames;
+//! - [`median`]: the spatial (block) and temporal median kernels;
+//! - [`window`]: the sliding window and its size `n` from the contamination rate;
+//! - [`factor`]: `F = (M − S) / C` and its upsampling;
+//! - [`correct`]: `A = (I − S) / F`;
+//! - [`engine`]: all of it over a stream of photos, in order, with memory bounded by the window;
+//! - [`params`]: the method's parameters;
+//! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
+//! - [`monitor`]: health figures that say where the method's assumptions fail;
+//! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
+//! - [`raster`] and [`transfer`]: photos, low-resolution images and camera curves.
+//!
+//! Nothing here reads or writes files; [`crate::io`] does, and [`crate::run`] streams whole missions.
+
+pub mod baseline;
+pub mod correct;
+pub mod engine;
+pub mod factor;
+pub mod mask;
+pub mod median;
+pub mod monitor;
+pub mod params;
+pub mod raster;
+pub mod scatter;
+pub mod transfer;
+pub mod window;

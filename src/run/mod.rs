@@ -1,0 +1,188 @@
+//! A whole mission from folders (or pipes) to folders, as `abysslight correct` runs it. [`correct_mission`] is a
+//! short recipe over the modules here:
+//!
+//! 1. [`plan`]: check the options and list the inputs, before anything is written;
+//! 2. [`prepare`]: `S`, the mask and the mission mean, into an [`Engine`](crate::method::engine::Engine);
+//! 3. [`threads`]: stream the survey once, in order, through the engine, decoding and writing on threads;
+//! 4. [`report`] and [`pictures`]: the run report and the pictures to check it by.
+//!
+//! Sources of photos: a folder ([`source`]), a folder watched during a dive ([`watch`]) or frames on stdin
+//! ([`stdin`]). [`options`] holds every setting, shared by the library, the TOML config file and the CLI.
+
+pub mod draw;
+pub mod options;
+pub mod pictures;
+pub mod plan;
+pub mod prepare;
+pub mod report;
+pub mod source;
+pub mod stdin;
+pub mod threads;
+pub mod watch;
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::io::find_photos;
+use crate::method::monitor::{Summary, Thresholds};
+use crate::method::scatter::Scatter;
+use crate::run::options::Options;
+use crate::run::plan::{check_output_folder, Plan};
+use crate::run::prepare::{prepare, spread_indices, Setup};
+use crate::run::report::{FrameReport, Progress, Report};
+use crate::run::threads::{stream, Outcome};
+
+/// Run `abysslight correct` as described by `opts`.
+pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report> {
+    match opts.threads {
+        Some(t) => rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .map_err(|e| Error::Usage(format!("cannot start {t} threads: {e}")))?
+            .install(|| run(opts, progress)),
+        None => run(opts, progress),
+    }
+}
+
+/// Plan, prepare the engine, stream the survey, report.
+fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
+    let started = Instant::now();
+    let plan = Plan::new(opts, progress)?;
+    plan.create_work_dir()?;
+    let setup = prepare(opts, &plan, progress)?;
+    let Setup {
+        engine,
+        scatter,
+        errors,
+        mut warnings,
+    } = setup;
+    warnings.splice(0..0, plan.warnings.iter().cloned());
+    let (n, k) = (plan.window.n, opts.downsample);
+    if plan.streaming {
+        progress.stage(&format!(
+            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in; \
+             blocks {k}x{k})",
+            n / 2
+        ));
+    } else {
+        progress.stage(&format!(
+            "correcting {} survey photos (window n = {n}, blocks {k}x{k})",
+            plan.chunk.len() - plan.skipped_existing
+        ));
+    }
+    progress.start(plan.chunk.len());
+    let outcome = stream(opts, &plan, engine, progress)?;
+    save_pictures(opts, &plan, &outcome)?;
+    let water_column_failed = errors.len();
+    let mut all_errors = errors;
+    all_errors.extend(outcome.errors);
+    warnings.extend(outcome.warnings);
+    let mut monitor = Summary::default();
+    for f in &outcome.frames {
+        monitor.add(&f.health.flags);
+    }
+    let mut report = Report {
+        tool: "abysslight".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        options: opts.clone(),
+        window: plan.window,
+        layout: outcome.layout,
+        scatter,
+        survey_photos: if plan.streaming {
+            outcome.streamed
+        } else {
+            plan.found.photos.len()
+        },
+        corrected: outcome.frames.iter().filter(|f| !f.resumed).count(),
+        skipped_existing: plan.skipped_existing,
+        peak_photos_in_memory: outcome.peak_photos,
+        failed: all_errors.len() - water_column_failed,
+        water_column_failed,
+        ignored_files: plan.found.ignored.len(),
+        floored_pixels: outcome.totals.floored_pixels,
+        clipped_samples: outcome.totals.clipped_samples,
+        monitor,
+        frames: outcome.frames,
+        errors: all_errors,
+        warnings,
+        elapsed_s: started.elapsed().as_secs_f64(),
+        report_path: None,
+    };
+    report.write(opts, plan.work_dir.as_deref())?;
+    Ok(report)
+}
+
+/// `overview.png` (the health series over the mission) and `flagged.png` (a few flagged photos beside their
+/// `F·C`) in `_abysslight/`.
+fn save_pictures(opts: &Options, plan: &Plan, outcome: &Outcome) -> Result<()> {
+    let (false, Some(work_dir)) = (outcome.frames.is_empty(), &plan.work_dir) else {
+        return Ok(());
+    };
+    let name = |what: &str| match opts.shard {
+        Some(s) => format!("{what}-shard-{}-of-{}.png", s.index, s.count),
+        None => format!("{what}.png"),
+    };
+    pictures::save_png(
+        &pictures::overview(&outcome.frames, &Thresholds::default()),
+        &work_dir.join(name("overview")),
+    )?;
+    let flagged = &outcome.flagged_lit;
+    let rows: Vec<(&FrameReport, &crate::method::raster::Raster)> =
+        spread_indices(flagged.len(), 6)
+            .into_iter()
+            .filter_map(|j| {
+                let (index, lit) = &flagged[j];
+                outcome
+                    .frames
+                    .iter()
+                    .find(|f| f.index == *index)
+                    .map(|f| (f, lit))
+            })
+            .collect();
+    if let Some(sheet) = pictures::flagged_sheet(&rows, 320) {
+        pictures::save_png(&sheet, &work_dir.join(name("flagged")))?;
+    }
+    Ok(())
+}
+
+/// What [`estimate_scatter_file`] did.
+#[derive(Debug, Clone, Copy)]
+pub struct ScatterRun {
+    /// Frames that entered the median.
+    pub frames: usize,
+    /// Frames that could not be used.
+    pub failed: usize,
+}
+
+/// `abysslight scatter`: estimate `S` from a folder of water-column frames and write it as a 16-bit PNG.
+pub fn estimate_scatter_file(
+    water_column: &Path,
+    out: &Path,
+    memory_mib: usize,
+    progress: &dyn Progress,
+) -> Result<ScatterRun> {
+    check_output_folder(out, &[("water-column", water_column)])?;
+    let wc = find_photos(water_column)?;
+    progress.stage(&format!(
+        "estimating scatter S from {} water-column frames in {}",
+        wc.photos.len(),
+        water_column.display()
+    ));
+    let mut failed = 0;
+    let s = Scatter::from_files(&wc.photos, memory_mib.max(1) << 20, |e| {
+        progress.file_error(&e);
+        failed += 1;
+    })?
+    .ok_or_else(|| {
+        Error::Usage(format!(
+            "no usable water-column frames in {}",
+            water_column.display()
+        ))
+    })?;
+    s.save_png(out)?;
+    Ok(ScatterRun {
+        frames: s.frames,
+        failed,
+    })
+}

@@ -1,0 +1,402 @@
+//! What a run will read and write, decided before anything is written: the options checked, the survey photos
+//! listed, the shard's chunk and halo, and which outputs `--resume` finds complete.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::io::{self, decode, find_photos, Entry, Found, WORK_DIR};
+use crate::method::baseline::Method;
+use crate::method::window::WindowChoice;
+use crate::run::options::Options;
+use crate::run::report::Progress;
+use crate::run::source::{Item, Role};
+
+/// A run's inputs and outputs, decided up front.
+#[derive(Debug)]
+pub struct Plan {
+    /// `--survey` (`-`: frames on stdin).
+    pub survey: PathBuf,
+    /// `--out` (`-`: frames on stdout).
+    pub out: PathBuf,
+    /// Frames come from stdin.
+    pub stdin: bool,
+    /// Frames go to stdout.
+    pub stdout: bool,
+    /// No list of photos up front (stdin or `--watch`).
+    pub streaming: bool,
+    /// The window `n` and its breakdown probability.
+    pub window: WindowChoice,
+    /// The survey photos found (empty when streaming).
+    pub found: Found,
+    /// The photos to read, in order, with what to do with each.
+    pub items: Vec<Item>,
+    /// The photos (indices into `found.photos`) this run writes.
+    pub chunk: Range<usize>,
+    /// The first photo read (before `chunk.start` for a shard's halo).
+    pub first: usize,
+    /// Photos whose output `--resume` found complete.
+    pub skipped_existing: usize,
+    /// `<out>/_abysslight` (`None` with `--out -`).
+    pub work_dir: Option<PathBuf>,
+    /// What the user should know before the run starts.
+    pub warnings: Vec<String>,
+}
+
+impl Plan {
+    /// Check the options and list the inputs; nothing is written.
+    pub fn new(opts: &Options, progress: &dyn Progress) -> Result<Plan> {
+        opts.validate()?;
+        let required = |p: &Option<PathBuf>, flag: &str| {
+            p.clone()
+                .ok_or_else(|| Error::Usage(format!("{flag} is required")))
+        };
+        let survey = required(&opts.survey, "--survey")?;
+        let out = required(&opts.out, "--out")?;
+        // Live and video input (src/run/watch.rs, src/run/stdin.rs): no list of photos up front.
+        let stdin = survey == Path::new("-");
+        let stdout = out == Path::new("-");
+        let streaming = stdin || opts.watch;
+        // Baseline `--method mean` needs the whole mission's mean before the stream.
+        if streaming && opts.method == Method::Mean {
+            return Err(Error::Usage(
+                "--method mean needs every photo of the mission before it corrects the first; it cannot be used \
+                 with --watch or --survey -"
+                    .into(),
+            ));
+        }
+        let mut inputs = Vec::new();
+        if !stdin {
+            inputs.push(("survey", survey.as_path()));
+        }
+        if let Some(w) = opts.water_column.as_deref() {
+            inputs.push(("water-column", w));
+        }
+        if !stdout {
+            check_output_folder(&out, &inputs)?;
+        }
+        let window = opts.window_choice()?;
+        let found = if streaming {
+            if opts.watch && !survey.is_dir() {
+                return Err(Error::Usage(format!(
+                    "--watch {}: not a folder",
+                    survey.display()
+                )));
+            }
+            Found::default()
+        } else {
+            find_photos(&survey)?
+        };
+        if !streaming && found.photos.is_empty() {
+            return Err(Error::Usage(format!(
+                "no photos ({}) found below {}",
+                io::PHOTO_EXTENSIONS.join(", "),
+                survey.display()
+            )));
+        }
+        let mut warnings = Vec::new();
+        if !found.ignored.is_empty() {
+            let m = format!(
+                "{} file(s) in {} are not photos by name and were passed over (e.g. {})",
+                found.ignored.len(),
+                survey.display(),
+                found.ignored[0].display()
+            );
+            progress.warn(&m);
+            warnings.push(m);
+        }
+        let total = found.photos.len();
+        let mut chunk = opts.shard.map_or(0..total, |s| s.range(total));
+        if let Some(limit) = opts.limit {
+            chunk.end = chunk.end.min(chunk.start + limit);
+        }
+        let first = if chunk.start > 0 {
+            halo_start(&found.photos, chunk.start, window.n)
+        } else {
+            0
+        };
+        let (items, skipped_existing) =
+            roles(&found.photos[first..], first, &chunk, opts.resume, &out);
+        if let Some(s) = opts.shard {
+            progress.stage(&format!(
+                "shard {}/{}: photos {}..{} of {} (reading {} before and up to {} after for the windows)",
+                s.index,
+                s.count,
+                chunk.start + 1,
+                chunk.end,
+                total,
+                chunk.start - first,
+                window.n - 1
+            ));
+        }
+        if skipped_existing > 0 {
+            progress.stage(&format!(
+                "resuming: {skipped_existing} photo(s) already have complete outputs and are read for the windows \
+                 only"
+            ));
+        }
+        // With --out - there is no output folder and no run files (the report goes to --report).
+        let work_dir = (!stdout).then(|| out.join(WORK_DIR));
+        Ok(Plan {
+            survey,
+            out,
+            stdin,
+            stdout,
+            streaming,
+            window,
+            found,
+            items,
+            chunk,
+            first,
+            skipped_existing,
+            work_dir,
+            warnings,
+        })
+    }
+
+    /// Create `<out>/_abysslight`: the first thing a run writes.
+    pub fn create_work_dir(&self) -> Result<()> {
+        if let Some(w) = &self.work_dir {
+            std::fs::create_dir_all(w).map_err(|e| Error::io(w, e))?;
+        }
+        Ok(())
+    }
+
+    /// What the run would read and write, in words (`correct --dry-run`).
+    pub fn describe(&self, opts: &Options) -> String {
+        let mut s = String::new();
+        let mut line = |l: String| {
+            s.push_str(&l);
+            s.push('\n');
+        };
+        if self.streaming {
+            line(format!(
+                "survey: {} (photos as they come)",
+                if self.stdin {
+                    "frames on stdin".to_string()
+                } else {
+                    format!("{} watched", self.survey.display())
+                }
+            ));
+        } else {
+            line(format!(
+                "survey: {} photos in {}{}",
+                self.found.photos.len(),
+                self.survey.display(),
+                match self.found.ignored.len() {
+                    0 => String::new(),
+                    n => format!(" ({n} other files passed over)"),
+                }
+            ));
+            let write = self.items.iter().filter(|i| i.role == Role::Write);
+            let (count, bytes) = write.fold((0usize, 0u64), |(n, b), i| {
+                let size = std::fs::metadata(&i.entry.path).map_or(0, |m| m.len());
+                (n + 1, b + size)
+            });
+            let existing = self
+                .items
+                .iter()
+                .filter(|i| i.role == Role::Write && self.output_path(&i.entry).exists())
+                .count();
+            line(format!(
+                "to correct: {count} photos (photos {}..{} of {}); read for the windows only: {}",
+                self.chunk.start + 1,
+                self.chunk.end,
+                self.found.photos.len(),
+                self.items.len() - count - self.skipped_existing
+            ));
+            if self.skipped_existing > 0 {
+                line(format!(
+                    "--resume: {} outputs exist and are kept",
+                    self.skipped_existing
+                ));
+            }
+            if existing > 0 {
+                line(format!(
+                    "note: {existing} of these outputs exist already and would be overwritten (--resume keeps \
+                     them)"
+                ));
+            }
+            line(format!(
+                "disk: about {:.1} MB of outputs (inputs' size; JPEG outputs can be larger)",
+                bytes as f64 / 1e6
+            ));
+        }
+        line(format!(
+            "output: {}",
+            if self.stdout {
+                "frames on stdout".to_string()
+            } else {
+                format!("{} (run files in {WORK_DIR}/)", self.out.display())
+            }
+        ));
+        let window = if self.window.p_half.is_nan() {
+            format!("window: n = {}", self.window.n)
+        } else {
+            format!(
+                "window: n = {} (P_half = {:.4} at contamination {})",
+                self.window.n,
+                self.window.p_half,
+                opts.contamination.unwrap_or_default()
+            )
+        };
+        line(window);
+        line(format!(
+            "S: {}",
+            match (&opts.scatter, &opts.water_column) {
+                (Some(p), _) => format!("scatter image {}", p.display()),
+                (None, Some(w)) => format!(
+                    "median of the water-column frames in {} ({})",
+                    w.display(),
+                    find_photos(w)
+                        .map_or_else(|e| e.to_string(), |f| format!("{} frames", f.photos.len()))
+                ),
+                (None, None) => "none (no --water-column or --scatter: S = 0)".into(),
+            }
+        ));
+        line(format!(
+            "method: {}, blocks {}x{}, seafloor colour {}, transfer {}, factor floor {}",
+            opts.method,
+            opts.downsample,
+            opts.downsample,
+            opts.seafloor_colour,
+            opts.transfer,
+            opts.factor_floor
+        ));
+        s
+    }
+
+    /// Where the output of a survey photo goes.
+    pub fn output_path(&self, entry: &Entry) -> PathBuf {
+        output_path(&self.out, entry)
+    }
+}
+
+/// The photos to read from `entries` (the survey from photo `first` on), each with what to do with it: write it
+/// (in `chunk`), only read it for the windows (a shard's halo), or only read it because `--resume` found its output
+/// complete. Also returns how many outputs were found complete.
+fn roles(
+    entries: &[Entry],
+    first: usize,
+    chunk: &Range<usize>,
+    resume: bool,
+    out: &Path,
+) -> (Vec<Item>, usize) {
+    let mut skipped_existing = 0usize;
+    let items = entries
+        .iter()
+        .enumerate()
+        .map(|(j, entry)| {
+            let i = first + j;
+            let role = if !chunk.contains(&i) {
+                Role::Halo
+            } else if resume && output_complete(&output_path(out, entry)) {
+                skipped_existing += 1;
+                Role::Done
+            } else {
+                Role::Write
+            };
+            Item {
+                index: j,
+                entry: entry.clone(),
+                role,
+            }
+        })
+        .collect();
+    (items, skipped_existing)
+}
+
+/// Absolute, normalised form of a path that may not exist yet (its existing ancestor is canonicalised).
+fn absolute(p: &Path) -> PathBuf {
+    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
+    let mut existing = abs.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(c) = existing.canonicalize() {
+            let mut out = c;
+            for r in rest.iter().rev() {
+                out.push(r);
+            }
+            return out;
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_owned());
+                existing = parent;
+            }
+            _ => return abs,
+        }
+    }
+}
+
+/// Refuse an output folder that would write into an input folder.
+pub fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
+    let out_abs = absolute(out);
+    for (what, dir) in inputs {
+        let dir_abs = absolute(dir);
+        if out_abs == dir_abs {
+            return Err(Error::Usage(format!(
+                "--out {} is the {what} folder: abysslight never writes over its inputs; choose another folder",
+                out.display()
+            )));
+        }
+        if out_abs.starts_with(&dir_abs) {
+            return Err(Error::Usage(format!(
+                "--out {} is inside the {what} folder {}: outputs would be read back as inputs; choose a folder \
+                 outside it",
+                out.display(),
+                dir.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// True when `path` holds an output of an earlier run. Outputs are only ever renamed into place once complete,
+/// so existence means complete; the header is read as a cheap check against foreign or damaged files.
+pub fn output_complete(path: &Path) -> bool {
+    image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .ok()
+        .and_then(|r| r.into_dimensions().ok())
+        .is_some_and(|(w, h)| w > 0 && h > 0)
+}
+
+/// Output path of a survey photo.
+pub fn output_path(out: &Path, entry: &Entry) -> PathBuf {
+    out.join(&entry.relative)
+}
+
+/// Index of the first photo this shard must read: far enough back that `n − 1` usable photos precede its chunk
+/// (a window reaches at most that far), or the start of the survey.
+fn halo_start(entries: &[Entry], chunk_start: usize, n: usize) -> usize {
+    let mut usable = 0;
+    let mut layout = None;
+    let mut i = chunk_start;
+    while i > 0 && usable + 1 < n {
+        i -= 1;
+        if let Ok(p) = decode(&entries[i].path) {
+            if *layout.get_or_insert(p.layout) == p.layout {
+                usable += 1;
+            }
+        }
+    }
+    i
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn output_inside_input_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let survey = d.path().join("survey");
+        std::fs::create_dir_all(&survey).unwrap();
+        assert!(check_output_folder(&survey, &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&survey.join("out"), &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&survey.join("./x/../"), &[("survey", &survey)]).is_err());
+        assert!(check_output_folder(&d.path().join("out"), &[("survey", &survey)]).is_ok());
+        assert!(check_output_folder(&d.path().join("survey2"), &[("survey", &survey)]).is_ok());
+    }
+}

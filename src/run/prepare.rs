@@ -1,0 +1,276 @@
+//! Everything the [`Engine`] needs before the survey stream: `S` (from the water column or a saved image), the
+//! mask of static pixels (`--mask`, `--mask-auto`) and, for `--method mean`, the mission's mean image.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::io::{decode, Entry};
+use crate::method::baseline::{block_mean, Method};
+use crate::method::engine::{Engine, Params};
+use crate::method::mask::{detect_static, DetectSettings, Mask};
+use crate::method::raster::{Layout, Raster};
+use crate::method::scatter::Scatter;
+use crate::method::transfer::Transfer;
+use crate::run::options::Options;
+use crate::run::plan::Plan;
+use crate::run::report::{FileError, Progress, ScatterInfo};
+
+/// The engine of a run and what setting it up found.
+pub struct Setup<T> {
+    /// The method, ready for the survey stream.
+    pub engine: Engine<T>,
+    /// Where `S` came from.
+    pub scatter: ScatterInfo,
+    /// Water-column frames that failed.
+    pub errors: Vec<FileError>,
+    /// What the user should know.
+    pub warnings: Vec<String>,
+}
+
+/// Collects warnings: each is shown as it happens and kept for the report.
+struct Warnings<'a> {
+    progress: &'a dyn Progress,
+    list: Vec<String>,
+}
+
+impl Warnings<'_> {
+    fn warn(&mut self, m: String) {
+        self.progress.warn(&m);
+        self.list.push(m);
+    }
+}
+
+/// Estimate or load `S`, find the mask, and build the engine.
+pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Result<Setup<T>> {
+    let mut warnings = Warnings {
+        progress,
+        list: Vec::new(),
+    };
+    let mut errors = Vec::new();
+    let (scatter, mut info) = scatter(opts, progress, &mut warnings, &mut errors)?;
+    if let (Some(s), true, Some(work_dir)) = (&scatter, opts.save_scatter, &plan.work_dir) {
+        let p = work_dir.join("scatter.png");
+        s.save_png(&p)?;
+        info.saved_to = Some(p);
+    }
+    let mask = mask(opts, plan, progress, &mut warnings)?;
+    if let (Some(m), Some(s)) = (&mask, &scatter) {
+        m.check(s.layout, mask_path(opts))?;
+    }
+    let params = Params {
+        method: opts.method,
+        window: plan.window.n,
+        downsample: opts.downsample,
+        seafloor_colour: opts.seafloor_colour,
+        factor_floor: opts.factor_floor,
+        transfer: opts.transfer,
+        degree: opts.degree,
+    };
+    let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
+    drop(scatter);
+    if opts.method == Method::Mean {
+        engine.set_mission_mean(mission_mean(
+            &plan.found.photos,
+            opts.downsample,
+            opts.transfer,
+            progress,
+        )?);
+    }
+    Ok(Setup {
+        engine,
+        scatter: info,
+        errors,
+        warnings: warnings.list,
+    })
+}
+
+/// The path a mask error names: `--mask`, or the mask `--mask-auto` found.
+pub fn mask_path(opts: &Options) -> &Path {
+    opts.mask.as_deref().unwrap_or(Path::new("mask-auto.png"))
+}
+
+fn scatter(
+    opts: &Options,
+    progress: &dyn Progress,
+    warnings: &mut Warnings,
+    errors: &mut Vec<FileError>,
+) -> Result<(Option<Scatter>, ScatterInfo)> {
+    let mut info = ScatterInfo {
+        source: "none".into(),
+        path: None,
+        frames: 0,
+        passes: 0,
+        saved_to: None,
+    };
+    if let Some(path) = opts.scatter.as_deref() {
+        progress.stage(&format!("loading scatter image {}", path.display()));
+        info.source = "file".into();
+        info.path = Some(path.to_owned());
+        return Ok((Some(Scatter::load(path)?), info));
+    }
+    let Some(dir) = opts.water_column.as_deref() else {
+        warnings
+            .warn("no --water-column or --scatter given: assuming no backscatter (S = 0)".into());
+        return Ok((None, info));
+    };
+    let wc = crate::io::find_photos(dir)?;
+    progress.stage(&format!(
+        "estimating scatter S from {} water-column frames in {}",
+        wc.photos.len(),
+        dir.display()
+    ));
+    info.source = "water-column".into();
+    info.path = Some(dir.to_owned());
+    let budget = opts.scatter_memory_mib.max(1) << 20;
+    let s = Scatter::from_files(&wc.photos, budget, |e| {
+        progress.file_error(&e);
+        errors.push(FileError::from_error(e.path().unwrap_or(Path::new("")), &e));
+    })?;
+    match &s {
+        Some(s) => {
+            info.frames = s.frames;
+            info.passes = s.passes;
+            if s.frames < 3 {
+                warnings.warn(format!(
+                    "only {} usable water-column frame(s): the median cannot reject particles with fewer than 3",
+                    s.frames
+                ));
+            }
+        }
+        None => warnings.warn(format!(
+            "no usable water-column frames in {}: continuing with S = 0 (no backscatter removal)",
+            dir.display()
+        )),
+    }
+    Ok((s, info))
+}
+
+/// `--mask`, united with what `--mask-auto` finds.
+fn mask(
+    opts: &Options,
+    plan: &Plan,
+    progress: &dyn Progress,
+    warnings: &mut Warnings,
+) -> Result<Option<Mask>> {
+    let mut mask = match opts.mask.as_deref() {
+        Some(p) => {
+            let m = Mask::load(p)?;
+            progress.stage(&format!(
+                "mask {}: {} pixels ignored",
+                p.display(),
+                m.count()
+            ));
+            Some(m)
+        }
+        None => None,
+    };
+    if !opts.mask_auto {
+        return Ok(mask);
+    }
+    let sample: Vec<Entry> = spread_indices(plan.found.photos.len(), 45)
+        .into_iter()
+        .map(|i| plan.found.photos[i].clone())
+        .collect();
+    // Medians of the three thirds of the mission: static content shows in all of them.
+    let parts = if sample.len() >= 9 { 3 } else { 1 };
+    progress.stage(&format!(
+        "looking for static pixels (overlays, lasers) in {} photos spread over the mission",
+        sample.len()
+    ));
+    if parts == 1 {
+        warnings.warn(format!(
+            "--mask-auto had only {} photos to compare: the mask may include coincidental dark spots",
+            sample.len()
+        ));
+    }
+    let budget = opts.scatter_memory_mib.max(1) << 20;
+    let mut medians = Vec::new();
+    for p in 0..parts {
+        let part = &sample[p * sample.len() / parts..(p + 1) * sample.len() / parts];
+        if let Some(m) = Scatter::from_files(part, budget, |_| {})? {
+            medians.push(m.to_raster());
+        }
+    }
+    if medians.is_empty() || medians.iter().any(|m| m.layout() != medians[0].layout()) {
+        return Ok(mask);
+    }
+    let found = detect_static(&medians, DetectSettings::default());
+    let p = plan
+        .work_dir
+        .as_deref()
+        .unwrap_or(Path::new("."))
+        .join("mask-auto.png");
+    if plan.work_dir.is_some() {
+        found.save(&p)?;
+    }
+    let share = found.count() as f64 / found.ignore.len().max(1) as f64;
+    progress.stage(&format!(
+        "static pixels found: {:.2} % of the frame, written to {}",
+        100.0 * share,
+        p.display()
+    ));
+    match &mut mask {
+        Some(m) if (m.width, m.height) == (found.width, found.height) => m.union(&found),
+        Some(_) => {}
+        None => mask = Some(found),
+    }
+    Ok(mask)
+}
+
+/// Up to `most` indices spread evenly over `0..n` (first and last included).
+pub fn spread_indices(n: usize, most: usize) -> Vec<usize> {
+    if n <= most {
+        return (0..n).collect();
+    }
+    (0..most).map(|i| i * (n - 1) / (most - 1).max(1)).collect()
+}
+
+/// The mission's mean image at block resolution, in linear light, over every photo that decodes with the layout of
+/// the first one (others are skipped here and reported by the correction stream).
+pub fn mission_mean(
+    photos: &[Entry],
+    k: usize,
+    transfer: Transfer,
+    progress: &dyn Progress,
+) -> Result<Raster> {
+    progress.stage(&format!(
+        "method mean: averaging all {} survey photos",
+        photos.len()
+    ));
+    let lows: Vec<Option<(Layout, Raster)>> = photos
+        .par_iter()
+        .map(|e| {
+            let p = decode(&e.path).ok()?;
+            let mut r = Raster::from_photo(&p);
+            if !transfer.is_linear() {
+                for v in &mut r.data {
+                    *v = transfer.to_linear(*v);
+                }
+            }
+            Some((p.layout, block_mean(&r, k)))
+        })
+        .collect();
+    let first = lows.iter().flatten().next().map(|(l, _)| *l);
+    let Some(layout) = first else {
+        return Err(Error::Usage(
+            "method mean: no survey photo could be decoded".into(),
+        ));
+    };
+    let mut n = 0usize;
+    let mut sum: Option<Raster> = None;
+    for (l, r) in lows.into_iter().flatten() {
+        if l != layout {
+            continue;
+        }
+        n += 1;
+        match &mut sum {
+            None => sum = Some(r),
+            Some(s) => s.data.iter_mut().zip(&r.data).for_each(|(a, b)| *a += b),
+        }
+    }
+    let mut mean = sum.expect("at least one photo");
+    mean.data.iter_mut().for_each(|v| *v /= n as f32);
+    Ok(mean)
+}

@@ -1,0 +1,395 @@
+//! The survey stream of a run, on threads:
+//!
+//! 1. a source (decoder threads for a folder, as many as worker threads; a watched folder; stdin) hands photos
+//!    over in order (bounded queue);
+//! 2. this thread gives them to the [`Engine`], which keeps the sliding window and corrects each photo once its
+//!    window is complete (rayon over rows inside);
+//! 3. writer threads encode and write outputs atomically (bounded queue).
+//!
+//! Memory: the engine's window (at most `n` low-resolution images, at most `n` full-resolution photos waiting at
+//! the start of a mission, `n/2 + 1` later), plus the few in the decode and write queues. It does not grow with
+//! the number of photos.
+
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{bounded, Sender};
+
+use crate::error::{Error, Result};
+use crate::io::EncodeSettings;
+use crate::method::correct::CorrectStats;
+use crate::method::engine::{Corrected, Engine, Use};
+use crate::method::raster::{Layout, Photo, Raster};
+use crate::run::options::Options;
+use crate::run::plan::Plan;
+use crate::run::report::{FileError, FrameReport, Progress};
+use crate::run::source::{FileList, Item, Role, Sink, Source};
+use crate::run::stdin::StreamFrames;
+use crate::run::watch::WatchFolder;
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1000.0
+}
+
+/// Counts the full-resolution photos alive at once (decoded and not yet written or dropped).
+#[derive(Default)]
+struct LiveCount {
+    now: AtomicUsize,
+    peak: AtomicUsize,
+}
+
+impl LiveCount {
+    fn enter(self: &Arc<Self>) -> Live {
+        let v = self.now.fetch_add(1, Ordering::SeqCst) + 1;
+        self.peak.fetch_max(v, Ordering::SeqCst);
+        Live(self.clone())
+    }
+}
+
+/// Held beside each decoded photo; leaving scope marks the photo as freed.
+struct Live(Arc<LiveCount>);
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        self.0.now.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// What the run pushes into the engine with each photo.
+pub struct Tag {
+    item: Item,
+    decode_ms: f64,
+    /// Held while the full-resolution photo exists (photos the engine only estimates are dropped at once).
+    live: Option<Live>,
+}
+
+struct WriteJob {
+    photo: Photo,
+    frame: FrameReport,
+    _live: Option<Live>,
+}
+
+/// `F·C` of flagged photos kept for the contact sheet (a few KB each).
+const FLAGGED_KEPT: usize = 200;
+
+/// What the survey stream did.
+#[derive(Default)]
+pub struct Outcome {
+    /// Photos corrected and written, and (with `--resume`) photos whose output existed, in order.
+    pub frames: Vec<FrameReport>,
+    /// Survey photos that failed, with the reason.
+    pub errors: Vec<FileError>,
+    /// Photos the source handed over.
+    pub streamed: usize,
+    /// The mission's photo size.
+    pub layout: Option<Layout>,
+    /// Sum over the corrected photos.
+    pub totals: CorrectStats,
+    /// Most full-resolution photos held at once.
+    pub peak_photos: usize,
+    /// `F·C` of some flagged photos, by index.
+    pub flagged_lit: Vec<(usize, Raster)>,
+    /// What the user should know.
+    pub warnings: Vec<String>,
+}
+
+/// The source of survey photos the options ask for.
+fn source(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Box<dyn Source> {
+    if plan.stdin {
+        progress.stage("reading frames from stdin (PPM, PGM or PNG, back to back)");
+        Box::new(StreamFrames::new(std::io::BufReader::with_capacity(
+            1 << 20,
+            std::io::stdin(),
+        )))
+    } else if opts.watch {
+        progress.stage(&format!(
+            "watching {} for photos (scan every {} ms{}; stop with Ctrl-C or SIGTERM)",
+            plan.survey.display(),
+            opts.poll_interval,
+            opts.idle_timeout
+                .map(|t| format!(", stop after {t} s without new files"))
+                .unwrap_or_default()
+        ));
+        Box::new(WatchFolder::new(
+            &plan.survey,
+            Duration::from_millis(opts.poll_interval),
+            opts.idle_timeout.map(Duration::from_secs_f64),
+            crate::run::watch::stop_flag(),
+        ))
+    } else {
+        // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
+        Box::new(FileList::parallel(
+            plan.items.clone(),
+            threads(opts).clamp(1, 4),
+        ))
+    }
+}
+
+/// Worker threads: `--threads`, or all cores.
+fn threads(opts: &Options) -> usize {
+    opts.threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
+        .max(1)
+}
+
+/// The engine's side of the stream: photos in, corrected photos to the writers, the rest recorded.
+struct Feed<'a> {
+    opts: &'a Options,
+    plan: &'a Plan,
+    progress: &'a dyn Progress,
+    wr_tx: Sender<WriteJob>,
+    /// Photos pushed that are this run's own (not halo) and not yet out of the engine.
+    pending: usize,
+    outcome: Outcome,
+    resumed: Vec<FrameReport>,
+}
+
+impl Feed<'_> {
+    fn fail(&mut self, path: &Path, role: Role, e: Error) {
+        // A halo photo belongs to another shard, which reports it.
+        if role != Role::Halo {
+            self.progress.file_error(&e);
+            self.outcome.errors.push(FileError::from_error(path, &e));
+            self.progress.photo_done(path, false);
+        }
+    }
+
+    /// Give one decoded photo to the engine and pass on what comes out.
+    fn push(
+        &mut self,
+        engine: &mut Engine<Tag>,
+        item: Item,
+        photo: Photo,
+        live: Live,
+        decode_ms: f64,
+    ) -> Result<()> {
+        let use_ = match item.role {
+            Role::Write => Use::Correct,
+            Role::Done => Use::Estimate,
+            Role::Halo => Use::Context,
+        };
+        let (path, role) = (item.entry.path.clone(), item.role);
+        let tag = Tag {
+            item,
+            decode_ms,
+            live: (use_ == Use::Correct).then_some(live),
+        };
+        match engine.push_as(photo, tag, use_) {
+            Ok(out) => {
+                self.pending += usize::from(role != Role::Halo);
+                self.emit(out)
+            }
+            // The first photo does not fit S or the mask: nothing of this mission can be corrected.
+            Err(Error::Usage(reason)) => {
+                let o = self.opts;
+                Err(Error::Mismatch {
+                    path: (o.scatter.clone())
+                        .or_else(|| o.water_column.clone())
+                        .or_else(|| o.mask.clone())
+                        .unwrap_or_default(),
+                    reason: format!("{reason} ({})", path.display()),
+                })
+            }
+            Err(e) => {
+                self.fail(&path, role, e.about(&path));
+                Ok(())
+            }
+        }
+    }
+
+    /// Hand corrected photos to the writers; record the ones `--resume` found written.
+    fn emit(&mut self, out: Vec<Corrected<Tag>>) -> Result<()> {
+        for c in out {
+            self.pending -= 1;
+            let entry = &c.tag.item.entry;
+            if !c.health.flags.is_empty() && self.outcome.flagged_lit.len() < FLAGGED_KEPT {
+                self.outcome.flagged_lit.push((c.index, c.lit.clone()));
+            }
+            let frame = FrameReport {
+                output: self.plan.output_path(entry),
+                input: entry.path.clone(),
+                index: c.index,
+                window: [c.window.start, c.window.end - 1],
+                decode_ms: c.tag.decode_ms,
+                estimate_ms: c.estimate_ms,
+                correct_ms: c.correct_ms,
+                encode_ms: 0.0,
+                floored_pixels: c.stats.floored_pixels,
+                clipped_samples: c.stats.clipped_samples,
+                resumed: c.photo.is_none(),
+                health: c.health,
+            };
+            let Some(photo) = c.photo else {
+                self.progress.photo_done(&entry.path, true);
+                self.resumed.push(frame);
+                continue;
+            };
+            if let (true, Some(work_dir)) = (self.opts.save_factors, &self.plan.work_dir) {
+                let p = work_dir
+                    .join("factors")
+                    .join(&entry.relative)
+                    .with_extension("png");
+                crate::io::save_raster_png16(&c.lit, &p)?;
+            }
+            self.outcome.totals += c.stats;
+            let job = WriteJob {
+                photo,
+                frame,
+                _live: c.tag.live,
+            };
+            if self.wr_tx.send(job).is_err() {
+                return Err(Error::Usage(if self.plan.stdout {
+                    "stdout was closed (is the program reading the frames still running?)".into()
+                } else {
+                    "all output writers stopped".into()
+                }));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Read the survey once, in order, through `engine`, writing every photo of the plan.
+pub fn stream(
+    opts: &Options,
+    plan: &Plan,
+    mut engine: Engine<Tag>,
+    progress: &dyn Progress,
+) -> Result<Outcome> {
+    let n = plan.window.n;
+    let live = Arc::new(LiveCount::default());
+    // Frames on stdout must leave in order: one writer, fed in order.
+    let writers = if plan.stdout { 1 } else { threads(opts) };
+    let settings = EncodeSettings {
+        jpeg_quality: opts.jpeg_quality,
+        png_compression: opts.png_compression,
+    };
+    let sink = if plan.stdout {
+        Sink::Stdout
+    } else {
+        Sink::Folder {
+            carry_metadata: !plan.stdin,
+        }
+    };
+    let done: Mutex<Vec<FrameReport>> = Mutex::new(Vec::new());
+    let write_errors: Mutex<Vec<FileError>> = Mutex::new(Vec::new());
+    let total_items = if plan.streaming {
+        usize::MAX
+    } else {
+        plan.items.len()
+    };
+    // The stream can stop once every photo of the chunk has been handled.
+    let last_needed = plan.chunk.end.saturating_sub(plan.first);
+    let mut source = source(opts, plan, progress);
+
+    let mut outcome = std::thread::scope(|scope| -> Result<Outcome> {
+        let (dec_tx, dec_rx) = bounded(1);
+        let (wr_tx, wr_rx) = bounded::<WriteJob>(writers);
+        let live = &live;
+        scope.spawn(move || {
+            while let Some((item, photo, decode_ms)) = source.next_photo() {
+                let photo = photo.map(|p| (p, live.enter()));
+                if dec_tx.send((item, photo, decode_ms)).is_err() {
+                    break;
+                }
+            }
+        });
+        for _ in 0..writers {
+            let rx = wr_rx.clone();
+            let (done, write_errors, sink) = (&done, &write_errors, &sink);
+            scope.spawn(move || write_all(rx, done, write_errors, sink, settings, progress));
+        }
+        drop(wr_rx);
+
+        let mut feed = Feed {
+            opts,
+            plan,
+            progress,
+            wr_tx,
+            pending: 0,
+            outcome: Outcome::default(),
+            resumed: Vec::new(),
+        };
+        let mut reached_end = true;
+        for (item, photo, decode_ms) in dec_rx {
+            feed.outcome.streamed += 1;
+            let index = item.index;
+            match photo {
+                Err(e) => feed.fail(&item.entry.path, item.role, e),
+                Ok((photo, photo_live)) => {
+                    feed.push(&mut engine, item, photo, photo_live, decode_ms)?
+                }
+            }
+            // A shard stops reading once every photo of its chunk has been corrected.
+            if index + 1 >= last_needed && feed.pending == 0 {
+                reached_end = index + 1 == total_items;
+                break;
+            }
+        }
+        if reached_end {
+            let out = engine.finish();
+            feed.emit(out)?;
+            let seen = engine.accepted();
+            if seen > 0 && seen < n {
+                let m = format!(
+                    "only {seen} usable survey photo(s), fewer than the window n = {n}: every photo's F is the \
+                     median of all of them"
+                );
+                progress.warn(&m);
+                feed.outcome.warnings.push(m);
+            }
+        }
+        feed.outcome.layout = engine.layout();
+        let mut outcome = feed.outcome;
+        outcome.frames = feed.resumed;
+        Ok(outcome)
+    });
+    progress.finish();
+    if let Ok(o) = &mut outcome {
+        o.frames.extend(done.into_inner().unwrap_or_default());
+        o.frames.sort_by_key(|f| f.index);
+        o.errors
+            .extend(write_errors.into_inner().unwrap_or_default());
+        o.peak_photos = live.peak.load(Ordering::SeqCst);
+    }
+    outcome
+}
+
+/// A writer thread: encode and write each job atomically, carrying the input's metadata.
+fn write_all(
+    rx: crossbeam_channel::Receiver<WriteJob>,
+    done: &Mutex<Vec<FrameReport>>,
+    write_errors: &Mutex<Vec<FileError>>,
+    sink: &Sink,
+    settings: EncodeSettings,
+    progress: &dyn Progress,
+) {
+    for mut job in rx {
+        let t = Instant::now();
+        // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
+        let (input, output) = (&job.frame.input, &job.frame.output);
+        let warn = |m: &str| progress.warn(m);
+        let r = sink.write(&job.photo, input, output, settings, &warn);
+        job.frame.encode_ms = ms(t);
+        progress.photo_done(&job.frame.input, r.is_ok());
+        match r {
+            Ok(()) => lock(done).push(job.frame),
+            Err(e) => {
+                progress.file_error(&e);
+                lock(write_errors).push(FileError::from_error(&job.frame.input, &e));
+                // Nobody reads stdout any more (e.g. the downstream ffmpeg ended): stop the run instead of
+                // failing every remaining frame.
+                if matches!(sink, Sink::Stdout) && matches!(e, Error::Io { .. }) {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// A mutex's contents, also after a writer thread panicked while holding it.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
