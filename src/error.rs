@@ -13,26 +13,48 @@ pub enum Error {
     /// A file could not be read or written.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
 
     /// A file is not a photo abysslight can read (corrupt, truncated, unsupported format or sample type).
     #[error("{}: cannot decode: {reason}", path.display())]
-    Decode { path: PathBuf, reason: String },
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
 
     /// A photo does not fit the mission (size or channel count differs from the first photo).
     #[error("{}: {reason}", path.display())]
-    Mismatch { path: PathBuf, reason: String },
+    Mismatch {
+        /// The file.
+        path: PathBuf,
+        /// How it differs.
+        reason: String,
+    },
 
     /// An output could not be encoded.
     #[error("{}: cannot encode: {reason}", path.display())]
-    Encode { path: PathBuf, reason: String },
+    Encode {
+        /// The output file.
+        path: PathBuf,
+        /// What the encoder said.
+        reason: String,
+    },
 
     /// A configuration file is malformed.
     #[error("{}: {reason}", path.display())]
-    Config { path: PathBuf, reason: String },
+    Config {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong in it.
+        reason: String,
+    },
 }
 
 impl Error {
@@ -87,4 +109,5 @@ impl Error {
     }
 }
 
+/// abysslight's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -41,8 +41,11 @@ pub fn lit_seafloor(f: &Raster, colour: &[f32]) -> Raster {
 /// One bilinear interpolation tap along an axis: the two low-resolution samples and the weight of the second.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tap {
+    /// The low-resolution sample before the coordinate.
     pub i0: u32,
+    /// The low-resolution sample after it (`i0` at the edges).
     pub i1: u32,
+    /// Weight of `i1`.
     pub t: f32,
 }
 

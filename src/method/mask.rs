@@ -14,12 +14,16 @@ use crate::method::raster::{Layout, Raster, Sample};
 /// Which pixels to ignore (`true`), one per pixel, row by row.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Mask {
+    /// Width in pixels (the photos').
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
+    /// One flag per pixel, row by row: `true` = not seafloor, left out of every median.
     pub ignore: Vec<bool>,
 }
 
 impl Mask {
+    /// A mask that ignores nothing.
     pub fn empty(width: usize, height: usize) -> Mask {
         Mask {
             width,
@@ -28,6 +32,7 @@ impl Mask {
         }
     }
 
+    /// Pixels ignored.
     pub fn count(&self) -> usize {
         self.ignore.iter().filter(|&&m| m).count()
     }

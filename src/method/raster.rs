@@ -65,11 +65,14 @@ impl Sample for u16 {
 /// Bit depth of a photo's samples.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum BitDepth {
+    /// 8 bits a sample.
     Eight,
+    /// 16 bits a sample.
     Sixteen,
 }
 
 impl BitDepth {
+    /// Bits a sample.
     pub fn bits(self) -> u32 {
         match self {
             BitDepth::Eight => 8,
@@ -81,20 +84,25 @@ impl BitDepth {
 /// Interleaved samples of one photo.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Samples {
+    /// 8-bit samples.
     U8(Vec<u8>),
+    /// 16-bit samples.
     U16(Vec<u16>),
 }
 
 impl Samples {
+    /// Number of samples.
     pub fn len(&self) -> usize {
         match self {
             Samples::U8(v) => v.len(),
             Samples::U16(v) => v.len(),
         }
     }
+    /// True when there are no samples.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+    /// Bit depth of the samples.
     pub fn depth(&self) -> BitDepth {
         match self {
             Samples::U8(_) => BitDepth::Eight,
@@ -113,7 +121,9 @@ impl Samples {
 /// What must agree between all photos of one mission (and the scatter image).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Layout {
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
     /// Colour channels: 1 (grey) or 3 (RGB). An alpha channel is carried separately and not corrected.
     pub channels: usize,
@@ -129,13 +139,16 @@ impl std::fmt::Display for Layout {
 /// A decoded photo: colour samples interleaved, in the file's own bit depth; alpha (if any) kept aside.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Photo {
+    /// Size and channel count.
     pub layout: Layout,
+    /// Colour samples, interleaved, row by row.
     pub samples: Samples,
     /// Alpha plane, passed through untouched.
     pub alpha: Option<Samples>,
 }
 
 impl Photo {
+    /// Bit depth of the samples.
     pub fn depth(&self) -> BitDepth {
         self.samples.depth()
     }
@@ -148,9 +161,13 @@ impl Photo {
 /// An `f32` image with interleaved channels, values in the photo's normalised range (`1.0` = white).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Raster {
+    /// Width in samples.
     pub width: usize,
+    /// Height in samples.
     pub height: usize,
+    /// Channels per pixel.
     pub channels: usize,
+    /// Samples, interleaved, row by row.
     pub data: Vec<f32>,
 }
 
@@ -188,6 +205,7 @@ impl Raster {
         }
     }
 
+    /// Sample `c` of pixel `(x, y)`.
     #[inline]
     pub fn get(&self, x: usize, y: usize, c: usize) -> f32 {
         self.data[(y * self.width + x) * self.channels + c]
@@ -200,6 +218,7 @@ impl Raster {
         &self.data[y * n..(y + 1) * n]
     }
 
+    /// Size and channel count.
     pub fn layout(&self) -> Layout {
         Layout {
             width: self.width,

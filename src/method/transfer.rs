@@ -53,6 +53,7 @@ impl Transfer {
         }
     }
 
+    /// True when stored values are light already.
     pub fn is_linear(self) -> bool {
         self == Transfer::Linear || self == Transfer::Gamma(1.0)
     }
@@ -121,6 +122,7 @@ pub struct Curve {
 }
 
 impl Curve {
+    /// The curve for codes `0..levels` (256 or 65536).
     pub fn new(transfer: Transfer, levels: usize) -> Curve {
         let max = (levels - 1) as f32;
         let linear = transfer.is_linear();
@@ -186,6 +188,7 @@ impl Curve {
         self.max
     }
 
+    /// The transfer this curve tabulates.
     pub fn transfer(&self) -> Transfer {
         self.transfer
     }

@@ -42,7 +42,10 @@ pub fn p_half(n: usize, c: f64) -> f64 {
 /// A window size and its breakdown probability.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct WindowChoice {
+    /// Photos in the window (odd).
     pub n: usize,
+    /// Probability that half or more of the window is contaminated at a pixel (NaN when the contamination rate
+    /// is not known).
     pub p_half: f64,
 }
 

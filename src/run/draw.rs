@@ -4,10 +4,15 @@
 use font8x8::UnicodeFonts;
 use image::{imageops, Rgb, RgbImage};
 
+/// Background and text colours of the pictures.
 pub const WHITE: Rgb<u8> = Rgb([255, 255, 255]);
+/// Text and axes.
 pub const BLACK: Rgb<u8> = Rgb([0, 0, 0]);
+/// Thresholds and grid lines.
 pub const GREY: Rgb<u8> = Rgb([150, 150, 150]);
+/// Flagged photos.
 pub const RED: Rgb<u8> = Rgb([220, 30, 30]);
+/// Health series.
 pub const BLUE: Rgb<u8> = Rgb([30, 80, 200]);
 
 /// Draw `text` with its top-left corner at `(x, y)`, each font pixel `scale`×`scale` pixels.

@@ -41,13 +41,16 @@ impl Progress for Silent {
 /// One file that could not be used.
 #[derive(Debug, Clone, Serialize)]
 pub struct FileError {
+    /// The file.
     pub path: PathBuf,
     /// `decode`, `mismatch`, `io`, `encode`, ...
     pub kind: String,
+    /// The whole message, naming the file and the reason.
     pub message: String,
 }
 
 impl FileError {
+    /// The report entry of `e` about `path`.
     pub fn from_error(path: &Path, e: &Error) -> Self {
         FileError {
             path: path.to_owned(),
@@ -60,16 +63,21 @@ impl FileError {
 /// What happened to one survey photo.
 #[derive(Debug, Clone, Serialize)]
 pub struct FrameReport {
+    /// The survey photo.
     pub input: PathBuf,
+    /// Its corrected output.
     pub output: PathBuf,
     /// Position among the usable photos of the mission.
     pub index: usize,
     /// Usable photos `[first, last]` whose median gave this photo's `F`.
     pub window: [usize; 2],
+    /// Milliseconds spent decoding the photo.
     pub decode_ms: f64,
     /// Block median, temporal median and `F`.
     pub estimate_ms: f64,
+    /// Milliseconds of the correction `A = (I − S) / F`.
     pub correct_ms: f64,
+    /// Milliseconds spent encoding and writing the output.
     pub encode_ms: f64,
     /// Pixels where `F` was below `factor-floor`.
     pub floored_pixels: u64,
@@ -87,20 +95,30 @@ pub struct FrameReport {
 pub struct ScatterInfo {
     /// `water-column`, `file` or `none`.
     pub source: String,
+    /// The water-column folder or scatter image.
     pub path: Option<PathBuf>,
+    /// Water-column frames that entered the median.
     pub frames: usize,
+    /// Row bands the estimate took (each a decoding pass over the frames).
     pub passes: usize,
+    /// Where `--save-scatter` wrote `S`.
     pub saved_to: Option<PathBuf>,
 }
 
 /// Everything about one `correct` run.
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
+    /// `abysslight`.
     pub tool: String,
+    /// Version of abysslight that made the report.
     pub version: String,
+    /// Every option of the run.
     pub options: Options,
+    /// The window `n` used.
     pub window: WindowChoice,
+    /// Size of the mission's photos.
     pub layout: Option<Layout>,
+    /// Where `S` came from.
     pub scatter: ScatterInfo,
     /// Photos found in the survey folder.
     pub survey_photos: usize,
@@ -117,13 +135,19 @@ pub struct Report {
     pub water_column_failed: usize,
     /// Files in the survey folder passed over because their names are not photo names.
     pub ignored_files: usize,
+    /// Pixels where `F` was below the floor, over all photos.
     pub floored_pixels: u64,
+    /// Samples clipped to the output range, over all photos.
     pub clipped_samples: u64,
     /// How many photos were flagged, by reason.
     pub monitor: crate::method::monitor::Summary,
+    /// Every photo corrected (and, with `--resume`, found corrected), in mission order.
     pub frames: Vec<FrameReport>,
+    /// Every file that failed, with the reason.
     pub errors: Vec<FileError>,
+    /// What the user should know.
     pub warnings: Vec<String>,
+    /// Seconds the run took.
     pub elapsed_s: f64,
     /// Where this report was written.
     pub report_path: Option<PathBuf>,

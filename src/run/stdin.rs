@@ -17,6 +17,7 @@ pub struct StreamFrames<R> {
 }
 
 impl<R: BufRead> StreamFrames<R> {
+    /// Frames read from `r`.
     pub fn new(r: R) -> Self {
         StreamFrames {
             splitter: FrameSplitter::new(r),
