@@ -33,6 +33,7 @@ pub mod error;
 pub mod evaluate;
 pub mod factor;
 pub mod io;
+pub mod io_jpeg;
 pub mod mask;
 pub mod median;
 pub mod metadata;

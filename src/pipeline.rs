@@ -555,10 +555,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |p| p.get()))
             .max(1)
     };
-    let settings = EncodeSettings {
-        jpeg_quality: opts.jpeg_quality,
-        png_compression: opts.png_compression,
-    };
+    let settings: EncodeSettings = opts.encode_settings();
     let done: Mutex<Vec<FrameReport>> = Mutex::new(Vec::new());
     let write_errors: Mutex<Vec<FileError>> = Mutex::new(Vec::new());
     let mut totals = CorrectStats::default();
