@@ -314,7 +314,8 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
     }
 }
 
-/// Camera-like JPEG: quality 90, 4:2:0.
+/// Camera-like JPEG: quality 90, 4:2:0 (as most survey cameras write them; jpeg-encoder's own default would be
+/// 4:4:4, which until issue 14 these inputs were).
 fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
     let Samples::U8(d) = &photo.samples else {
         unreachable!("synthetic photos are 8-bit")
@@ -325,7 +326,8 @@ fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
         reason: e,
     };
     let mut buf = Vec::new();
-    let enc = jpeg_encoder::Encoder::new(&mut buf, 90);
+    let mut enc = jpeg_encoder::Encoder::new(&mut buf, 90);
+    enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
     enc.encode(
         d,
         l.width as u16,
@@ -705,6 +707,15 @@ mod tests {
                 io::decode(&e.path).unwrap_or_else(|err| panic!("{err}"));
             }
         }
+    }
+
+    #[test]
+    fn generated_photos_are_camera_like_jpegs() {
+        let d = tempfile::tempdir().unwrap();
+        let m = generate(&tiny(), d.path()).unwrap();
+        let c = crate::io_jpeg::parse(&std::fs::read(&m.distinct[0]).unwrap()).unwrap();
+        assert_eq!(c.subsampling, Some(io::Subsampling::S420));
+        assert_eq!(c.quality, Some(90));
     }
 
     #[test]
