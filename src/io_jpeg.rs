@@ -135,11 +135,42 @@ pub fn ijg_scaled(table: &[u16; 64], quality: u8) -> [u16; 64] {
     table.map(|v| ((u32::from(v) * scale + 50) / 100).clamp(1, 255) as u16)
 }
 
-/// The quality (1–100) whose scaled IJG tables are closest to `luma` (and `chroma`, if given), in natural order:
-/// the smallest sum of absolute differences over all coefficients, the higher quality on a tie. Exact for files
-/// written by libjpeg-style encoders; for other tables (cameras with their own), the quality of the IJG tables that
-/// quantise about as coarsely, which is what decides the size of the output.
+/// The quality (1–100) of the quantisation tables `luma` (and `chroma`, if given), in natural order, estimated as
+/// ImageMagick does (`coders/jpeg.c`): two measures of how coarse tables are, the sum of all their entries and the
+/// sum of four of them (luma 2 and 53, chroma 0 and 63), are compared with those of the IJG tables scaled to each
+/// quality from the coarsest up; the first quality the tables are not finer than in both measures is taken when it
+/// matches in both (exact for libjpeg-style encoders) or is above 50. ImageMagick's reference values are those of
+/// the scaled IJG tables, computed here. Where that rule gives nothing (unusual tables below quality 51), the
+/// quality whose scaled tables are nearest entry by entry.
 pub fn estimate_quality(luma: &[u16; 64], chroma: Option<&[u16; 64]>) -> u8 {
+    let measures = |l: &[u16; 64], c: Option<&[u16; 64]>| -> (u32, u32) {
+        let mut hash = u32::from(l[2]) + u32::from(l[53]);
+        let mut sum: u32 = l.iter().map(|&v| u32::from(v)).sum();
+        if let Some(c) = c {
+            hash += u32::from(c[0]) + u32::from(c[63]);
+            sum += c.iter().map(|&v| u32::from(v)).sum::<u32>();
+        }
+        (hash, sum)
+    };
+    let (hash, sum) = measures(luma, chroma);
+    for q in 1..=100u8 {
+        let l = ijg_scaled(&IJG_LUMA, q);
+        let c = chroma.map(|_| ijg_scaled(&IJG_CHROMA, q));
+        let (h, s) = measures(&l, c.as_ref());
+        if hash < h && sum < s {
+            continue;
+        }
+        if (hash <= h && sum <= s) || q > 50 {
+            return q;
+        }
+        break;
+    }
+    nearest_quality(luma, chroma)
+}
+
+/// The quality whose scaled IJG tables are nearest to `luma` (and `chroma`): the smallest sum of absolute
+/// differences over all entries, the higher quality on a tie.
+pub fn nearest_quality(luma: &[u16; 64], chroma: Option<&[u16; 64]>) -> u8 {
     let dist = |a: &[u16; 64], b: &[u16; 64]| -> u64 {
         a.iter()
             .zip(b)
@@ -480,6 +511,20 @@ mod tests {
         let mid: [u16; 64] = std::array::from_fn(|i| (a[i] + b[i]) / 2);
         let q = estimate_quality(&mid, None);
         assert!((80..=84).contains(&q), "{q}");
+        assert!((80..=84).contains(&nearest_quality(&mid, None)));
+    }
+
+    #[test]
+    fn exact_tables_give_their_quality_for_every_quality() {
+        // Both rules, every quality: the tables libjpeg writes at q are recognised as q (±1 where two qualities
+        // round to the same tables).
+        for q in 1..=100u8 {
+            let (l, c) = (ijg_scaled(&IJG_LUMA, q), ijg_scaled(&IJG_CHROMA, q));
+            let got = estimate_quality(&l, Some(&c));
+            assert!(got.abs_diff(q) <= 1, "{q}: {got}");
+            assert_eq!(ijg_scaled(&IJG_LUMA, got), l, "{q}: {got}");
+            assert!(nearest_quality(&l, Some(&c)).abs_diff(q) <= 1);
+        }
     }
 
     #[test]
