@@ -29,7 +29,7 @@ EXIT STATUS:
 /// plus backscatter S. abysslight estimates S from water-column frames, F from a sliding window of survey photos,
 /// and writes A = (I - S) / F. No calibration of lights, water or camera is needed.
 #[derive(Parser, Debug)]
-#[command(name = "abysslight", version, after_help = EXIT_HELP, propagate_version = true)]
+#[command(name = "abysslight", version = abysslight::io::jpeg::VERSION, after_help = EXIT_HELP, propagate_version = true)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -72,9 +72,12 @@ struct BenchArgs {
     /// Sliding window n.
     #[arg(long, default_value_t = 7)]
     window: usize,
-    /// JPEG output quality.
-    #[arg(long, default_value_t = 95)]
-    jpeg_quality: u8,
+    /// JPEG output quality [default: each input's, as `correct` does].
+    #[arg(long, value_name = "Q")]
+    jpeg_quality: Option<u8>,
+    /// JPEG output subsampling: 444, 422 or 420 [default: each input's, as `correct` does].
+    #[arg(long, value_name = "444|422|420")]
+    jpeg_subsampling: Option<abysslight::io::Subsampling>,
     /// Generate the mission here instead of in a temporary folder.
     #[arg(long, value_name = "DIR")]
     dir: Option<PathBuf>,
@@ -254,9 +257,14 @@ struct CorrectArgs {
     #[arg(long)]
     save_factors: bool,
 
-    /// JPEG output quality, 1-100 [default: 95]; JPEGs are written 4:4:4.
+    /// JPEG output quality, 1-100 [default: the JPEG input's, estimated from its quantisation tables; 95 for
+    /// other inputs].
     #[arg(long, value_name = "Q")]
     jpeg_quality: Option<u8>,
+
+    /// JPEG output chroma subsampling: 444, 422 or 420 [default: the JPEG input's; 444 for other inputs].
+    #[arg(long, value_name = "444|422|420")]
+    jpeg_subsampling: Option<abysslight::io::Subsampling>,
 
     /// PNG output compression: fast, default or best [default: fast]. Lossless either way; fast writes a 12 MP
     /// photo several times quicker for files somewhat larger (docs/performance.md). TIFF is written uncompressed.
@@ -400,7 +408,10 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         o.png_compression = v;
     }
     if let Some(v) = args.jpeg_quality {
-        o.jpeg_quality = v;
+        o.jpeg_quality = Some(v);
+    }
+    if let Some(v) = args.jpeg_subsampling {
+        o.jpeg_subsampling = Some(v);
     }
     o.save_scatter |= args.save_scatter;
     o.resume |= args.resume;
@@ -594,6 +605,7 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
             a.threads,
             a.window,
             a.jpeg_quality,
+            a.jpeg_subsampling,
         )?;
         println!(
             "{}{}",
@@ -615,6 +627,7 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
         threads: a.threads,
         window: a.window,
         jpeg_quality: a.jpeg_quality,
+        jpeg_subsampling: a.jpeg_subsampling,
         dir: a.dir,
         ..bench::BenchOptions::default()
     };

@@ -8,6 +8,10 @@
 //! - photos per second of decode + encode alone (the same photos, threads, writer and settings): the floor any
 //!   corrector pays;
 //! - their ratio;
+//! - the size of `correct`'s JPEG outputs against that of its inputs (outputs follow their inputs' quality and
+//!   subsampling by default);
+//! - with the `turbojpeg` feature, libjpeg-turbo decode + encode in memory alone (no writer, no metadata): the
+//!   best codec on the machine;
 //! - peak memory (VmHWM) of a short and of a 10× longer mission, each `correct` run in a child process of the same
 //!   binary, so the two peaks are separate.
 //!
@@ -42,7 +46,10 @@ pub struct BenchOptions {
     pub water_column: usize,
     pub threads: usize,
     pub window: usize,
-    pub jpeg_quality: u8,
+    /// JPEG output quality; `None`: each input's (the default of `correct`).
+    pub jpeg_quality: Option<u8>,
+    /// JPEG output subsampling; `None`: each input's.
+    pub jpeg_subsampling: Option<io::Subsampling>,
     /// Where the mission is generated (default: a temporary folder, removed afterwards).
     pub dir: Option<PathBuf>,
 }
@@ -58,7 +65,8 @@ impl Default for BenchOptions {
             water_column: 5,
             threads: 2,
             window: 7,
-            jpeg_quality: 95,
+            jpeg_quality: None,
+            jpeg_subsampling: None,
             dir: None,
         }
     }
@@ -89,6 +97,13 @@ pub struct BenchResult {
     /// Seconds of decode + encode of `correct`'s own outputs (same threads and settings): what the codec alone
     /// costs on corrected content, which encodes larger (flattened light, brightened corners) than the input.
     pub outputs_floor_s: f64,
+    /// The JPEG codec built in.
+    pub codec: String,
+    /// Bytes of the long mission's inputs and of `correct`'s outputs of them.
+    pub input_bytes: u64,
+    pub output_bytes: u64,
+    /// Seconds of libjpeg-turbo decode + encode in memory of the long mission (`turbojpeg` feature only).
+    pub turbo_floor_s: Option<f64>,
 }
 
 impl BenchResult {
@@ -110,9 +125,10 @@ impl BenchResult {
             self.machine, self.cores, self.rustc
         );
         s += &format!(
-            "mission: {}x{} RGB JPEG, {} threads (generated in {:.1} s)\n\n",
+            "mission: {}x{} RGB JPEG (quality 90, 4:2:0, like a camera's), {} threads (generated in {:.1} s)\n",
             self.width, self.height, self.threads, self.generate_s
         );
+        s += &format!("JPEG codec: {}\n\n", self.codec);
         s += "| measure | value |\n|---|---|\n";
         s += &format!(
             "| correct ({} photos) | {:.2} photos/s |\n",
@@ -136,6 +152,24 @@ impl BenchResult {
         s += &format!(
             "| ratio correct / that | {:.3} |\n",
             self.correct_rate() / self.outputs_floor_rate()
+        );
+        if let Some(t) = self.turbo_floor_s {
+            let rate = self.floor_photos as f64 / t;
+            s += &format!(
+                "| libjpeg-turbo decode + encode in memory ({} photos) | {:.2} photos/s |\n",
+                self.floor_photos, rate
+            );
+            s += &format!(
+                "| ratio correct / libjpeg-turbo | {:.3} |\n",
+                self.correct_rate() / rate
+            );
+        }
+        s += &format!(
+            "| output / input size ({} JPEGs) | {:.2} ({:.1} / {:.1} MB) |\n",
+            self.long.photos,
+            self.output_bytes as f64 / self.input_bytes.max(1) as f64,
+            self.output_bytes as f64 / 1e6,
+            self.input_bytes as f64 / 1e6
         );
         s += &format!(
             "| peak memory, {} photos | {:.0} MiB |\n",
@@ -280,7 +314,8 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
     }
 }
 
-/// Camera-like JPEG: quality 90, 4:2:0.
+/// Camera-like JPEG: quality 90, 4:2:0 (as most survey cameras write them; jpeg-encoder's own default would be
+/// 4:4:4, which until issue 14 these inputs were).
 fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
     let Samples::U8(d) = &photo.samples else {
         unreachable!("synthetic photos are 8-bit")
@@ -291,7 +326,8 @@ fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
         reason: e,
     };
     let mut buf = Vec::new();
-    let enc = jpeg_encoder::Encoder::new(&mut buf, 90);
+    let mut enc = jpeg_encoder::Encoder::new(&mut buf, 90);
+    enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
     enc.encode(
         d,
         l.width as u16,
@@ -356,12 +392,13 @@ fn survey_folder(m: &Mission, dir: &Path, count: usize) -> Result<()> {
 
 /// Decode + encode every photo of `survey` into `out` with `threads` threads, the way `correct` reads and writes
 /// them (same decoder, writer and settings). Returns seconds.
-pub fn floor(survey: &Path, out: &Path, threads: usize, jpeg_quality: u8) -> Result<(usize, f64)> {
+pub fn floor(
+    survey: &Path,
+    out: &Path,
+    threads: usize,
+    settings: EncodeSettings,
+) -> Result<(usize, f64)> {
     let found = io::find_photos(survey)?;
-    let settings = EncodeSettings {
-        jpeg_quality,
-        ..EncodeSettings::default()
-    };
     let next = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
     let t = Instant::now();
@@ -402,7 +439,8 @@ pub fn child(
     out: &Path,
     threads: usize,
     window: usize,
-    jpeg_quality: u8,
+    jpeg_quality: Option<u8>,
+    jpeg_subsampling: Option<io::Subsampling>,
 ) -> Result<ChildResult> {
     let opts = Options {
         water_column: Some(water_column.to_owned()),
@@ -411,6 +449,7 @@ pub fn child(
         threads: Some(threads),
         window: Some(window),
         jpeg_quality,
+        jpeg_subsampling,
         ..Options::default()
     };
     let t = Instant::now();
@@ -439,8 +478,15 @@ fn run_child(
     survey: &Path,
     out: &Path,
 ) -> Result<ChildResult> {
-    let output = Command::new(exe)
-        .arg("bench")
+    let mut cmd = Command::new(exe);
+    cmd.arg("bench");
+    if let Some(q) = o.jpeg_quality {
+        cmd.arg("--jpeg-quality").arg(q.to_string());
+    }
+    if let Some(s) = o.jpeg_subsampling {
+        cmd.arg("--jpeg-subsampling").arg(s.name());
+    }
+    let output = cmd
         .arg("--child")
         .arg("--child-water-column")
         .arg(wc)
@@ -452,8 +498,6 @@ fn run_child(
         .arg(o.threads.to_string())
         .arg("--window")
         .arg(o.window.to_string())
-        .arg("--jpeg-quality")
-        .arg(o.jpeg_quality.to_string())
         .output()
         .map_err(|e| Error::io(exe, e))?;
     let stdout = String::from_utf8_lossy(&output.stdout);
@@ -525,20 +569,30 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
         &long_dir,
         &root.join("out-long"),
     )?;
+    let input_bytes = photo_bytes(&long_dir)?;
+    let output_bytes = photo_bytes(&root.join("out-long"))?;
+    let settings = Options {
+        jpeg_quality: o.jpeg_quality,
+        jpeg_subsampling: o.jpeg_subsampling,
+        ..Options::default()
+    }
+    .encode_settings();
     say("decode + encode of the corrected long mission");
     let outputs_out = root.join("out-outputs-floor");
-    let (_, outputs_floor_s) = floor(
-        &root.join("out-long"),
-        &outputs_out,
-        o.threads,
-        o.jpeg_quality,
-    )?;
+    let (_, outputs_floor_s) = floor(&root.join("out-long"), &outputs_out, o.threads, settings)?;
     remove(&outputs_out);
     remove(&root.join("out-long"));
     say("floor: decode + encode of the long mission");
     let floor_out = root.join("out-floor");
-    let (floor_photos, floor_s) = floor(&long_dir, &floor_out, o.threads, o.jpeg_quality)?;
+    let (floor_photos, floor_s) = floor(&long_dir, &floor_out, o.threads, settings)?;
     remove(&floor_out);
+    #[cfg(feature = "turbojpeg")]
+    let turbo_floor_s = {
+        say("libjpeg-turbo decode + encode in memory of the long mission");
+        Some(turbo_floor(&long_dir, o.threads, settings)?)
+    };
+    #[cfg(not(feature = "turbojpeg"))]
+    let turbo_floor_s = None;
     Ok(BenchResult {
         machine,
         cores,
@@ -552,7 +606,62 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
         floor_photos,
         floor_s,
         outputs_floor_s,
+        codec: crate::io::jpeg::codec_name().into(),
+        input_bytes,
+        output_bytes,
+        turbo_floor_s,
     })
+}
+
+/// Total bytes of the photos below `dir` (each name counted, hard links too).
+fn photo_bytes(dir: &Path) -> Result<u64> {
+    let mut n = 0;
+    for e in io::find_photos(dir)?.photos {
+        n += std::fs::metadata(&e.path)
+            .map_err(|err| Error::io(&e.path, err))?
+            .len();
+    }
+    Ok(n)
+}
+
+/// libjpeg-turbo alone: read, decode and encode (quality and subsampling like each input unless `settings` set
+/// them) every photo of `survey` in memory, on `threads` threads. Seconds.
+#[cfg(feature = "turbojpeg")]
+pub fn turbo_floor(survey: &Path, threads: usize, settings: EncodeSettings) -> Result<f64> {
+    let found = io::find_photos(survey)?;
+    let next = AtomicUsize::new(0);
+    let failed = AtomicUsize::new(0);
+    let t = Instant::now();
+    std::thread::scope(|s| {
+        for _ in 0..threads.max(1) {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::SeqCst);
+                let Some(e) = found.photos.get(i) else { break };
+                let ok = std::fs::read(&e.path).ok().and_then(|data| {
+                    let st = settings.like(crate::io::jpeg::parse(&data).as_ref());
+                    let (w, h, c, px) = crate::io::jpeg::turbo::decode(&data).ok()?;
+                    crate::io::jpeg::turbo::encode(
+                        &px,
+                        w,
+                        h,
+                        c,
+                        st.jpeg_quality,
+                        st.jpeg_subsampling,
+                    )
+                    .ok()
+                });
+                if ok.is_none() {
+                    failed.fetch_add(1, Ordering::SeqCst);
+                }
+            });
+        }
+    });
+    if failed.load(Ordering::SeqCst) > 0 {
+        return Err(Error::Usage(
+            "bench: libjpeg-turbo decode + encode failed".into(),
+        ));
+    }
+    Ok(t.elapsed().as_secs_f64())
 }
 
 fn remove(dir: &Path) {
@@ -601,12 +710,27 @@ mod tests {
     }
 
     #[test]
+    fn generated_photos_are_camera_like_jpegs() {
+        let d = tempfile::tempdir().unwrap();
+        let m = generate(&tiny(), d.path()).unwrap();
+        let c = crate::io::jpeg::parse(&std::fs::read(&m.distinct[0]).unwrap()).unwrap();
+        assert_eq!(c.subsampling, Some(io::Subsampling::S420));
+        assert_eq!(c.quality, Some(90));
+    }
+
+    #[test]
     fn floor_counts_photos() {
         let d = tempfile::tempdir().unwrap();
         let o = tiny();
         let m = generate(&o, d.path()).unwrap();
         survey_folder(&m, &d.path().join("s"), 5).unwrap();
-        let (n, s) = floor(&d.path().join("s"), &d.path().join("o"), 2, 95).unwrap();
+        let (n, s) = floor(
+            &d.path().join("s"),
+            &d.path().join("o"),
+            2,
+            EncodeSettings::default(),
+        )
+        .unwrap();
         assert_eq!(n, 5);
         assert!(s > 0.0);
         assert_eq!(

@@ -1,6 +1,7 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+pub mod jpeg;
 pub mod mask;
 pub mod metadata;
 pub mod pnm;
@@ -13,6 +14,7 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, ImageFormat};
 
 use crate::error::{Error, Result};
+pub use crate::io::jpeg::Subsampling;
 use crate::method::raster::{BitDepth, Layout, Photo, Raster, Samples};
 
 /// File name extensions taken as photos (case-insensitive).
@@ -125,6 +127,24 @@ pub fn decode(path: &Path) -> Result<Photo> {
 }
 
 fn decode_jpeg_strict(data: &[u8]) -> std::result::Result<Photo, String> {
+    // libjpeg-turbo when built in (its warnings, e.g. a truncated file, are errors); anything it refuses goes to
+    // the strict Rust decoder, whose reason is the one reported.
+    #[cfg(feature = "turbojpeg")]
+    if let Ok((width, height, channels, pixels)) = crate::io::jpeg::turbo::decode(data) {
+        return Ok(Photo {
+            layout: Layout {
+                width,
+                height,
+                channels,
+            },
+            samples: Samples::U8(pixels),
+            alpha: None,
+        });
+    }
+    decode_jpeg_zune(data)
+}
+
+fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     use zune_core::bytestream::ZCursor;
     use zune_core::colorspace::ColorSpace;
     use zune_core::options::DecoderOptions;
@@ -289,9 +309,24 @@ impl std::str::FromStr for PngCompression {
 /// Encoder settings.
 #[derive(Debug, Clone, Copy)]
 pub struct EncodeSettings {
+    /// JPEG quality, 1–100 (unless taken from a JPEG input, see `jpeg_like_input`).
     pub jpeg_quality: u8,
     /// PNG compression effort (TIFF is written uncompressed, the fastest).
     pub png_compression: PngCompression,
+    /// JPEG chroma subsampling (unless taken from a JPEG input, see `jpeg_like_input`).
+    pub jpeg_subsampling: Subsampling,
+    /// Which JPEG settings a JPEG output takes from its JPEG input instead of the two fields above (see
+    /// [`EncodeSettings::like`]); the fields stay what non-JPEG inputs get.
+    pub jpeg_like_input: LikeInput,
+}
+
+/// JPEG settings taken from a JPEG input (issue 14): outputs about the size of their inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LikeInput {
+    /// Quality estimated from the input's quantisation tables.
+    pub quality: bool,
+    /// The input's chroma subsampling.
+    pub subsampling: bool,
 }
 
 impl Default for EncodeSettings {
@@ -299,7 +334,29 @@ impl Default for EncodeSettings {
         EncodeSettings {
             jpeg_quality: 95,
             png_compression: PngCompression::Fast,
+            jpeg_subsampling: Subsampling::S444,
+            jpeg_like_input: LikeInput {
+                quality: true,
+                subsampling: true,
+            },
         }
+    }
+}
+
+impl EncodeSettings {
+    /// The settings for the output of an input coded as `input` (`None`: not a JPEG, or unreadable headers):
+    /// quality and subsampling taken from it where `jpeg_like_input` says so and it has them.
+    pub fn like(self, input: Option<&crate::io::jpeg::JpegCoding>) -> Self {
+        let mut s = self;
+        if let Some(c) = input {
+            if s.jpeg_like_input.quality {
+                s.jpeg_quality = c.quality.unwrap_or(s.jpeg_quality);
+            }
+            if s.jpeg_like_input.subsampling {
+                s.jpeg_subsampling = c.subsampling.unwrap_or(s.jpeg_subsampling);
+            }
+        }
+        s
     }
 }
 
@@ -325,9 +382,26 @@ pub fn encode_to<W: Write>(
                 u16::try_from(l.width).map_err(|_| "too wide for JPEG")?,
                 u16::try_from(l.height).map_err(|_| "too tall for JPEG")?,
             );
-            let mut enc = jpeg_encoder::Encoder::new(w, settings.jpeg_quality);
-            enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_4_4);
-            enc.encode(c, w16, h16, colour).map_err(|e| e.to_string())
+            #[cfg(feature = "turbojpeg")]
+            {
+                let _ = (colour, w16, h16);
+                let bytes = crate::io::jpeg::turbo::encode(
+                    c,
+                    l.width,
+                    l.height,
+                    l.channels,
+                    settings.jpeg_quality,
+                    settings.jpeg_subsampling,
+                )?;
+                let mut w = w;
+                w.write_all(&bytes).map_err(|e| e.to_string())
+            }
+            #[cfg(not(feature = "turbojpeg"))]
+            {
+                let mut enc = jpeg_encoder::Encoder::new(w, settings.jpeg_quality);
+                enc.set_sampling_factor(settings.jpeg_subsampling.jpeg_encoder());
+                enc.encode(c, w16, h16, colour).map_err(|e| e.to_string())
+            }
         }
         ImageFormat::Png => {
             let enc = image::codecs::png::PngEncoder::new_with_quality(

@@ -94,8 +94,11 @@ pub struct Options {
     pub save_scatter: bool,
     /// Write each photo's `F·C = M − S` to `<out>/_abysslight/factors/` (16-bit, one pixel per block). Default: false.
     pub save_factors: bool,
-    /// JPEG output quality, 1–100. Default: 95.
-    pub jpeg_quality: u8,
+    /// JPEG output quality, 1–100. Default (`None`): the quality of a JPEG input, estimated from its quantisation
+    /// tables; 95 for other inputs.
+    pub jpeg_quality: Option<u8>,
+    /// JPEG output chroma subsampling. Default (`None`): that of a JPEG input; 4:4:4 for other inputs.
+    pub jpeg_subsampling: Option<crate::io::Subsampling>,
     /// PNG output compression: `fast`, `default` or `best` (lossless either way; see docs/performance.md).
     /// Default: fast.
     pub png_compression: crate::io::PngCompression,
@@ -155,7 +158,8 @@ impl Default for Options {
             factor_floor: 0.05,
             save_scatter: false,
             save_factors: false,
-            jpeg_quality: 95,
+            jpeg_quality: None,
+            jpeg_subsampling: None,
             png_compression: crate::io::PngCompression::Fast,
             threads: None,
             scatter_memory_mib: 2048,
@@ -249,11 +253,8 @@ impl Options {
                 self.factor_floor
             ));
         }
-        if !(1..=100).contains(&self.jpeg_quality) {
-            return usage(format!(
-                "--jpeg-quality must be 1 to 100, got {}",
-                self.jpeg_quality
-            ));
+        if let Some(q) = self.jpeg_quality.filter(|q| !(1..=100).contains(q)) {
+            return usage(format!("--jpeg-quality must be 1 to 100, got {q}"));
         }
         if self.method == Method::Polynomial && !(1..=8).contains(&self.degree) {
             return usage(format!("--degree must be 1 to 8, got {}", self.degree));
@@ -307,6 +308,22 @@ impl Options {
             return usage("give either --water-column or --scatter, not both".into());
         }
         Ok(())
+    }
+}
+
+/// Issue 14: the encoder settings of a run. JPEG quality and subsampling follow each JPEG input unless set.
+impl Options {
+    pub fn encode_settings(&self) -> crate::io::EncodeSettings {
+        let d = crate::io::EncodeSettings::default();
+        crate::io::EncodeSettings {
+            jpeg_quality: self.jpeg_quality.unwrap_or(d.jpeg_quality),
+            png_compression: self.png_compression,
+            jpeg_subsampling: self.jpeg_subsampling.unwrap_or(d.jpeg_subsampling),
+            jpeg_like_input: crate::io::LikeInput {
+                quality: self.jpeg_quality.is_none(),
+                subsampling: self.jpeg_subsampling.is_none(),
+            },
+        }
     }
 }
 

@@ -119,10 +119,32 @@ impl Sink {
         settings: EncodeSettings,
         warn: &dyn Fn(&str),
     ) -> Result<()> {
+        // A JPEG output is written like its JPEG input (issue 14); the input's head (metadata, tables, frame
+        // header) is read once, for both.
+        let jpeg_out = crate::io::format_of(output) == Some(image::ImageFormat::Jpeg);
+        let head = match self {
+            Sink::Folder {
+                carry_metadata: true,
+            } => crate::io::jpeg::read_head(input).ok().flatten(),
+            _ if jpeg_out => crate::io::jpeg::read_head(input).ok().flatten(),
+            _ => None,
+        };
+        let settings = if jpeg_out {
+            settings.like(head.as_deref().and_then(crate::io::jpeg::parse).as_ref())
+        } else {
+            settings
+        };
         match self {
             Sink::Folder {
                 carry_metadata: true,
-            } => crate::io::metadata::write_carrying(photo, input, output, settings, warn),
+            } => crate::io::metadata::write_carrying(
+                photo,
+                input,
+                head.as_deref(),
+                output,
+                settings,
+                warn,
+            ),
             Sink::Folder {
                 carry_metadata: false,
             } => crate::io::write_atomic(photo, output, settings),

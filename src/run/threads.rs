@@ -262,10 +262,7 @@ pub fn stream(
     let live = Arc::new(LiveCount::default());
     // Frames on stdout must leave in order: one writer, fed in order.
     let writers = if plan.stdout { 1 } else { threads(opts) };
-    let settings = EncodeSettings {
-        jpeg_quality: opts.jpeg_quality,
-        png_compression: opts.png_compression,
-    };
+    let settings: EncodeSettings = opts.encode_settings();
     let sink = if plan.stdout {
         Sink::Stdout
     } else {

@@ -268,11 +268,18 @@ fn photoshop_for_output(irb: &[u8]) -> Vec<u8> {
 pub fn write_carrying(
     photo: &Photo,
     input: &Path,
+    jpeg_head: Option<&[u8]>,
     output: &Path,
     settings: EncodeSettings,
     warn: &dyn Fn(&str),
 ) -> Result<()> {
-    let (meta, mut notes) = match Metadata::read(input) {
+    // `jpeg_head`: the input's bytes up to its first scan when it is a JPEG and the caller read them already
+    // (`crate::io::jpeg::read_head`), which is all its metadata.
+    let read = match jpeg_head {
+        Some(h) => Ok(Metadata::from_bytes(h).unwrap_or_default()),
+        None => Metadata::read(input),
+    };
+    let (meta, mut notes) = match read {
         Ok(mut m) => {
             let problems = std::mem::take(&mut m.problems);
             (m, problems)
