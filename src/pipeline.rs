@@ -24,7 +24,7 @@ use crate::factor::{factor, lit_seafloor};
 use crate::io::{self, decode, find_photos, EncodeSettings, Entry, WORK_DIR};
 use crate::mask::{block_median_masked, detect_static, fill_missing, DetectSettings, Mask};
 use crate::median::{block_median, stack_median};
-use crate::monitor::{contamination, Monitor, Summary, Thresholds};
+use crate::monitor::{Flag, Monitor, Summary, Thresholds};
 use crate::options::{Method, Options};
 use crate::overview;
 use crate::raster::{Layout, Photo, Raster, Samples};
@@ -967,18 +967,12 @@ impl Ctx<'_> {
                 fill_missing(&mut f);
             }
             let lit = lit_seafloor(&f, &self.colour);
-            let contaminated = contamination(
-                own,
-                &lit,
-                self.scatter_low,
-                self.monitor.thresholds.block_deviation,
-            );
-            let mut health = self.monitor.observe(&f, contaminated);
+            let mut health = self.monitor.observe_photo(own, &lit, self.scatter_low, &f);
             if eof && decoded < self.n {
-                health.flags.push(format!(
-                    "only {decoded} photos in the mission, fewer than the window n = {}",
-                    self.n
-                ));
+                health.flags.push(Flag::ShortMission {
+                    photos: decoded,
+                    window: self.n,
+                });
             }
             if !health.flags.is_empty() && self.flagged_lit.len() < FLAGGED_KEPT {
                 self.flagged_lit.push((i, lit.clone()));
