@@ -149,6 +149,17 @@ struct EvaluateArgs {
     /// [default with --truth: the simulator's poses].
     #[arg(long, value_name = "FILE")]
     placements: Option<PathBuf>,
+    /// Register the photos of this folder (the RAW photos, before any correction) by phase correlation of
+    /// consecutive photos, and score every set's consistency on those placements (instead of --placements).
+    #[arg(long, value_name = "RAW_DIR")]
+    register: Option<PathBuf>,
+    /// With --register: write the placements found (placement file format, reusable with --placements).
+    #[arg(long, value_name = "FILE", requires = "register")]
+    save_placements: Option<PathBuf>,
+    /// Box-average photos by K before the consistency metric (each set is held in memory); placements and
+    /// --cell stay in full-resolution units.
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    eval_downsample: usize,
     /// Mosaic cell size of the consistency metric, in mosaic units.
     #[arg(long, value_name = "UNITS", default_value_t = 8.0)]
     cell: f64,
@@ -685,6 +696,9 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
     let settings = abysslight::eval::evaluate::EvalSettings {
         cell: a.cell,
         transfer: a.transfer,
+        register: a.register.clone(),
+        save_placements: a.save_placements.clone(),
+        downsample: a.eval_downsample.max(1),
         ..Default::default()
     };
     if !(a.cell > 0.0 && a.cell.is_finite()) {
@@ -699,6 +713,16 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         a.placements.as_deref(),
         &settings,
     )?;
+    if let Some(r) = &ev.registration {
+        eprintln!(
+            "abysslight: registered {} photos: {} of {} consecutive pairs matched{}",
+            r.photos,
+            r.accepted_pairs,
+            r.pairs,
+            r.median_ncc
+                .map_or(String::new(), |v| format!(" (median correlation {v:.2})"))
+        );
+    }
     print!("{}", ev.table());
     ev.save_json(&a.json)?;
     eprintln!("abysslight: scores written to {}", a.json.display());

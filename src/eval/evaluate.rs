@@ -16,6 +16,7 @@
 //! top-left corner of the photo is `(0, 0)`, pixel centres are at `+0.5`. NAME is the photo's path relative to the
 //! photo folder.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -316,6 +317,14 @@ pub struct EvalSettings {
     pub grid: (usize, usize),
     /// Transfer curve of the photos (all sets). Default: the simulated dive's encoding, else linear.
     pub transfer: Option<Transfer>,
+    /// Register the photos of this folder (the raw photos) and use the placements found for the consistency
+    /// metric of every set (see [`crate::eval::register`]).
+    pub register: Option<PathBuf>,
+    /// Write the placements found by `register` here (the placement file format).
+    pub save_placements: Option<PathBuf>,
+    /// Box-average photos by this factor before the consistency metric (memory: every photo of a set is held);
+    /// placements stay in full-resolution units. Default: 1.
+    pub downsample: usize,
 }
 
 impl Default for EvalSettings {
@@ -324,6 +333,9 @@ impl Default for EvalSettings {
             cell: 8.0,
             grid: (8, 6),
             transfer: None,
+            register: None,
+            save_placements: None,
+            downsample: 1,
         }
     }
 }
@@ -339,11 +351,45 @@ pub struct Scores {
     pub consistency: Option<f64>,
 }
 
+/// How the registration of `--register` went.
+#[derive(Debug, Clone, Serialize)]
+pub struct RegistrationSummary {
+    /// Photos registered.
+    pub photos: usize,
+    /// Consecutive pairs whose match passed the confidence test.
+    pub accepted_pairs: usize,
+    /// Consecutive pairs tried.
+    pub pairs: usize,
+    /// Median normalised cross-correlation of the accepted matches.
+    pub median_ncc: Option<f64>,
+}
+
+impl RegistrationSummary {
+    fn of(reg: &crate::eval::register::Registration) -> Self {
+        let (accepted_pairs, pairs) = reg.accepted();
+        let mut ncc: Vec<f64> = reg
+            .matches
+            .iter()
+            .flatten()
+            .filter(|m| m.accepted)
+            .map(|m| m.ncc)
+            .collect();
+        RegistrationSummary {
+            photos: reg.placements.len(),
+            accepted_pairs,
+            pairs,
+            median_ncc: (!ncc.is_empty()).then(|| median(&mut ncc)),
+        }
+    }
+}
+
 /// What `abysslight evaluate` writes as JSON.
 #[derive(Debug, Clone, Serialize)]
 pub struct Evaluation {
     pub truth: Option<PathBuf>,
     pub placements: Option<PathBuf>,
+    /// With `--register`: how many consecutive pairs were matched.
+    pub registration: Option<RegistrationSummary>,
     pub transfer: Transfer,
     pub settings: EvalSettings,
     pub sets: Vec<Scores>,
@@ -362,7 +408,8 @@ fn truth_file(p: &Path) -> PathBuf {
     }
 }
 
-fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
+/// Decode a photo and undo its transfer curve.
+pub fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
     let mut r = Raster::from_photo(&decode(path)?);
     if !transfer.is_linear() {
         for v in &mut r.data {
@@ -370,6 +417,40 @@ fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
         }
     }
     Ok(r)
+}
+
+/// Box average by `k` (the right and bottom remainders dropped); `k = 1` returns a copy.
+pub fn reduce(r: &Raster, k: usize) -> Raster {
+    if k <= 1 {
+        return r.clone();
+    }
+    let c = r.channels;
+    Raster::from_fn(r.width / k, r.height / k, c, |x, y, ch| {
+        let mut s = 0.0f32;
+        for yy in y * k..(y + 1) * k {
+            for xx in x * k..(x + 1) * k {
+                s += r.get(xx, yy, ch);
+            }
+        }
+        s / (k * k) as f32
+    })
+}
+
+/// A placement of full-resolution pixels turned into one of pixels of a photo reduced by `k`: reduced pixel
+/// coordinates (pixel centres at `+0.5`) times `k` are full-resolution coordinates, so `H·diag(k, k, 1)`.
+fn scale_h(h: &[f64; 9], k: usize) -> [f64; 9] {
+    let k = k as f64;
+    [
+        h[0] * k,
+        h[1] * k,
+        h[2],
+        h[3] * k,
+        h[4] * k,
+        h[5],
+        h[6] * k,
+        h[7] * k,
+        h[8],
+    ]
 }
 
 /// Score each `(label, folder)` of photos. `truth` is a simulated dive folder (or its `truth/dive.json`);
@@ -387,12 +468,31 @@ pub fn evaluate(
     }
     let truth_path = truth.map(truth_file);
     let truth = truth_path.as_deref().map(load_truth).transpose()?;
-    let placed: Option<Vec<Placement>> = match placements {
-        Some(p) => {
+    let mut registration = None;
+    let placed: Option<Vec<Placement>> = match (placements, &settings.register) {
+        (Some(_), Some(_)) => {
+            return Err(Error::Usage(
+                "give either --placements or --register, not both".into(),
+            ))
+        }
+        (None, Some(raw)) => {
+            let transfer = settings.transfer.unwrap_or_default();
+            let reg = crate::eval::register::register_folder(raw, transfer)?;
+            if let Some(out) = &settings.save_placements {
+                let text = placements_text(reg.placements.iter().map(|p| (p.name.as_str(), &p.h)));
+                crate::io::write_with(out, |w| {
+                    w.write_all(text.as_bytes()).map_err(|e| Error::io(out, e))
+                })?;
+            }
+            let placed = reg.placements.clone();
+            registration = Some(RegistrationSummary::of(&reg));
+            Some(placed)
+        }
+        (Some(p), None) => {
             let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
             Some(parse_placements(&text, p)?)
         }
-        None => truth.as_ref().map(|t| {
+        (None, None) => truth.as_ref().map(|t| {
             t.poses
                 .iter()
                 .map(|p| Placement {
@@ -404,7 +504,7 @@ pub fn evaluate(
     };
     if truth.is_none() && placed.is_none() {
         return Err(Error::Usage(
-            "nothing to score against: give --truth (a simulated dive) and/or --placements FILE"
+            "nothing to score against: give --truth (a simulated dive), --placements FILE or --register RAW_DIR"
                 .into(),
         ));
     }
@@ -431,9 +531,14 @@ pub fn evaluate(
     };
     let mut scores = Vec::new();
     for (label, folder) in sets {
+        let k = if albedo.is_some() {
+            1
+        } else {
+            settings.downsample.max(1)
+        };
         let photos: Vec<Raster> = names
             .par_iter()
-            .map(|n| load_linear(&folder.join(n), transfer))
+            .map(|n| load_linear(&folder.join(n), transfer).map(|r| reduce(&r, k)))
             .collect::<Result<_>>()?;
         if let Some(a) = &albedo {
             for (p, (t, n)) in photos.iter().zip(a.iter().zip(&names)) {
@@ -452,7 +557,7 @@ pub fn evaluate(
         let consistency = placed.as_ref().and_then(|pl| {
             let hs: Vec<[f64; 9]> = names
                 .iter()
-                .map(|n| pl.iter().find(|p| &p.name == n).map(|p| p.h))
+                .map(|n| pl.iter().find(|p| &p.name == n).map(|p| scale_h(&p.h, k)))
                 .collect::<Option<_>>()?;
             consistency(&photos, &hs, settings.cell)
         });
@@ -469,8 +574,11 @@ pub fn evaluate(
     }
     Ok(Evaluation {
         truth: truth_path,
-        placements: placements.map(Path::to_owned),
+        placements: placements
+            .map(Path::to_owned)
+            .or(settings.save_placements.clone()),
         transfer,
+        registration,
         settings: settings.clone(),
         sets: scores,
     })

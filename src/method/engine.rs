@@ -30,7 +30,7 @@ use crate::method::correct::{correct_in_place, CorrectStats};
 use crate::method::factor::{factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median};
-use crate::method::monitor::{contamination, Health, Monitor, Thresholds};
+use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Samples};
 use crate::method::scatter::{Prepared, Scatter};
@@ -352,18 +352,14 @@ impl<T> Engine<T> {
             fill_missing(&mut f);
         }
         let lit = lit_seafloor(&f, &self.colour);
-        let contaminated = contamination(
-            own,
-            &lit,
-            self.scatter_low.as_ref(),
-            self.monitor.thresholds.block_deviation,
-        );
-        let mut health = self.monitor.observe(&f, contaminated);
+        let mut health = self
+            .monitor
+            .observe_photo(own, &lit, self.scatter_low.as_ref(), &f);
         if eof && self.seq < self.params.window {
-            health.flags.push(format!(
-                "only {} photos in the mission, fewer than the window n = {}",
-                self.seq, self.params.window
-            ));
+            health.flags.push(Flag::ShortMission {
+                photos: self.seq,
+                window: self.params.window,
+            });
         }
         let estimate_ms = w.downsample_ms + ms(t);
         let t = Instant::now();

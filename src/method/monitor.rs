@@ -22,6 +22,10 @@ pub struct Thresholds {
     pub block_deviation: f32,
     /// Roughness of `F` above which a photo is flagged (see [`roughness`]).
     pub roughness: f32,
+    /// Share of the photo's texture kept by the correction below which `F` is taken to hold the scene.
+    pub texture_kept: f32,
+    /// Relative level of a photo against its window's `M` beyond which (either way) it is an exposure jump.
+    pub exposure_jump: f32,
 }
 
 impl Default for Thresholds {
@@ -33,24 +37,143 @@ impl Default for Thresholds {
             colour_shift: 0.1,
             block_deviation: 0.5,
             roughness: 0.12,
+            texture_kept: 0.45,
+            exposure_jump: 0.25,
         }
+    }
+}
+
+/// Why a photo's correction is likely wrong. In `report.json` each flag is written as `{"kind": "...", "message":
+/// "..."}`: `kind` is a stable kebab-case name for scripts ([`Flag::kind`]), `message` the explanation for people
+/// (the [`Display`](std::fmt::Display) text, which may be reworded).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Flag {
+    /// More of the photo is off the seafloor colour than the median can take (it breaks down at 50 %).
+    Contamination {
+        /// Share of blocks off the seafloor colour, after the photo's overall level is removed.
+        share: f32,
+    },
+    /// `F` jumped from the previous photo (altitude or attitude jump, or a seafloor change).
+    FactorChange {
+        /// Mean relative change of `F`.
+        change: f32,
+    },
+    /// `F`'s colour balance moved away from what its overall level predicts (seafloor or water colour change).
+    ColourShift {
+        /// Largest relative change of a channel's share.
+        shift: f32,
+    },
+    /// `F` holds the scene instead of only the lighting: the window holds too little seafloor at some pixels, or
+    /// the camera hardly moves.
+    SceneInFactor {
+        /// Fine structure of `F` (see [`roughness`]).
+        roughness: f32,
+        /// Share of the photo's fine structure left after the correction (see [`PhotoFit`]).
+        texture_kept: f32,
+    },
+    /// The whole photo is brighter or darker than its window predicts while the lighting pattern stays: an
+    /// exposure (gain, shutter, strobe) jump of this photo.
+    ExposureJump {
+        /// The photo's level relative to its window's `M` (1: as predicted).
+        level: f32,
+    },
+    /// Fewer photos in the mission than the window: every `F` is the median of all of them.
+    ShortMission {
+        /// Photos in the mission.
+        photos: usize,
+        /// The window `n`.
+        window: usize,
+    },
+}
+
+impl Flag {
+    /// Stable kebab-case name of the kind of flag (what `report.json` writes as `kind`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Flag::Contamination { .. } => "contamination",
+            Flag::FactorChange { .. } => "factor-change",
+            Flag::ColourShift { .. } => "colour-shift",
+            Flag::SceneInFactor { .. } => "scene-in-factor",
+            Flag::ExposureJump { .. } => "exposure-jump",
+            Flag::ShortMission { .. } => "short-mission",
+        }
+    }
+}
+
+impl std::fmt::Display for Flag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Flag::Contamination { share } => write!(
+                f,
+                "contamination {:.0} % is near the 50 % at which the median breaks down",
+                100.0 * share
+            ),
+            Flag::FactorChange { change } => write!(
+                f,
+                "F changed {:.0} % from the previous photo (altitude or attitude jump, or a seafloor change)",
+                100.0 * change
+            ),
+            Flag::ColourShift { shift } => write!(
+                f,
+                "F's colour balance differs {:.0} % from what its level predicts (seafloor or water colour \
+                 change: it is absorbed into F and removed from the photos)",
+                100.0 * shift
+            ),
+            Flag::SceneInFactor {
+                roughness,
+                texture_kept,
+            } => write!(
+                f,
+                "F shows the scene ({:.0} % fine structure, {:.0} % of the photo's texture kept): the window holds \
+                 too little seafloor here or the camera hardly moves; raise --window or mask the objects",
+                100.0 * roughness,
+                100.0 * texture_kept
+            ),
+            Flag::ExposureJump { level } => write!(
+                f,
+                "exposure jump: the photo is {:+.0} % off its window's level while the lighting pattern stays",
+                100.0 * (level - 1.0)
+            ),
+            Flag::ShortMission { photos, window } => write!(
+                f,
+                "only {photos} photos in the mission, fewer than the window n = {window}"
+            ),
+        }
+    }
+}
+
+impl Serialize for Flag {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut st = s.serialize_struct("Flag", 2)?;
+        st.serialize_field("kind", self.kind())?;
+        st.serialize_field("message", &self.to_string())?;
+        st.end()
     }
 }
 
 /// Health figures of one photo, in the run report.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Health {
-    /// Share of blocks whose corrected value is far from the seafloor colour (not seafloor, or a broken `F`).
+    /// Share of blocks whose corrected value is far from the seafloor colour once the photo's overall level is
+    /// removed (not seafloor, or a broken `F`).
     pub contamination: f32,
+    /// The photo's overall level relative to its window's `M` (median over blocks of `(I − S)/(M − S)`; 1 when
+    /// only the factor-image figures were observed).
+    pub level: f32,
+    /// Share of the photo's fine structure (texture) left after the correction: about 1 when `F` is smooth,
+    /// small when `F` copies the scene (see [`PhotoFit`]).
+    pub texture_kept: f32,
     /// Mean relative change of `F` from the previous photo.
     pub factor_change: f32,
-    /// Largest relative change of `F`'s channel ratios against the start of the mission.
+    /// Largest relative change of `F`'s channel shares against what the mission so far predicts from `F`'s
+    /// overall level (altitude changes the level and, through attenuation, the colour together).
     pub colour_shift: f32,
     /// Fine structure in `F` (see [`roughness`]): lights make smooth patterns, a window short of seafloor leaves
     /// the scene in `F`.
     pub roughness: f32,
     /// Why this photo's correction is likely wrong (empty: no reason to doubt it).
-    pub flags: Vec<String>,
+    pub flags: Vec<Flag>,
 }
 
 /// Share of blocks of `low` (the photo's own block medians, linear) whose ratio to `M − S` (i.e. the corrected
@@ -86,6 +209,139 @@ pub fn contamination(
     } else {
         bad as f32 / n as f32
     }
+}
+
+/// How a photo's own block medians compare with its window's `M − S` (both at block resolution, linear).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhotoFit {
+    /// The photo's overall level: median over blocks of the channel-mean ratio `(I − S)/(M − S)`.
+    pub level: f32,
+    /// Share of blocks whose ratio, divided by `level`, is off 1 by more than the block deviation.
+    pub contamination: f32,
+    /// Fine structure of the corrected photo over that of the photo itself: the median of `|hp(ln I′ − ln M′)|`
+    /// over that of `|hp(ln I′)|`, where `I′ = I − S` and `M′ = M − S` are channel means, `hp(v) = v − v̄` with
+    /// `v̄` the box average of [`roughness`], over blocks lit in both (above a tenth of the 99th percentile).
+    /// When `F` is smooth the correction keeps the seafloor's texture (≈ 1); when `F` copies the scene (a camera
+    /// that hardly moves, or a window short of seafloor) the corrected photo is flat (≪ 1). 1 when the image is
+    /// smaller than [`MIN_ROUGHNESS_SIZE`] or has no texture at all.
+    pub texture_kept: f32,
+}
+
+/// [`PhotoFit`] of a photo's block medians `low` against its window's `m_minus_s`; `s_low` is subtracted from
+/// `low` first. `NaN` (masked) blocks are left out.
+pub fn photo_fit(
+    low: &Raster,
+    m_minus_s: &Raster,
+    s_low: Option<&Raster>,
+    deviation: f32,
+) -> PhotoFit {
+    let (w, h, c) = (low.width, low.height, low.channels);
+    let mut a = vec![f32::NAN; w * h];
+    let mut b = vec![f32::NAN; w * h];
+    let mut ratios = Vec::with_capacity(w * h);
+    for p in 0..w * h {
+        let (mut sa, mut sb, mut ratio) = (0.0f32, 0.0f32, 0.0f32);
+        let mut valid = true;
+        for ch in 0..c {
+            let i = p * c + ch;
+            let s = s_low.map_or(0.0, |s| s.data[i]);
+            let (v, m) = (low.data[i] - s, m_minus_s.data[i]);
+            if v.is_nan() || m.is_nan() || m <= 1e-6 {
+                valid = false;
+                break;
+            }
+            ratio += v / m;
+            sa += v;
+            sb += m;
+        }
+        if valid {
+            ratios.push(ratio / c as f32);
+            a[p] = sa / c as f32;
+            b[p] = sb / c as f32;
+        }
+    }
+    if ratios.is_empty() {
+        return PhotoFit {
+            level: 1.0,
+            contamination: 0.0,
+            texture_kept: 1.0,
+        };
+    }
+    let mut sorted = ratios.clone();
+    let mid = sorted.len() / 2;
+    let level = *sorted.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let level_ok = level.is_finite() && level > 1e-6;
+    let scale = if level_ok { level } else { 1.0 };
+    let bad = ratios
+        .iter()
+        .filter(|&&r| (r / scale - 1.0).abs() > deviation)
+        .count();
+    PhotoFit {
+        level: if level_ok { level } else { 1.0 },
+        contamination: bad as f32 / ratios.len() as f32,
+        texture_kept: texture_kept(&a, &b, w, h),
+    }
+}
+
+/// Percentile of the fine structure compared (the median: a 90th percentile at 3×3 blocks was tried and did not
+/// separate MBARI benthic from sound dives).
+const TEXTURE_QUANTILE: usize = 50;
+
+/// See [`PhotoFit::texture_kept`]; `a` and `b` are the channel means of `I − S` and `M − S` (`NaN`: left out).
+fn texture_kept(a: &[f32], b: &[f32], w: usize, h: usize) -> f32 {
+    if w < MIN_ROUGHNESS_SIZE.0 || h < MIN_ROUGHNESS_SIZE.1 {
+        return 1.0;
+    }
+    let floor = |v: &[f32]| {
+        let mut f: Vec<f32> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        if f.is_empty() {
+            return f32::INFINITY;
+        }
+        let at = (f.len() - 1) * 99 / 100;
+        (0.1 * *f.select_nth_unstable_by(at, f32::total_cmp).1).max(1e-6)
+    };
+    let (fa, fb) = (floor(a), floor(b));
+    let lit = |p: usize| a[p].is_finite() && b[p].is_finite() && a[p] >= fa && b[p] >= fb;
+    let photo: Vec<f32> = (0..w * h)
+        .map(|p| if lit(p) { a[p].ln() } else { f32::NAN })
+        .collect();
+    let corrected: Vec<f32> = (0..w * h)
+        .map(|p| {
+            if lit(p) {
+                a[p].ln() - b[p].ln()
+            } else {
+                f32::NAN
+            }
+        })
+        .collect();
+    let fine = |v: &[f32]| -> f32 {
+        let mut smooth = Vec::new();
+        box_average_into(
+            v,
+            w,
+            h,
+            (w / 16).max(2),
+            &mut Vec::new(),
+            &mut Vec::new(),
+            &mut smooth,
+        );
+        let mut dev: Vec<f32> = v
+            .iter()
+            .zip(&smooth)
+            .filter(|(x, s)| x.is_finite() && s.is_finite())
+            .map(|(x, s)| (x - s).abs())
+            .collect();
+        if dev.is_empty() {
+            return 0.0;
+        }
+        let at = (dev.len() - 1) * TEXTURE_QUANTILE / 100;
+        *dev.select_nth_unstable_by(at, f32::total_cmp).1
+    };
+    let own = fine(&photo);
+    if own <= 1e-6 {
+        return 1.0;
+    }
+    fine(&corrected) / own
 }
 
 /// Mean relative change between two factor images: `Σ|a − b| / Σ|b|`.
@@ -274,15 +530,75 @@ pub struct Monitor {
     pub thresholds: Thresholds,
     previous: Option<Raster>,
     changes: Vec<f32>,
-    /// Balances of the first photos, whose median is the mission's reference balance.
+    /// Balances of the first photos, whose median is the mission's reference balance until the level fit
+    /// takes over.
     start: Vec<Vec<f32>>,
     reference: Option<Vec<f32>>,
+    /// Least-squares sums of `ln balance_c` against `ln level` over unflagged photos (see [`ColourFit`]).
+    colour_fit: ColourFit,
     scratch: Scratch,
     sorted_changes: Vec<f32>,
 }
 
 /// Photos whose balance makes up the mission's reference.
 const REFERENCE_PHOTOS: usize = 5;
+
+/// Spread of `ln level` (standard deviation) below which the slope of colour on level is shrunk towards 0: a
+/// slope is only learnt from level changes the mission has actually shown (ridge regression).
+const LEVEL_SPREAD: f64 = 0.05;
+
+/// Running least-squares fit of each channel's log share of `F` (`ln balance_c`) on the log of `F`'s overall
+/// level. Altitude changes move both together (the light falls off with distance and, through per-channel
+/// attenuation, its colour changes), so the colour a photo's level predicts is not a colour change; what is
+/// left over is (a seafloor or water colour change absorbed into `F`).
+#[derive(Debug, Default, Clone)]
+struct ColourFit {
+    n: f64,
+    sx: f64,
+    sxx: f64,
+    sy: Vec<f64>,
+    sxy: Vec<f64>,
+}
+
+impl ColourFit {
+    fn add(&mut self, x: f64, y: &[f64]) {
+        if self.sy.len() != y.len() {
+            *self = ColourFit {
+                sy: vec![0.0; y.len()],
+                sxy: vec![0.0; y.len()],
+                ..ColourFit::default()
+            };
+        }
+        self.n += 1.0;
+        self.sx += x;
+        self.sxx += x * x;
+        for (c, &v) in y.iter().enumerate() {
+            self.sy[c] += v;
+            self.sxy[c] += x * v;
+        }
+    }
+
+    /// Predicted `ln balance_c` at log level `x`.
+    fn predict(&self, x: f64) -> Vec<f64> {
+        let mx = self.sx / self.n;
+        let var = (self.sxx - self.n * mx * mx).max(0.0);
+        self.sy
+            .iter()
+            .zip(&self.sxy)
+            .map(|(&sy, &sxy)| {
+                let my = sy / self.n;
+                let slope = (sxy - self.n * mx * my) / (var + self.n * LEVEL_SPREAD * LEVEL_SPREAD);
+                my + slope * (x - mx)
+            })
+            .collect()
+    }
+}
+
+/// Overall level of a factor image: the mean over channels of the channel means.
+fn overall_level(f: &Raster) -> f64 {
+    let m = f.channel_means();
+    m.iter().sum::<f64>() / m.len().max(1) as f64
+}
 
 impl Monitor {
     pub fn new(thresholds: Thresholds) -> Self {
@@ -292,18 +608,54 @@ impl Monitor {
         }
     }
 
-    /// Health of the next photo, from its factor image and contamination estimate.
+    /// Health of the next photo from everything the method knows about it: its own block medians `own`, its
+    /// window's `M − S` (`m_minus_s`, before any per-photo adjustment), the scatter at block resolution and the
+    /// factor image `f`. Adds the photo's level (exposure jumps) and the texture the correction kept (scene in
+    /// `F`) to [`Monitor::observe`]'s figures.
+    pub fn observe_photo(
+        &mut self,
+        own: &Raster,
+        m_minus_s: &Raster,
+        s_low: Option<&Raster>,
+        f: &Raster,
+    ) -> Health {
+        let t = self.thresholds;
+        let fit = photo_fit(own, m_minus_s, s_low, t.block_deviation);
+        let mut h = self.observe(f, fit.contamination);
+        h.level = fit.level;
+        h.texture_kept = fit.texture_kept;
+        if (fit.level - 1.0).abs() > t.exposure_jump {
+            h.flags.push(Flag::ExposureJump { level: fit.level });
+        }
+        if fit.texture_kept < t.texture_kept {
+            match h
+                .flags
+                .iter_mut()
+                .find(|f| matches!(f, Flag::SceneInFactor { .. }))
+            {
+                Some(Flag::SceneInFactor { texture_kept, .. }) => *texture_kept = fit.texture_kept,
+                _ => h.flags.push(Flag::SceneInFactor {
+                    roughness: h.roughness,
+                    texture_kept: fit.texture_kept,
+                }),
+            }
+        }
+        h
+    }
+
+    /// Health of the next photo from its factor image and contamination estimate alone.
     pub fn observe(&mut self, f: &Raster, contamination: f32) -> Health {
         let t = self.thresholds;
         let mut h = Health {
             contamination,
+            level: 1.0,
+            texture_kept: 1.0,
             ..Health::default()
         };
         if contamination > t.contamination {
-            h.flags.push(format!(
-                "contamination {:.0} % is near the 50 % at which the median breaks down",
-                100.0 * contamination
-            ));
+            h.flags.push(Flag::Contamination {
+                share: contamination,
+            });
         }
         if let Some(prev) = &self.previous {
             let change = factor_change(f, prev);
@@ -319,43 +671,51 @@ impl Monitor {
                 *sorted.select_nth_unstable_by(mid, f32::total_cmp).1
             };
             if change > t.factor_change && change > t.factor_change_ratio * typical {
-                h.flags.push(format!(
-                    "F changed {:.0} % from the previous photo (altitude or attitude jump, or a seafloor change)",
-                    100.0 * change
-                ));
+                h.flags.push(Flag::FactorChange { change });
             }
             self.changes.push(change);
         }
         h.roughness = self.scratch.roughness(f);
         if h.roughness > t.roughness {
-            h.flags.push(format!(
-                "F shows the scene ({:.0} % fine structure; lights make smooth patterns): the window holds too \
-                 little seafloor here, raise --window or mask the objects",
-                100.0 * h.roughness
-            ));
+            h.flags.push(Flag::SceneInFactor {
+                roughness: h.roughness,
+                texture_kept: 1.0,
+            });
         }
         let b = balance(f);
+        let level = overall_level(f);
+        let x = if level > 0.0 { level.ln() } else { 0.0 };
+        let y: Vec<f64> = b.iter().map(|&v| (v.max(1e-6) as f64).ln()).collect();
         if self.reference.is_none() {
             self.start.push(b.clone());
             if self.start.len() == REFERENCE_PHOTOS {
                 self.reference = Some(median_balance(&self.start));
             }
         }
-        let reference = self
-            .reference
-            .clone()
-            .unwrap_or_else(|| median_balance(&self.start));
+        // Until the mission has shown a few photos, the reference is the median balance of the first ones;
+        // then the colour the photo's level predicts from the unflagged photos so far.
+        let expected: Vec<f32> = if self.colour_fit.n >= REFERENCE_PHOTOS as f64 {
+            self.colour_fit
+                .predict(x)
+                .into_iter()
+                .map(|v| v.exp() as f32)
+                .collect()
+        } else {
+            self.reference
+                .clone()
+                .unwrap_or_else(|| median_balance(&self.start))
+        };
         h.colour_shift = b
             .iter()
-            .zip(&reference)
+            .zip(&expected)
             .map(|(x, r)| ((x - r) / r).abs())
             .fold(0.0, f32::max);
         if h.colour_shift > t.colour_shift {
-            h.flags.push(format!(
-                "F's colour balance differs {:.0} % from the mission start (seafloor or water colour change: \
-                 it is absorbed into F and removed from the photos)",
-                100.0 * h.colour_shift
-            ));
+            h.flags.push(Flag::ColourShift {
+                shift: h.colour_shift,
+            });
+        } else if level > 0.0 {
+            self.colour_fit.add(x, &y);
         }
         match &mut self.previous {
             Some(p) if p.layout() == f.layout() => p.data.copy_from_slice(&f.data),
@@ -383,27 +743,26 @@ pub struct Summary {
     pub contamination: usize,
     pub factor_change: usize,
     pub colour_shift: usize,
+    /// Photos flagged [`Flag::SceneInFactor`] (the name is kept for existing report readers).
     pub roughness: usize,
+    pub exposure_jump: usize,
     pub short_mission: usize,
 }
 
 impl Summary {
-    pub fn add(&mut self, flags: &[String]) {
+    pub fn add(&mut self, flags: &[Flag]) {
         if flags.is_empty() {
             return;
         }
         self.flagged += 1;
         for f in flags {
-            if f.starts_with("contamination") {
-                self.contamination += 1;
-            } else if f.starts_with("F changed") {
-                self.factor_change += 1;
-            } else if f.starts_with("F's colour") {
-                self.colour_shift += 1;
-            } else if f.starts_with("F shows the scene") {
-                self.roughness += 1;
-            } else {
-                self.short_mission += 1;
+            match f {
+                Flag::Contamination { .. } => self.contamination += 1,
+                Flag::FactorChange { .. } => self.factor_change += 1,
+                Flag::ColourShift { .. } => self.colour_shift += 1,
+                Flag::SceneInFactor { .. } => self.roughness += 1,
+                Flag::ExposureJump { .. } => self.exposure_jump += 1,
+                Flag::ShortMission { .. } => self.short_mission += 1,
             }
         }
     }
@@ -419,6 +778,7 @@ impl Summary {
             (self.factor_change, "sudden change of F"),
             (self.colour_shift, "colour change of F"),
             (self.roughness, "scene left in F"),
+            (self.exposure_jump, "exposure jump"),
             (self.short_mission, "too few photos for the window"),
         ] {
             if n > 0 {
@@ -483,14 +843,18 @@ mod tests {
         // Altitude jump: F halves.
         let h = mon.observe(&steady(0.5), 0.2);
         assert!(
-            h.flags.iter().any(|f| f.starts_with("F changed")),
+            h.flags
+                .iter()
+                .any(|f| matches!(f, Flag::FactorChange { .. })),
             "{:?}",
             h.flags
         );
         // Contamination near breakdown.
         let h = mon.observe(&steady(0.5), 0.45);
         assert!(
-            h.flags.iter().any(|f| f.starts_with("contamination")),
+            h.flags
+                .iter()
+                .any(|f| matches!(f, Flag::Contamination { .. })),
             "{:?}",
             h.flags
         );
@@ -500,7 +864,9 @@ mod tests {
         });
         let h = mon.observe(&blue, 0.2);
         assert!(
-            h.flags.iter().any(|f| f.starts_with("F's colour")),
+            h.flags
+                .iter()
+                .any(|f| matches!(f, Flag::ColourShift { .. })),
             "{:?}",
             h.flags
         );
@@ -589,7 +955,9 @@ mod tests {
         assert!(h.flags.is_empty(), "{:?}", h.flags);
         let h = Monitor::new(Thresholds::default()).observe(&scene, 0.1);
         assert!(
-            h.flags.iter().any(|f| f.starts_with("F shows the scene")),
+            h.flags
+                .iter()
+                .any(|f| matches!(f, Flag::SceneInFactor { .. })),
             "{:?}",
             h.flags
         );

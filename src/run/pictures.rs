@@ -19,7 +19,8 @@ struct Series<'a> {
     threshold: f32,
 }
 
-/// Draw the mission overview: contamination, change of F, colour shift and roughness of F, per photo; flagged photos in red.
+/// Draw the mission overview: contamination, change of F, colour shift and roughness of F, texture kept and level
+/// (exposure), per photo; flagged photos in red.
 pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
     let series = [
         Series {
@@ -41,6 +42,19 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
             title: "roughness of F (scene left in F)",
             values: frames.iter().map(|f| f.health.roughness).collect(),
             threshold: t.roughness,
+        },
+        Series {
+            title: "texture kept by the correction (low: scene left in F)",
+            values: frames.iter().map(|f| f.health.texture_kept).collect(),
+            threshold: t.texture_kept,
+        },
+        Series {
+            title: "level against the window's M, |level - 1| (exposure jump)",
+            values: frames
+                .iter()
+                .map(|f| (f.health.level - 1.0).abs())
+                .collect(),
+            threshold: t.exposure_jump,
         },
     ];
     let n = frames.len().max(1);
@@ -172,7 +186,7 @@ pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<Rg
             .health
             .flags
             .first()
-            .map_or(Vec::new(), |r| r.chars().collect());
+            .map_or(Vec::new(), |r| r.to_string().chars().collect());
         let max_chars = ((2 * tile_w + gap) / 8) as usize;
         for (line, chunk) in reason.chunks(max_chars).take(2).enumerate() {
             let text: String = chunk.iter().collect();

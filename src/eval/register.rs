@@ -1,0 +1,576 @@
+//! Registration of consecutive overlapping photos, for the consistency metric on real dives without navigation
+//! (`abysslight evaluate --register RAW_DIR`).
+//!
+//! Model: a translation between consecutive photos (a downward camera over flat ground at a steady altitude).
+//! Each photo is reduced to a texture image at about [`TARGET_SIDE`] pixels on its long side: the log of its grey
+//! level, box-averaged down, minus a local box average (the lights' smooth pattern goes, the texture stays). The
+//! per-pixel median of those images over the sequence, the part that stays in the frame (vignetting residue,
+//! overlays, laser dots), is subtracted when the sequence has at least 15 photos, so it cannot pull the match
+//! to zero shift. Consecutive texture images are matched by phase correlation (FFT of a Hann-windowed copy,
+//! normalised cross-power spectrum, peak refined to sub-pixel by a parabola through its neighbours). A match is
+//! accepted only when the photos overlap over at least [`MIN_OVERLAP`] of their area and the texture images
+//! correlate there (normalised cross-correlation at least [`MIN_NCC`]); unrelated photos fail that test. The
+//! placements are chained along the sequence; after a rejected pair a new chain starts far away, so photos of
+//! different chains never share a mosaic cell.
+//!
+//! The FFT is written out (radix 2, on power-of-two sizes the texture images are padded to): at 256–512 pixels a
+//! side it is a few dozen lines and fast enough (milliseconds a pair), so no FFT crate is added.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::eval::evaluate::Placement;
+use crate::method::raster::Raster;
+
+/// Long side, in pixels, of the texture images photos are matched on (at least; the reduction is an integer).
+pub const TARGET_SIDE: usize = 256;
+/// Smallest overlap (share of the photo's area) of an accepted match.
+pub const MIN_OVERLAP: f64 = 0.2;
+/// Smallest normalised cross-correlation of the texture images over the overlap of an accepted match.
+pub const MIN_NCC: f64 = 0.25;
+/// Vertical distance, in photo heights, between chains of placements that could not be joined.
+const CHAIN_GAP: f64 = 100.0;
+
+/// A texture image prepared for matching.
+#[derive(Debug, Clone)]
+pub struct Texture {
+    pub width: usize,
+    pub height: usize,
+    /// Pixels of the reduced photo per pixel of the texture image.
+    pub scale: usize,
+    pub data: Vec<f32>,
+}
+
+/// Result of matching one photo against the previous one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Match {
+    /// Shift `(dx, dy)` in full-resolution pixels: a point at `(u, v)` in the first photo is at `(u + dx, v + dy)`
+    /// in the second.
+    pub shift: (f64, f64),
+    /// Normalised cross-correlation of the texture images over the overlap.
+    pub ncc: f64,
+    /// Overlap, as a share of the photo's area.
+    pub overlap: f64,
+    /// Whether the match passed the confidence test.
+    pub accepted: bool,
+}
+
+/// Reduction factor giving a long side of at least [`TARGET_SIDE`] (1 for small photos).
+pub fn reduction(width: usize, height: usize) -> usize {
+    (width.max(height) / TARGET_SIDE).max(1)
+}
+
+/// The texture image of a photo (any channels, linear or not: only the log of its grey level's local contrast
+/// counts), reduced by `scale`.
+pub fn texture(photo: &Raster, scale: usize) -> Texture {
+    let (w, h) = (photo.width / scale, photo.height / scale);
+    let c = photo.channels;
+    let mut grey = vec![0.0f32; w * h];
+    for (y, row) in grey.chunks_exact_mut(w.max(1)).enumerate().take(h) {
+        for (x, g) in row.iter_mut().enumerate() {
+            let mut s = 0.0f32;
+            for yy in y * scale..(y + 1) * scale {
+                let line = photo.row(yy);
+                for v in &line[x * scale * c..(x + 1) * scale * c] {
+                    s += v;
+                }
+            }
+            *g = s / (scale * scale * c) as f32;
+        }
+    }
+    let mut sorted: Vec<f32> = grey.iter().copied().filter(|v| v.is_finite()).collect();
+    let floor = if sorted.is_empty() {
+        1e-6
+    } else {
+        let at = (sorted.len() - 1) * 99 / 100;
+        (0.02 * *sorted.select_nth_unstable_by(at, f32::total_cmp).1).max(1e-6)
+    };
+    let log: Vec<f32> = grey.iter().map(|&v| v.max(floor).ln()).collect();
+    let r = (w.max(h) / 32).max(2);
+    let smooth = box_blur(&log, w, h, r);
+    Texture {
+        width: w,
+        height: h,
+        scale,
+        data: log.iter().zip(&smooth).map(|(a, b)| a - b).collect(),
+    }
+}
+
+/// Mean over the clamped `(2r + 1)²` square (separable running sums).
+fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| -> Vec<f32> {
+        let mut out = vec![0.0f32; src.len()];
+        for k in 0..count {
+            let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
+            let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
+            for i in 0..len as isize {
+                out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
+                acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
+            }
+        }
+        out
+    };
+    let rows = pass(v, w, 1, h, w);
+    pass(&rows, h, w, w, 1)
+}
+
+/// Photos a sequence needs before its fixed pattern is removed: the median of fewer, overlapping texture images
+/// still holds their texture, and subtracting it puts a common component into every image (a false peak at zero
+/// shift; seen on a synthetic five-photo sequence).
+pub const FIXED_PATTERN_PHOTOS: usize = 15;
+
+/// Subtract the per-pixel median over the sequence (what stays in the frame), when it has at least
+/// [`FIXED_PATTERN_PHOTOS`] images of one size.
+pub fn remove_fixed_pattern(textures: &mut [Texture]) {
+    if textures.len() < FIXED_PATTERN_PHOTOS
+        || textures
+            .iter()
+            .any(|t| t.data.len() != textures[0].data.len())
+    {
+        return;
+    }
+    let n = textures[0].data.len();
+    let mut column = Vec::with_capacity(textures.len());
+    let median: Vec<f32> = (0..n)
+        .map(|i| {
+            column.clear();
+            column.extend(textures.iter().map(|t| t.data[i]));
+            let mid = column.len() / 2;
+            *column.select_nth_unstable_by(mid, f32::total_cmp).1
+        })
+        .collect();
+    for t in textures {
+        for (v, m) in t.data.iter_mut().zip(&median) {
+            *v -= m;
+        }
+    }
+}
+
+/// In-place radix-2 FFT of `re`/`im` (length a power of two); `inverse` without the `1/n` factor.
+fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
+    let n = re.len();
+    debug_assert!(n.is_power_of_two());
+    let mut j = 0;
+    for i in 1..n {
+        let mut bit = n >> 1;
+        while j & bit != 0 {
+            j ^= bit;
+            bit >>= 1;
+        }
+        j |= bit;
+        if i < j {
+            re.swap(i, j);
+            im.swap(i, j);
+        }
+    }
+    let sign = if inverse { 1.0 } else { -1.0 };
+    let mut len = 2;
+    while len <= n {
+        let ang = sign * std::f64::consts::TAU / len as f64;
+        for start in (0..n).step_by(len) {
+            for k in 0..len / 2 {
+                let (wr, wi) = ((ang * k as f64).cos(), (ang * k as f64).sin());
+                let (a, b) = (start + k, start + k + len / 2);
+                let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
+                re[b] = re[a] - xr;
+                im[b] = im[a] - xi;
+                re[a] += xr;
+                im[a] += xi;
+            }
+        }
+        len <<= 1;
+    }
+}
+
+/// 2-D FFT of a row-major `w`×`h` complex image (both powers of two).
+fn fft2(re: &mut [f64], im: &mut [f64], w: usize, h: usize, inverse: bool) {
+    for y in 0..h {
+        fft(
+            &mut re[y * w..(y + 1) * w],
+            &mut im[y * w..(y + 1) * w],
+            inverse,
+        );
+    }
+    let (mut cr, mut ci) = (vec![0.0; h], vec![0.0; h]);
+    for x in 0..w {
+        for y in 0..h {
+            cr[y] = re[y * w + x];
+            ci[y] = im[y * w + x];
+        }
+        fft(&mut cr, &mut ci, inverse);
+        for y in 0..h {
+            re[y * w + x] = cr[y];
+            im[y * w + x] = ci[y];
+        }
+    }
+}
+
+/// Spectrum of a texture image, Hann-windowed and zero-padded to `(pw, ph)`.
+fn spectrum(t: &Texture, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>) {
+    let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
+    let mean = t.data.iter().map(|&v| v as f64).sum::<f64>() / t.data.len().max(1) as f64;
+    let hann = |i: usize, n: usize| {
+        0.5 - 0.5 * (std::f64::consts::TAU * (i as f64 + 0.5) / n as f64).cos()
+    };
+    for y in 0..t.height {
+        for x in 0..t.width {
+            re[y * pw + x] =
+                (t.data[y * t.width + x] as f64 - mean) * hann(x, t.width) * hann(y, t.height);
+        }
+    }
+    fft2(&mut re, &mut im, pw, ph, false);
+    let _ = &mut im;
+    (re, im)
+}
+
+/// Normalised cross-correlation of `a` and `b` over their overlap when `b` is `a` shifted by `(dx, dy)` texture
+/// pixels (`b(x + dx, y + dy) ≈ a(x, y)`), and the overlap's share of the area.
+pub fn overlap_ncc(a: &Texture, b: &Texture, dx: isize, dy: isize) -> (f64, f64) {
+    let (w, h) = (a.width as isize, a.height as isize);
+    let (x0, x1) = (0.max(-dx), w.min(w - dx));
+    let (y0, y1) = (0.max(-dy), h.min(h - dy));
+    if x1 <= x0 || y1 <= y0 {
+        return (0.0, 0.0);
+    }
+    let (mut sa, mut sb, mut saa, mut sbb, mut sab, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0f64);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let va = a.data[(y * w + x) as usize] as f64;
+            let vb = b.data[((y + dy) * w + x + dx) as usize] as f64;
+            sa += va;
+            sb += vb;
+            saa += va * va;
+            sbb += vb * vb;
+            sab += va * vb;
+            n += 1.0;
+        }
+    }
+    let cov = sab - sa * sb / n;
+    let va = (saa - sa * sa / n).max(0.0);
+    let vb = (sbb - sb * sb / n).max(0.0);
+    let ncc = if va > 0.0 && vb > 0.0 {
+        cov / (va * vb).sqrt()
+    } else {
+        0.0
+    };
+    (ncc, n / (w * h) as f64)
+}
+
+/// Match texture image `b` against `a` (same size) by phase correlation; see [`Match`].
+pub fn match_pair(a: &Texture, b: &Texture) -> Match {
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "texture sizes differ"
+    );
+    let (pw, ph) = (a.width.next_power_of_two(), a.height.next_power_of_two());
+    let (ar, ai) = spectrum(a, pw, ph);
+    let (br, bi) = spectrum(b, pw, ph);
+    // conj(A)·B / |A·B|: its inverse peaks at the shift of b against a.
+    let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
+    for i in 0..pw * ph {
+        let (r, m) = (ar[i] * br[i] + ai[i] * bi[i], ar[i] * bi[i] - ai[i] * br[i]);
+        let mag = (r * r + m * m).sqrt();
+        if mag > 1e-20 {
+            re[i] = r / mag;
+            im[i] = m / mag;
+        }
+    }
+    fft2(&mut re, &mut im, pw, ph, true);
+    let best = (0..pw * ph)
+        .max_by(|&i, &j| re[i].total_cmp(&re[j]))
+        .unwrap_or(0);
+    let (px, py) = (best % pw, best / pw);
+    let at = |x: isize, y: isize| {
+        re[(y.rem_euclid(ph as isize) as usize) * pw + x.rem_euclid(pw as isize) as usize]
+    };
+    let refine = |l: f64, c: f64, r: f64| {
+        let d = l - 2.0 * c + r;
+        if d < 0.0 {
+            (0.5 * (l - r) / d).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        }
+    };
+    let (xi, yi) = (px as isize, py as isize);
+    let fx = refine(at(xi - 1, yi), at(xi, yi), at(xi + 1, yi));
+    let fy = refine(at(xi, yi - 1), at(xi, yi), at(xi, yi + 1));
+    let wrap = |p: isize, n: usize| {
+        if p > n as isize / 2 {
+            p - n as isize
+        } else {
+            p
+        }
+    };
+    let (dx, dy) = (wrap(xi, pw), wrap(yi, ph));
+    let (ncc, overlap) = overlap_ncc(a, b, dx, dy);
+    let s = a.scale as f64;
+    Match {
+        shift: ((dx as f64 + fx) * s, (dy as f64 + fy) * s),
+        ncc,
+        overlap,
+        accepted: overlap >= MIN_OVERLAP && ncc >= MIN_NCC,
+    }
+}
+
+/// What [`register`] found: one placement per photo (translations, in full-resolution pixels) and the match of
+/// each photo against the previous one (`None` for the first).
+#[derive(Debug, Clone)]
+pub struct Registration {
+    pub placements: Vec<Placement>,
+    pub matches: Vec<Option<Match>>,
+}
+
+impl Registration {
+    /// Pairs accepted, of pairs tried.
+    pub fn accepted(&self) -> (usize, usize) {
+        let tried = self.matches.iter().flatten().count();
+        let ok = self.matches.iter().flatten().filter(|m| m.accepted).count();
+        (ok, tried)
+    }
+}
+
+/// Register a sequence of photos (in order; all of one size): chain the accepted consecutive matches into
+/// placements. `names` label the placements.
+pub fn register_rasters(names: &[String], photos: &[Raster]) -> Registration {
+    assert_eq!(names.len(), photos.len(), "one name per photo");
+    let Some(first) = photos.first() else {
+        return Registration {
+            placements: Vec::new(),
+            matches: Vec::new(),
+        };
+    };
+    let scale = reduction(first.width, first.height);
+    let mut textures: Vec<Texture> = photos.par_iter().map(|p| texture(p, scale)).collect();
+    remove_fixed_pattern(&mut textures);
+    chain(names, &textures, first.height as f64)
+}
+
+/// Register the photos of a folder (found as `correct` finds them), decoded in order, `transfer` undone. Photos
+/// of another size than the first are left out with a warning on stderr.
+pub fn register_folder(
+    dir: &Path,
+    transfer: crate::method::transfer::Transfer,
+) -> Result<Registration> {
+    let found = crate::io::find_photos(dir)?;
+    let names: Vec<String> = found
+        .photos
+        .iter()
+        .map(|e| e.relative.to_string_lossy().replace('\\', "/"))
+        .collect();
+    // Decode and reduce one photo at a time (in parallel), keeping only the small texture images.
+    let loaded: Vec<Result<(usize, usize, Texture)>> = found
+        .photos
+        .par_iter()
+        .map(|e| {
+            let r = crate::eval::evaluate::load_linear(&e.path, transfer)?;
+            let scale = reduction(r.width, r.height);
+            Ok((r.width, r.height, texture(&r, scale)))
+        })
+        .collect();
+    let mut kept_names = Vec::new();
+    let mut textures = Vec::new();
+    let mut size = None;
+    for (name, l) in names.into_iter().zip(loaded) {
+        let (w, h, t) = l?;
+        match size {
+            None => size = Some((w, h)),
+            Some(s) if s != (w, h) => {
+                eprintln!(
+                    "abysslight: {name} is {w}x{h}, not {}x{}: left out of the registration",
+                    s.0, s.1
+                );
+                continue;
+            }
+            _ => {}
+        }
+        kept_names.push(name);
+        textures.push(t);
+    }
+    remove_fixed_pattern(&mut textures);
+    Ok(chain(
+        &kept_names,
+        &textures,
+        size.map_or(1.0, |s| s.1 as f64),
+    ))
+}
+
+fn chain(names: &[String], textures: &[Texture], height: f64) -> Registration {
+    let matches: Vec<Option<Match>> = (0..textures.len())
+        .into_par_iter()
+        .map(|i| (i > 0).then(|| match_pair(&textures[i - 1], &textures[i])))
+        .collect();
+    let mut placements = Vec::with_capacity(names.len());
+    let (mut tx, mut ty, mut chains) = (0.0f64, 0.0f64, 0usize);
+    for (name, m) in names.iter().zip(&matches) {
+        match m {
+            Some(m) if m.accepted => {
+                // Photo pixel (u, v) of the previous photo is at (u + dx, v + dy) here; both at one mosaic point.
+                tx -= m.shift.0;
+                ty -= m.shift.1;
+            }
+            Some(_) => {
+                chains += 1;
+                tx = 0.0;
+                ty = chains as f64 * CHAIN_GAP * height;
+            }
+            None => {}
+        }
+        placements.push(Placement {
+            name: name.clone(),
+            h: [1.0, 0.0, tx, 0.0, 1.0, ty, 0.0, 0.0, 1.0],
+        });
+    }
+    Registration {
+        placements,
+        matches,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic pseudo-random texture: smooth blobs of several sizes (sums of hashed lattice values).
+    fn terrain(seed: u64, x: f64, y: f64) -> f64 {
+        let hash = |i: i64, j: i64, k: u64| {
+            let mut v = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+                ^ k.wrapping_mul(0x1656_67B1_9E37_79F9)
+                ^ seed;
+            v ^= v >> 29;
+            v = v.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            v ^= v >> 32;
+            (v % 10_000) as f64 / 10_000.0
+        };
+        let mut s = 0.0;
+        for (k, cell) in [3.0f64, 7.0, 17.0].iter().enumerate() {
+            let (gx, gy) = (x / cell, y / cell);
+            let (i, j) = (gx.floor() as i64, gy.floor() as i64);
+            let (fx, fy) = (gx - gx.floor(), gy - gy.floor());
+            let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+            let k = k as u64;
+            let a = hash(i, j, k) + (hash(i + 1, j, k) - hash(i, j, k)) * sx;
+            let b = hash(i, j + 1, k) + (hash(i + 1, j + 1, k) - hash(i, j + 1, k)) * sx;
+            s += a + (b - a) * sy;
+        }
+        s
+    }
+
+    /// A photo of the terrain seen from `(ox, oy)`, under a co-moving light cone.
+    fn photo(seed: u64, ox: f64, oy: f64, w: usize, h: usize) -> Raster {
+        Raster::from_fn(w, h, 3, |x, y, c| {
+            let (dx, dy) = (x as f64 - w as f64 / 2.0, y as f64 - h as f64 / 2.0);
+            let cone = 0.2 + (-(dx * dx + dy * dy) / (0.3 * (w * w) as f64)).exp();
+            let a = 0.3 + 0.2 * terrain(seed, x as f64 + ox, y as f64 + oy);
+            (cone * a * [1.0, 0.9, 0.7][c]) as f32
+        })
+    }
+
+    /// Brute-force DFT of a short complex sequence.
+    fn dft(re: &[f64], im: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let n = re.len();
+        let mut out = (vec![0.0; n], vec![0.0; n]);
+        for k in 0..n {
+            for t in 0..n {
+                let a = -std::f64::consts::TAU * (k * t) as f64 / n as f64;
+                out.0[k] += re[t] * a.cos() - im[t] * a.sin();
+                out.1[k] += re[t] * a.sin() + im[t] * a.cos();
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn fft_matches_the_direct_sum_and_inverts() {
+        let n = 16;
+        let re: Vec<f64> = (0..n).map(|i| ((i * 7) % 5) as f64 - 1.3).collect();
+        let im: Vec<f64> = (0..n).map(|i| ((i * 3) % 4) as f64 * 0.5).collect();
+        let (wr, wi) = dft(&re, &im);
+        let (mut r, mut m) = (re.clone(), im.clone());
+        fft(&mut r, &mut m, false);
+        for k in 0..n {
+            assert!((r[k] - wr[k]).abs() < 1e-9 && (m[k] - wi[k]).abs() < 1e-9);
+        }
+        fft(&mut r, &mut m, true);
+        for k in 0..n {
+            assert!((r[k] / n as f64 - re[k]).abs() < 1e-9);
+            assert!((m[k] / n as f64 - im[k]).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn box_blur_matches_brute_force() {
+        let (w, h, r) = (11usize, 7usize, 2usize);
+        let v: Vec<f32> = (0..w * h).map(|i| ((i * 13) % 7) as f32).collect();
+        let got = box_blur(&v, w, h, r);
+        for y in 0..h {
+            for x in 0..w {
+                let mut s = 0.0;
+                for dy in -(r as isize)..=r as isize {
+                    for dx in -(r as isize)..=r as isize {
+                        let sx = (x as isize + dx).clamp(0, w as isize - 1) as usize;
+                        let sy = (y as isize + dy).clamp(0, h as isize - 1) as usize;
+                        s += v[sy * w + sx];
+                    }
+                }
+                let want = s / ((2 * r + 1) * (2 * r + 1)) as f32;
+                assert!((got[y * w + x] - want).abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn recovers_a_known_shift_and_rejects_unrelated_photos() {
+        let (w, h) = (320, 200);
+        // The camera moves by (23, -41) pixels: a ground point at (u, v) in the first photo is at (u − 23, v + 41)
+        // in the second.
+        let (mx, my) = (23.0, -41.0);
+        let a = photo(7, 0.0, 0.0, w, h);
+        let b = photo(7, mx, my, w, h);
+        let scale = reduction(w, h);
+        assert_eq!(scale, 1);
+        let m = match_pair(&texture(&a, scale), &texture(&b, scale));
+        assert!(m.accepted, "{m:?}");
+        assert!(
+            (m.shift.0 + mx).abs() < 0.6 && (m.shift.1 + my).abs() < 0.6,
+            "{m:?}"
+        );
+        // Another stretch of ground: no overlap, the test rejects it.
+        let c = photo(99, 5000.0, 3000.0, w, h);
+        let m = match_pair(&texture(&a, scale), &texture(&c, scale));
+        assert!(!m.accepted, "{m:?}");
+        // Chained over a sequence: placements agree with the truth up to the
+        // first photo's position, and a break in the sequence starts a new chain far away.
+        let offsets = [(0.0, 0.0), (10.0, 35.0), (25.0, 70.0), (31.0, 112.0)];
+        let mut photos: Vec<Raster> = offsets.iter().map(|&(x, y)| photo(3, x, y, w, h)).collect();
+        photos.push(photo(11, 9000.0, 0.0, w, h));
+        let names: Vec<String> = (0..photos.len()).map(|i| format!("{i}.png")).collect();
+        let reg = register_rasters(&names, &photos);
+        assert_eq!(reg.accepted(), (3, 4), "{:?}", reg.matches);
+        for (p, &(x, y)) in reg.placements.iter().zip(&offsets) {
+            assert!(
+                (p.h[2] - x).abs() < 1.0 && (p.h[5] - y).abs() < 1.0,
+                "{p:?}"
+            );
+        }
+        assert!(reg.placements[4].h[5] > 50.0 * h as f64);
+    }
+
+    #[test]
+    fn recovers_a_shift_at_reduced_resolution() {
+        let (w, h) = (600, 420);
+        let a = photo(5, 0.0, 0.0, w, h);
+        let b = photo(5, -60.0, 34.0, w, h);
+        let scale = reduction(w, h);
+        assert_eq!(scale, 2);
+        let m = match_pair(&texture(&a, scale), &texture(&b, scale));
+        assert!(m.accepted, "{m:?}");
+        assert!(
+            (m.shift.0 - 60.0).abs() < 1.5 && (m.shift.1 + 34.0).abs() < 1.5,
+            "{m:?}"
+        );
+    }
+}
