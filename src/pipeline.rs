@@ -990,6 +990,14 @@ impl Ctx<'_> {
                     .join(&entry.relative)
                     .with_extension("png");
                 io::save_raster_png16(&lit, &p)?;
+                // Issue 15: an 8-bit, enlarged preview beside the 16-bit data, for people to look at.
+                let preview =
+                    crate::overview::factor_preview(&lit, crate::overview::PREVIEW_MIN_WIDTH);
+                let pp = work_dir
+                    .join("factors-preview")
+                    .join(&entry.relative)
+                    .with_extension("png");
+                crate::overview::save_png(&preview, &pp)?;
             }
             let t = Instant::now();
             let l = w.photo.layout;
