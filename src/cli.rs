@@ -664,10 +664,12 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
                 .map_err(|e| Error::Usage(format!("cannot install the signal handler: {e}")))?;
         }
     }
+    // A batch run into a folder (not --watch, not a pipe: --resume is for these only).
+    let piped = |p: &Option<PathBuf>| p.as_deref() == Some(Path::new("-"));
     let batch_out = opts
         .out
         .clone()
-        .filter(|o| !opts.watch && o.as_os_str() != "-");
+        .filter(|_| !opts.watch && !piped(&opts.survey) && !piped(&opts.out));
     if let Some(out) = &batch_out {
         crate::cli_extras::hint_on_interrupt()?;
         if !args.quiet {
