@@ -104,12 +104,13 @@ fn interrupted_hint(sig: i32) -> String {
 
 /// After the summary line: the first flagged photos by name and reason, and where to look.
 pub fn print_flagged(report: &Report, out: Option<&Path>) {
-    for line in flagged_lines(report, out) {
+    let survey = report.options.survey.as_deref();
+    for line in flagged_lines(report, survey, out) {
         eprintln!("abysslight: {line}");
     }
 }
 
-fn flagged_lines(report: &Report, out: Option<&Path>) -> Vec<String> {
+fn flagged_lines(report: &Report, survey: Option<&Path>, out: Option<&Path>) -> Vec<String> {
     let flagged: Vec<_> = report
         .frames
         .iter()
@@ -123,7 +124,11 @@ fn flagged_lines(report: &Report, out: Option<&Path>) -> Vec<String> {
         lines.push(format!(
             "  flagged #{} {}: {}",
             f.index + 1,
-            f.input.display(),
+            // Relative to the survey folder: the name the user knows (and the output's), without a long prefix.
+            survey
+                .and_then(|s| f.input.strip_prefix(s).ok())
+                .unwrap_or(&f.input)
+                .display(),
             f.health.flags.join("; ")
         ));
     }

@@ -377,7 +377,7 @@ fn previews_sheet_summary_and_rerun_note() {
     // The closing summary names the flagged photos and where to look.
     for name in ["img1.png", "img2.png", "img3.png"] {
         assert!(
-            err.contains(&format!("flagged #")) && err.contains(name),
+            err.contains("flagged #") && err.contains(name),
             "{name}: {err}"
         );
     }
