@@ -194,3 +194,302 @@ fn plain_log_lines_when_not_on_a_terminal() {
         "missing water column is warned about: {err}"
     );
 }
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Headings of a clap help text: unindented lines ending in ':' ("Inputs:", "Run control:").
+fn headings(help: &str) -> Vec<String> {
+    help.lines()
+        .filter(|l| !l.starts_with(' ') && l.ends_with(':'))
+        .map(|l| l.trim_end_matches(':').to_string())
+        .collect()
+}
+
+#[test]
+fn correct_help_groups_options_shows_required_arguments_and_examples() {
+    let d = tempfile::tempdir().unwrap();
+    let short = stdout(&abysslight(&["correct", "-h"], d.path()));
+    let long = stdout(&abysslight(&["correct", "--help"], d.path()));
+    for h in [&short, &long] {
+        let found = headings(h);
+        for want in ["Inputs", "Outputs", "Method", "Monitoring", "Run control"] {
+            assert!(found.iter().any(|f| f == want), "no {want:?} in {found:?}");
+        }
+        assert!(
+            h.contains("Usage: abysslight correct [OPTIONS] --survey DIR --out DIR"),
+            "{h}"
+        );
+        assert!(h.contains("--resume"), "exit status 130 says how to go on");
+    }
+    // -h: one line per option; --help: paragraphs and examples.
+    assert!(!short.contains("Examples:"), "{short}");
+    assert!(long.contains("Examples:"), "{long}");
+    assert!(
+        long.contains("byte-identical"),
+        "long help has the paragraphs"
+    );
+    assert!(!short.contains("byte-identical"));
+    assert!(long.len() > short.len() * 3 / 2);
+    // The old spellings still work.
+    assert!(long.contains("--seafloor-color"));
+}
+
+#[test]
+fn each_subcommand_has_its_own_help_and_the_top_level_lists_them() {
+    let d = tempfile::tempdir().unwrap();
+    let scatter = stdout(&abysslight(&["scatter", "--help"], d.path()));
+    assert!(scatter.contains("water-column"), "{scatter}");
+    for correct_only in ["every photo was corrected", "report.json", "--resume"] {
+        assert!(!scatter.contains(correct_only), "{correct_only}: {scatter}");
+    }
+    let top = abysslight(&["--help"], d.path());
+    assert!(top.status.success());
+    let top = stdout(&top);
+    for sub in [
+        "correct",
+        "window",
+        "scatter",
+        "sheet",
+        "bench",
+        "simulate",
+        "evaluate",
+        "demo",
+        "completions",
+        "manpage",
+    ] {
+        let line = top
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{sub} ")))
+            .unwrap_or_else(|| panic!("{sub} not listed: {top}"));
+        assert!(
+            line.split_whitespace().count() > 3,
+            "{sub} has a description: {line}"
+        );
+    }
+}
+
+#[test]
+fn completions_and_manpage_come_from_the_same_definition() {
+    let d = tempfile::tempdir().unwrap();
+    let bash = abysslight(&["completions", "bash"], d.path());
+    assert!(bash.status.success(), "{}", stderr(&bash));
+    let bash = stdout(&bash);
+    assert!(
+        bash.contains("correct") && bash.contains("--survey") && bash.contains("complete"),
+        "{bash}"
+    );
+    for shell in ["zsh", "fish", "powershell", "elvish"] {
+        let o = abysslight(&["completions", shell], d.path());
+        assert!(o.status.success(), "{shell}: {}", stderr(&o));
+        assert!(stdout(&o).contains("water-column"), "{shell}");
+    }
+    assert_eq!(
+        abysslight(&["completions", "tcsh"], d.path()).status.code(),
+        Some(2)
+    );
+    let man = abysslight(&["manpage"], d.path());
+    assert!(man.status.success());
+    let man = stdout(&man);
+    assert!(man.contains(".TH") && man.contains("correct"), "{man}");
+    let man = stdout(&abysslight(&["manpage", "correct"], d.path()));
+    assert!(man.contains(".TH") && man.contains("correct"), "{man}");
+    assert!(man.contains("survey"), "{man}");
+    let o = abysslight(&["manpage", "nonsense"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("nonsense"));
+}
+
+/// Every flag in README's options table is one `correct --help` knows, and the other way round.
+#[test]
+fn readme_options_table_matches_correct_help() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let table = readme
+        .split("## `abysslight correct` options")
+        .nth(1)
+        .expect("README has the options table")
+        .split("\n## ")
+        .next()
+        .unwrap();
+    let flags_in = |text: &str| -> Vec<String> {
+        let mut v: Vec<String> = text
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+            .filter(|w| w.starts_with("--") && w.len() > 2)
+            .map(String::from)
+            .collect();
+        v.sort();
+        v.dedup();
+        v
+    };
+    let rows: String = table
+        .lines()
+        .filter(|l| l.starts_with("| `-"))
+        .map(|l| l.split('|').nth(1).unwrap().to_string() + "\n")
+        .collect();
+    let readme_flags = flags_in(&rows);
+    assert!(readme_flags.len() > 20, "{readme_flags:?}");
+    let d = tempfile::tempdir().unwrap();
+    let help = stdout(&abysslight(&["correct", "--help"], d.path()));
+    let help_flags: Vec<String> = help
+        .lines()
+        .map(str::trim_start)
+        .filter(|l| l.starts_with("--") || l.starts_with("-j") || l.starts_with("-q"))
+        .flat_map(|l| flags_in(l.split("  ").next().unwrap()))
+        .filter(|f| f != "--help" && f != "--version")
+        .collect();
+    for f in &readme_flags {
+        assert!(
+            help_flags.contains(f),
+            "README lists {f}, correct --help does not"
+        );
+    }
+    for f in &help_flags {
+        assert!(
+            readme_flags.contains(f),
+            "correct --help has {f}, README's table does not"
+        );
+    }
+}
+
+#[test]
+fn previews_sheet_summary_and_rerun_note() {
+    let d = tempfile::tempdir().unwrap();
+    // Three photos and the default window of 7: every photo is flagged ("too few photos for the window").
+    let dive = dive(48, 32, 3, 3, 0.1, false, 8);
+    write_all(&dive.water, &d.path().join("water"), "w", "png");
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    let args = [
+        "correct",
+        "--water-column",
+        "water",
+        "--survey",
+        "survey",
+        "--out",
+        "out",
+        "--save-factors",
+    ];
+    let o = abysslight(&args, d.path());
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("note:"), "a new folder needs no note: {err}");
+    // The closing summary names the flagged photos and where to look.
+    for name in ["img1.png", "img2.png", "img3.png"] {
+        assert!(
+            err.contains("flagged #") && err.contains(name),
+            "{name}: {err}"
+        );
+    }
+    assert!(
+        err.contains("report.json") && err.contains("overview.png"),
+        "{err}"
+    );
+    // 16-bit data one pixel per block, and an 8-bit preview at least 640 wide.
+    let data = image::open(d.path().join("out/_abysslight/factors/img2.png")).unwrap();
+    assert_eq!((data.width(), data.height()), (6, 4));
+    assert!(matches!(data, image::DynamicImage::ImageRgb16(_)));
+    let preview = image::open(d.path().join("out/_abysslight/factors-preview/img2.png")).unwrap();
+    assert!(matches!(preview, image::DynamicImage::ImageRgb8(_)));
+    assert_eq!((preview.width(), preview.height()), (640, 426));
+    let brightest = preview.to_rgb8().pixels().map(|p| p.0[1]).max().unwrap();
+    assert!(
+        brightest > 200,
+        "scaled to its range, not black: {brightest}"
+    );
+    // A before/after sheet from the CLI: input | corrected | F·C, 3 rows of 200-pixel tiles.
+    let o = abysslight(
+        &[
+            "sheet",
+            "survey",
+            "out",
+            "sheet.png",
+            "--rows",
+            "3",
+            "--width",
+            "200",
+        ],
+        d.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sheet = image::open(d.path().join("sheet.png")).unwrap();
+    assert!(
+        sheet.width() >= 3 * 200 && sheet.height() >= 3 * 133,
+        "{:?}",
+        (sheet.width(), sheet.height())
+    );
+    let o = abysslight(&["sheet", "nowhere", "out", "s.png"], d.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("nowhere"));
+    // Running again into the same folder says what happens to what is there.
+    let err = stderr(&abysslight(&args, d.path()));
+    assert!(
+        err.contains("note:") && err.contains("overwritten"),
+        "{err}"
+    );
+    let mut resume = args.to_vec();
+    resume.push("--resume");
+    let err = stderr(&abysslight(&resume, d.path()));
+    assert!(
+        err.contains("note:") && err.contains("--resume keeps"),
+        "{err}"
+    );
+}
+
+/// Deterministic: `--scatter` names a FIFO nobody writes to, so the run blocks opening it; the note on the
+/// non-empty output folder is printed once the handler is installed, and then Ctrl-C comes.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_in_a_batch_run_says_how_to_resume_and_exits_130() {
+    use std::io::{BufRead, BufReader};
+    let d = tempfile::tempdir().unwrap();
+    let dive = dive(32, 24, 4, 0, 0.1, false, 9);
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    std::fs::create_dir(d.path().join("out")).unwrap();
+    std::fs::write(d.path().join("out/earlier.txt"), b"x").unwrap();
+    let fifo = Command::new("mkfifo")
+        .arg(d.path().join("s.fifo"))
+        .status()
+        .unwrap();
+    assert!(fifo.success());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_abysslight"))
+        .args([
+            "correct",
+            "--scatter",
+            "s.fifo",
+            "--survey",
+            "survey",
+            "--out",
+            "out",
+        ])
+        .current_dir(d.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut log = String::new();
+    for l in lines.by_ref() {
+        let l = l.unwrap();
+        log += &l;
+        log.push('\n');
+        if l.contains("note:") {
+            break;
+        }
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    for l in lines {
+        log += &l.unwrap();
+        log.push('\n');
+    }
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130), "{log}");
+    assert!(
+        log.contains("interrupted (Ctrl-C)")
+            && log.contains("run the same command again with --resume"),
+        "{log}"
+    );
+}

@@ -1,5 +1,7 @@
 //! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
 
+mod extras;
+
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -7,7 +9,7 @@ use std::sync::Mutex;
 
 use abysslight::run::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Exit status: everything worked.
@@ -18,10 +20,56 @@ const EXIT_SOME_FAILED: u8 = 1;
 const EXIT_USAGE: u8 = 2;
 
 const EXIT_HELP: &str = "\
-EXIT STATUS:
-  0  every photo was corrected
-  1  the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
-  2  bad usage or a fatal error (nothing, or nothing more, was written)";
+Exit status:
+  0    every photo was corrected
+  1    the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
+  2    bad usage or a fatal error (nothing, or nothing more, was written)
+  130  interrupted (Ctrl-C): run the same command again with --resume to finish";
+
+/// `correct --help`: examples first, then the exit status.
+const CORRECT_LONG_HELP: &str = "\
+Examples:
+  Correct a dive, with S from the frames of the descent:
+    abysslight correct --water-column dive042/descent --survey dive042/survey --out dive042/corrected
+
+  Cluttered terrain, JPEGs from an sRGB camera, pictures to check the estimate:
+    abysslight correct --water-column descent --survey survey --out corrected \\
+        --contamination 0.2 --transfer srgb --save-factors
+
+  Finish an interrupted run (finished photos are skipped, the result is the same):
+    abysslight correct --water-column descent --survey survey --out corrected --resume
+
+  One of 16 array jobs, S computed once with `abysslight scatter`:
+    abysslight correct --scatter scatter.png --survey survey --out corrected --resume --shard 3/16
+
+  Options from a file, one flag overridden:
+    abysslight correct --config dive042.toml --window 9
+
+Afterwards look at <out>/_abysslight/overview.png and flagged.png, and make a before/after sheet with
+`abysslight sheet SURVEY OUT sheet.png`.
+
+Exit status:
+  0    every photo was corrected
+  1    the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
+  2    bad usage or a fatal error (nothing, or nothing more, was written)
+  130  interrupted (Ctrl-C): run the same command again with --resume to finish";
+
+const SCATTER_EXIT_HELP: &str = "\
+Exit status:
+  0  S was estimated from every water-column frame
+  1  S was written, but some frames failed (named on stderr)
+  2  bad usage or a fatal error (nothing was written)";
+
+const TOP_HELP: &str = "\
+Start with `abysslight demo` (a simulated dive, corrected and scored in seconds), then
+`abysslight correct --help`. Exit status 0: all went well, 1: some files failed, 2: bad usage or a fatal error.";
+
+const H_IN: &str = "Inputs";
+const H_OUT: &str = "Outputs";
+const H_METHOD: &str = "Method";
+const H_MON: &str = "Monitoring";
+const H_RUN: &str = "Run control";
+const H_LIVE: &str = "During a dive (--watch)";
 
 /// Remove the lighting of co-moving artificial lights from deep-sea survey photos (Köser et al.).
 ///
@@ -29,7 +77,7 @@ EXIT STATUS:
 /// plus backscatter S. abysslight estimates S from water-column frames, F from a sliding window of survey photos,
 /// and writes A = (I - S) / F. No calibration of lights, water or camera is needed.
 #[derive(Parser, Debug)]
-#[command(name = "abysslight", version = abysslight::io::jpeg::VERSION, after_help = EXIT_HELP, propagate_version = true)]
+#[command(name = "abysslight", version = abysslight::io::jpeg::VERSION, after_help = TOP_HELP, propagate_version = true)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -38,13 +86,19 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Correct a dive: water-column frames + survey photos -> lighting-compensated photos.
-    #[command(after_help = EXIT_HELP)]
+    #[command(
+        override_usage = "abysslight correct [OPTIONS] --survey DIR --out DIR\n       abysslight correct --config FILE.toml [OPTIONS]",
+        after_help = EXIT_HELP,
+        after_long_help = CORRECT_LONG_HELP
+    )]
     Correct(Box<CorrectArgs>),
     /// Print the window size n for a contamination rate, and its breakdown probability P_half.
     Window(WindowArgs),
     /// Estimate the backscatter S from water-column frames once, for --scatter (e.g. before sharded runs).
-    #[command(after_help = EXIT_HELP)]
+    #[command(after_help = SCATTER_EXIT_HELP)]
     Scatter(ScatterArgs),
+    /// Draw a before/after sheet of a corrected folder: input | corrected | F·C, a few photos spread over the dive.
+    Sheet(SheetArgs),
     /// Benchmark: generate a 12 MP JPEG mission in a temp folder and measure correct against decode + encode.
     Bench(BenchArgs),
     /// Render a simulated dive with known albedo (water/, survey/, truth/) for testing and evaluation.
@@ -53,6 +107,52 @@ enum Command {
     Evaluate(EvaluateArgs),
     /// Simulate a small dive, correct it with every method, score them and draw a contact sheet.
     Demo(DemoArgs),
+    /// Print a shell completion script (bash, zsh, fish, powershell, elvish) to stdout.
+    #[command(after_long_help = "\
+Examples:
+  abysslight completions bash > ~/.local/share/bash-completion/completions/abysslight
+  abysslight completions zsh > ~/.zfunc/_abysslight      # with fpath+=(~/.zfunc) in ~/.zshrc
+  abysslight completions fish > ~/.config/fish/completions/abysslight.fish")]
+    Completions(CompletionsArgs),
+    /// Print the manual page (roff) to stdout: abysslight manpage | man -l -
+    #[command(after_long_help = "\
+Examples:
+  abysslight manpage | man -l -
+  abysslight manpage correct > /usr/local/share/man/man1/abysslight-correct.1")]
+    Manpage(ManpageArgs),
+}
+
+#[derive(Args, Debug)]
+struct CompletionsArgs {
+    /// The shell to complete for.
+    #[arg(value_name = "SHELL")]
+    shell: clap_complete::Shell,
+}
+
+#[derive(Args, Debug)]
+struct ManpageArgs {
+    /// A subcommand's page (e.g. correct) instead of the top-level page.
+    #[arg(value_name = "COMMAND")]
+    command: Option<String>,
+}
+
+#[derive(Args, Debug)]
+struct SheetArgs {
+    /// The survey folder that was corrected.
+    #[arg(value_name = "SURVEY")]
+    survey: PathBuf,
+    /// The corrected folder (the --out of correct); F·C is added where --save-factors wrote it.
+    #[arg(value_name = "CORRECTED")]
+    corrected: PathBuf,
+    /// The PNG to write.
+    #[arg(value_name = "SHEET.png")]
+    sheet: PathBuf,
+    /// Photos on the sheet, spread evenly over the dive.
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    rows: usize,
+    /// Width of each picture on the sheet, in pixels.
+    #[arg(long, value_name = "PX", default_value_t = 480)]
+    width: u32,
 }
 
 #[derive(Args, Debug)]
@@ -195,139 +295,180 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 
 #[derive(Args, Debug)]
 struct CorrectArgs {
-    /// Folder of water-column frames taken on the way down (only water in view), for the backscatter S.
-    /// Without it (and without --scatter) S = 0.
-    #[arg(long, value_name = "DIR")]
+    /// Folder of water-column frames (only water in view) for the backscatter S.
+    ///
+    /// Frames taken on the way down, with the lights on and only water and particles in view; their per-pixel
+    /// median is S. Without it (and without --scatter) S = 0 and a warning says so.
+    #[arg(long, value_name = "DIR", help_heading = H_IN)]
     water_column: Option<PathBuf>,
 
-    /// Reuse a scatter image saved by an earlier run with --save-scatter (same rig, other dive).
-    #[arg(long, value_name = "FILE", conflicts_with = "water_column")]
+    /// Reuse a scatter image saved by an earlier run with --save-scatter.
+    ///
+    /// For another dive with the same rig, or shards sharing one S (see `abysslight scatter`).
+    #[arg(long, value_name = "FILE", conflicts_with = "water_column", help_heading = H_IN)]
     scatter: Option<PathBuf>,
 
-    /// Folder of survey photos, searched recursively, processed in natural file-name order; - reads frames
-    /// (binary PPM/PGM or PNG, back to back, e.g. from ffmpeg -f image2pipe) from stdin.
-    #[arg(long, value_name = "DIR")]
+    /// Folder of survey photos (required; - reads frames from stdin).
+    ///
+    /// Searched recursively and processed in natural file-name order (img2 before img10). With - the frames
+    /// (binary PPM/PGM or PNG, back to back, e.g. from ffmpeg -f image2pipe) are read from stdin.
+    #[arg(long, value_name = "DIR", help_heading = H_IN)]
     survey: Option<PathBuf>,
 
-    /// Output folder: mirrors the survey tree (same names, format and bit depth); run files go to _abysslight/.
-    /// With "-" the corrected frames go to stdout in order, in the format they came in (log on stderr, report
-    /// only with --report).
-    #[arg(long, value_name = "DIR")]
+    /// Mask image, white = not seafloor (overlays, laser dots, vehicle parts).
+    ///
+    /// The size of the photos. White pixels are left out of every median and copied unchanged to the output.
+    #[arg(long, value_name = "FILE", help_heading = H_IN)]
+    mask: Option<PathBuf>,
+
+    /// Also mask pixels that stay the same through the mission (overlays, lasers).
+    ///
+    /// The mask found is written to <out>/_abysslight/mask-auto.png, to check and to reuse with --mask.
+    #[arg(long, help_heading = H_IN)]
+    mask_auto: bool,
+
+    /// How stored values relate to light: srgb (most JPEGs), linear or gamma:G [default: linear].
+    ///
+    /// srgb for most JPEG cameras, linear for machine-vision cameras and RAW conversions, gamma:G for a pure
+    /// power law. Estimation and correction run in linear light; the output is stored with the same curve.
+    #[arg(long, value_name = "CURVE", help_heading = H_IN)]
+    transfer: Option<Transfer>,
+
+    /// Options from a TOML file (keys as the long flags); flags override it.
+    ///
+    /// E.g. seafloor-colour = "#8a7560". Relative paths in the file are relative to the file.
+    #[arg(long, value_name = "FILE.toml", help_heading = H_IN)]
+    config: Option<PathBuf>,
+
+    /// Output folder (required; - writes the frames to stdout).
+    ///
+    /// Mirrors the survey tree (same names, format and bit depth); run files go to <out>/_abysslight/. With -
+    /// the corrected frames go to stdout in order, in the format they came in (log on stderr, report only with
+    /// --report).
+    #[arg(long, value_name = "DIR", help_heading = H_OUT)]
     out: Option<PathBuf>,
 
-    /// Watch the survey folder during a dive: correct photos as they arrive (each once the n/2 photos after it
-    /// are complete), until Ctrl-C/SIGTERM or --idle-timeout; then finish the last photos and write the report.
-    /// A file is taken once its size and mtime are unchanged over two scans: writers should rename files into
-    /// place.
-    #[arg(long)]
+    /// JPEG output quality, 1-100 [default: the JPEG input's].
+    ///
+    /// By default each JPEG output gets the quality of its input, estimated from the input's quantisation
+    /// tables (as ImageMagick does), so a corrected dive is about the size of the raw one; 95 for other inputs.
+    #[arg(long, value_name = "Q", help_heading = H_OUT)]
+    jpeg_quality: Option<u8>,
+
+    /// JPEG output chroma subsampling: 444, 422 or 420 [default: the JPEG input's].
+    ///
+    /// By default each JPEG output gets its input's subsampling; 444 for other inputs.
+    #[arg(long, value_name = "444|422|420", help_heading = H_OUT)]
+    jpeg_subsampling: Option<abysslight::io::Subsampling>,
+
+    /// PNG output compression: fast, default or best [default: fast].
+    ///
+    /// Lossless either way; fast writes a 12 MP photo several times quicker for files somewhat larger
+    /// (docs/performance.md). TIFF is written uncompressed.
+    #[arg(long, value_name = "LEVEL", help_heading = H_OUT)]
+    png_compression: Option<abysslight::io::PngCompression>,
+
+    /// Write S as a 16-bit PNG to <out>/_abysslight/scatter.png (reusable with --scatter).
+    #[arg(long, help_heading = H_OUT)]
+    save_scatter: bool,
+
+    /// How the lighting is estimated: paper, mean or polynomial [default: paper].
+    ///
+    /// paper is Köser et al.; the baselines are mean (divide by the mission's mean image) and polynomial
+    /// (per-photo robust polynomial fit of log intensity).
+    #[arg(long, value_name = "METHOD", help_heading = H_METHOD)]
+    method: Option<Method>,
+
+    /// Photos in the sliding window whose median gives F (odd) [default: 7].
+    ///
+    /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
+    /// shadow) at one place in the frame, but follow altitude changes more slowly.
+    #[arg(long, value_name = "N", conflicts_with = "contamination", help_heading = H_METHOD)]
+    window: Option<usize>,
+
+    /// Expected share of non-seafloor pixels (0 to 0.5); sets --window from it.
+    ///
+    /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`).
+    #[arg(long, value_name = "C", help_heading = H_METHOD)]
+    contamination: Option<f64>,
+
+    /// Accepted breakdown probability of the median, for --contamination [default: 0.01].
+    #[arg(long, value_name = "R", help_heading = H_METHOD)]
+    risk: Option<f64>,
+
+    /// Block size K of the spatial median before the temporal median [default: 8].
+    #[arg(long, value_name = "K", help_heading = H_METHOD)]
+    downsample: Option<usize>,
+
+    /// Colour C the seafloor gets after correction (white balance) [default: grey = 0.4].
+    ///
+    /// grey, grey:0.5, 0.42,0.36,0.28, 107,92,71 or #8a7560. The default 0.4 leaves 2.5x headroom for objects
+    /// brighter than the sediment.
+    #[arg(long, value_name = "COLOUR", visible_alias = "seafloor-color", help_heading = H_METHOD)]
+    seafloor_colour: Option<SeafloorColour>,
+
+    /// Smallest F a pixel is divided by [default: 0.05].
+    ///
+    /// Caps the gain in dark corners (at 20x a normally lit pixel for 0.05); the count of floored pixels is
+    /// reported.
+    #[arg(long, value_name = "F", help_heading = H_METHOD)]
+    factor_floor: Option<f32>,
+
+    /// Degree of the polynomial of --method polynomial [default: 4].
+    #[arg(long, value_name = "D", help_heading = H_METHOD)]
+    degree: Option<usize>,
+
+    /// Write each photo's lit seafloor F·C = M - S to <out>/_abysslight/factors/ (and a preview).
+    ///
+    /// factors/ holds 16-bit PNGs, one pixel per KxK block (the data); factors-preview/ holds 8-bit PNGs scaled
+    /// to each photo's range and enlarged to at least 640 pixels wide (for looking at). A seafloor colour change
+    /// or a broken estimate (a window full of rocks) shows up here first.
+    #[arg(long, help_heading = H_MON)]
+    save_factors: bool,
+
+    /// Write the run report (JSON) here [default: <out>/_abysslight/report.json].
+    ///
+    /// With --out - this is the only report.
+    #[arg(long, value_name = "FILE", help_heading = H_MON)]
+    report: Option<PathBuf>,
+
+    /// No progress bar and no log lines (errors are still printed).
+    #[arg(long, short = 'q', help_heading = H_MON)]
+    quiet: bool,
+
+    /// Worker threads [default: all cores].
+    #[arg(long, short = 'j', value_name = "N", help_heading = H_RUN)]
+    threads: Option<usize>,
+
+    /// Skip photos whose output already exists (to finish an interrupted run).
+    ///
+    /// Outputs are only renamed into place when complete. The skipped photos' neighbours are still read, so the
+    /// result is byte-identical to an uninterrupted run.
+    #[arg(long, help_heading = H_RUN)]
+    resume: bool,
+
+    /// Write only chunk K of N contiguous chunks of the survey (K = 1..N).
+    ///
+    /// Reads the neighbours its windows need: the union of all N shards equals one run. For SLURM/PBS array
+    /// jobs and GNU parallel.
+    #[arg(long, value_name = "K/N", help_heading = H_RUN)]
+    shard: Option<Shard>,
+
+    /// Correct photos as they arrive in the survey folder during a dive.
+    ///
+    /// Each photo is corrected once the n/2 photos after it are complete, until Ctrl-C/SIGTERM or
+    /// --idle-timeout; then the last photos are finished and the report written. A file is taken once its size
+    /// and mtime are unchanged over two scans: writers should rename files into place.
+    #[arg(long, help_heading = H_LIVE)]
     watch: bool,
 
     /// With --watch: stop after SECS seconds without a new or changed file [default: never].
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", help_heading = H_LIVE)]
     idle_timeout: Option<f64>,
 
     /// With --watch: milliseconds between two scans of the survey folder [default: 500].
-    #[arg(long, value_name = "MS")]
+    #[arg(long, value_name = "MS", help_heading = H_LIVE)]
     poll_interval: Option<u64>,
-
-    /// Write the run report (JSON) here instead of <out>/_abysslight/report.json (with --out -, the only report).
-    #[arg(long, value_name = "FILE")]
-    report: Option<PathBuf>,
-
-    /// Photos in the sliding window whose median gives F (odd) [default: 7].
-    #[arg(long, value_name = "N", conflicts_with = "contamination")]
-    window: Option<usize>,
-
-    /// Expected share of non-seafloor pixels (0 to 0.5); sets --window to the smallest odd n with P_half <= --risk.
-    #[arg(long, value_name = "C")]
-    contamination: Option<f64>,
-
-    /// Accepted probability that the median breaks down at a pixel, for --contamination [default: 0.01].
-    #[arg(long, value_name = "R")]
-    risk: Option<f64>,
-
-    /// Block size K of the spatial median downsampling before the temporal median [default: 8].
-    #[arg(long, value_name = "K")]
-    downsample: Option<usize>,
-
-    /// Colour C the seafloor gets after correction (white balance): grey, grey:0.5, 0.42,0.36,0.28,
-    /// 107,92,71 or #8a7560 [default: grey = 0.4, leaving headroom for brighter objects].
-    #[arg(long, value_name = "COLOUR", visible_alias = "seafloor-color")]
-    seafloor_colour: Option<SeafloorColour>,
-
-    /// Smallest F a pixel is divided by, so dark corners are not amplified without bound [default: 0.05].
-    #[arg(long, value_name = "F")]
-    factor_floor: Option<f32>,
-
-    /// Write S as a 16-bit PNG to <out>/_abysslight/scatter.png (reusable with --scatter).
-    #[arg(long)]
-    save_scatter: bool,
-
-    /// Write each photo's F·C = M - S (the lit seafloor without backscatter) as a 16-bit PNG, one pixel per
-    /// K×K block, to <out>/_abysslight/factors/.
-    #[arg(long)]
-    save_factors: bool,
-
-    /// JPEG output quality, 1-100 [default: the JPEG input's, estimated from its quantisation tables; 95 for
-    /// other inputs].
-    #[arg(long, value_name = "Q")]
-    jpeg_quality: Option<u8>,
-
-    /// JPEG output chroma subsampling: 444, 422 or 420 [default: the JPEG input's; 444 for other inputs].
-    #[arg(long, value_name = "444|422|420")]
-    jpeg_subsampling: Option<abysslight::io::Subsampling>,
-
-    /// PNG output compression: fast, default or best [default: fast]. Lossless either way; fast writes a 12 MP
-    /// photo several times quicker for files somewhat larger (docs/performance.md). TIFF is written uncompressed.
-    #[arg(long, value_name = "LEVEL")]
-    png_compression: Option<abysslight::io::PngCompression>,
-
-    /// Worker threads [default: all cores].
-    #[arg(long, short = 'j', value_name = "N")]
-    threads: Option<usize>,
-
-    /// How stored values relate to light: srgb (most JPEGs), linear (machine-vision, RAW) or gamma:G.
-    /// Estimation and correction run in linear light [default: linear].
-    #[arg(long, value_name = "CURVE")]
-    transfer: Option<Transfer>,
-
-    /// How the lighting is estimated: paper (Köser et al.), or the baselines mean (divide by the mission's mean
-    /// image) and polynomial (per-photo robust polynomial fit of log intensity) [default: paper].
-    #[arg(long, value_name = "METHOD")]
-    method: Option<Method>,
-
-    /// Degree of the polynomial of --method polynomial [default: 4].
-    #[arg(long, value_name = "D")]
-    degree: Option<usize>,
-
-    /// Mask image the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of
-    /// every median and copied unchanged to the output.
-    #[arg(long, value_name = "FILE")]
-    mask: Option<PathBuf>,
-
-    /// Find pixels that stay the same through the mission (overlays, lasers) and mask them too; the mask found
-    /// is written to <out>/_abysslight/mask-auto.png.
-    #[arg(long)]
-    mask_auto: bool,
-
-    /// Skip photos whose output already exists (outputs are only renamed into place when complete); their
-    /// neighbours are still read, so the result equals an uninterrupted run.
-    #[arg(long)]
-    resume: bool,
-
-    /// Write only chunk K of N contiguous chunks of the survey (K = 1..N), reading the neighbours its windows need:
-    /// the union of all N shards equals one run. For SLURM/PBS array jobs and GNU parallel.
-    #[arg(long, value_name = "K/N")]
-    shard: Option<Shard>,
-
-    /// Options from a TOML file (keys as the long flags, e.g. seafloor-colour = "#8a7560"); flags override it.
-    /// Relative paths in the file are relative to the file.
-    #[arg(long, value_name = "FILE.toml")]
-    config: Option<PathBuf>,
-
-    /// No progress bar and no log lines (errors are still printed).
-    #[arg(long, short = 'q')]
-    quiet: bool,
 }
 
 #[derive(Args, Debug)]
@@ -549,6 +690,18 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
                 .map_err(|e| Error::Usage(format!("cannot install the signal handler: {e}")))?;
         }
     }
+    // A batch run into a folder (not --watch, not a pipe: --resume is for these only).
+    let piped = |p: &Option<PathBuf>| p.as_deref() == Some(Path::new("-"));
+    let batch_out = opts
+        .out
+        .clone()
+        .filter(|_| !opts.watch && !piped(&opts.survey) && !piped(&opts.out));
+    if let Some(out) = &batch_out {
+        extras::hint_on_interrupt()?;
+        if !args.quiet {
+            extras::note_non_empty_out(out, opts.resume);
+        }
+    }
     let console = Console::new(args.quiet);
     let report = abysslight::correct_mission(&opts, &console)?;
     if !args.quiet {
@@ -565,6 +718,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
                 .display()
         );
         eprintln!("abysslight: {}", report.monitor.line(report.corrected));
+        extras::print_flagged(&report, batch_out.as_deref());
         if report.floored_pixels > 0 {
             eprintln!(
                 "abysslight: {} pixels had F below --factor-floor {} (dark corners; their gain was capped)",
@@ -747,6 +901,17 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
     Ok(ExitCode::from(EXIT_OK))
 }
 
+fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
+    let img =
+        abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
+    abysslight::run::pictures::save_png(&img, &a.sheet)?;
+    eprintln!(
+        "abysslight: before/after sheet written to {} (input | corrected | F·C)",
+        a.sheet.display()
+    );
+    Ok(ExitCode::from(EXIT_OK))
+}
+
 fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     let w = choose_window(args.contamination, args.risk)?;
     println!("n = {}", w.n);
@@ -771,6 +936,12 @@ pub fn run() -> ExitCode {
         Command::Simulate(a) => simulate(a),
         Command::Evaluate(a) => evaluate(a),
         Command::Demo(a) => demo(a),
+        Command::Sheet(a) => sheet(a),
+        Command::Completions(a) => {
+            extras::completions(a.shell, &mut Cli::command());
+            Ok(ExitCode::from(EXIT_OK))
+        }
+        Command::Manpage(a) => extras::manpage(Cli::command(), a.command.as_deref()),
     };
     match result {
         Ok(code) => code,

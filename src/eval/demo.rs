@@ -28,6 +28,24 @@ pub struct DemoReport {
     pub seconds: f64,
 }
 
+/// What each column of `scores.md` means, written under the table (definitions as in docs/evaluation.md).
+pub const SCORES_LEGEND: &str = "
+Lower is better in every column. Each method corrected the same simulated dive; the scores compare its output
+with the dive's true albedo (details: docs/evaluation.md in the abysslight repository).
+
+- **method**: `raw` is the uncorrected photos; `mean` divides by the mission's mean image; `polynomial` fits a
+  robust polynomial of log intensity per photo; `paper` is Köser et al. (abysslight's default).
+- **photos**: photos scored.
+- **albedo error**: sum of |corrected - s*true albedo| / sum of s*true albedo over every sample of every photo,
+  with s the least-squares scale per channel (so a white balance is not counted as error). 0 is perfect.
+- **residual pattern**: lighting left in the photos. The frame is cut into 8x6 cells; per cell the median of
+  corrected / (s*true albedo) over all photos; reported is the robust spread of those cell medians
+  (1.4826*MAD / median). 0 means no trace of the light cones.
+- **consistency** (Köser et al.): overlapping photos should show a patch of seafloor alike. Per mosaic cell seen
+  whole by two or more photos, the RMS difference of each photo's mean from the cell's mean, divided by the
+  standard deviation of all pixels. 0 means overlapping photos agree exactly.
+";
+
 /// The dive the demo renders: 30 photos of 320×240 with 20 % nodules.
 pub fn demo_simulation() -> Simulation {
     Simulation::default()
@@ -70,7 +88,7 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
     let scores_md = out.join("scores.md");
     crate::io::write_with(&scores_md, |w| {
         use std::io::Write;
-        w.write_all(evaluation.table().as_bytes())
+        w.write_all(format!("{}{SCORES_LEGEND}", evaluation.table()).as_bytes())
             .map_err(|e| Error::io(&scores_md, e))
     })?;
     // Contact sheet: three photos spread over the dive.
@@ -210,5 +228,49 @@ fn fit_scale(s: &str, width: u32) -> u32 {
         2
     } else {
         1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small demo end to end: scores.md holds the table and, under it, a legend entry for every column of
+    /// that table and every method in it.
+    #[test]
+    fn scores_md_explains_every_column_and_method() {
+        let d = tempfile::tempdir().unwrap();
+        let sim = Simulation {
+            frames: 9,
+            water_column: 5,
+            width: 64,
+            height: 48,
+            ..demo_simulation()
+        };
+        let r = run_demo(d.path(), &sim, &crate::Silent).unwrap();
+        let md = std::fs::read_to_string(&r.scores_md).unwrap();
+        let (table, legend) = md.split_at(md.find("Lower is better").expect("a legend"));
+        let header = table.lines().next().unwrap();
+        let columns: Vec<&str> = header
+            .split('|')
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .collect();
+        assert!(columns.len() >= 4, "{header}");
+        for c in &columns {
+            assert!(legend.contains(&format!("**{c}**")), "no legend for {c:?}");
+        }
+        let methods: Vec<&str> = table
+            .lines()
+            .skip(2)
+            .filter_map(|l| l.split('|').nth(1).map(str::trim))
+            .collect();
+        assert_eq!(methods.len(), 4, "{table}");
+        for m in methods {
+            assert!(
+                legend.contains(&format!("`{m}`")),
+                "no legend for method {m:?}"
+            );
+        }
     }
 }

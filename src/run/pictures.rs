@@ -243,6 +243,54 @@ pub fn before_after_sheet(
     Ok(draw::grid(&["input", "corrected", "F*C"], &tiles, 4))
 }
 
+/// Smallest width of a factor preview: a 4000-pixel photo's `F·C` is 500 blocks wide, a 1920-pixel video frame's
+/// 240; enlarged to this, the light cones and any scene left in `F` can be seen without zooming.
+pub const PREVIEW_MIN_WIDTH: u32 = 640;
+
+/// An 8-bit preview of a photo's lit seafloor `F·C` (one pixel per block, linear values in `[0, 1]`), for people:
+/// scaled so its 99.5th percentile sample is white, with one scale for all channels, and enlarged smoothly to at
+/// least `min_width` pixels wide (never shrunk).
+///
+/// Why per photo and one scale for the channels: the 16-bit data is dim (a grey seafloor of 0.4 under lights that
+/// fall off to the corners) and a mission's brightness swings with altitude, so a scale fixed per mission would
+/// leave the photos taken high up near black; how `F` changes from photo to photo is plotted in `overview.png`.
+/// Scaling the channels together keeps `F`'s colour, where a seafloor colour change shows up (per-channel
+/// scaling would white-balance it away). The 99.5th percentile rather than the maximum keeps a few bright
+/// blocks (a shell, a lens flare) from darkening the rest. Non-finite samples are drawn black.
+pub fn factor_preview(lit: &Raster, min_width: u32) -> RgbImage {
+    let img = scaled_rgb(lit, 0.995);
+    let width = min_width.max(img.width());
+    if width == img.width() {
+        img
+    } else {
+        draw::tile(&img, width, true)
+    }
+}
+
+/// `r` as 8-bit RGB, the sample at quantile `q` of all finite samples mapped to 255 (grey rasters replicated).
+fn scaled_rgb(r: &Raster, q: f64) -> RgbImage {
+    let mut v: Vec<f32> = r.data.iter().copied().filter(|x| x.is_finite()).collect();
+    let top = if v.is_empty() {
+        1.0
+    } else {
+        let k = ((v.len() - 1) as f64 * q).round() as usize;
+        *v.select_nth_unstable_by(k, f32::total_cmp).1
+    }
+    .max(1e-6);
+    RgbImage::from_fn(r.width as u32, r.height as u32, |x, y| {
+        let px = |c: usize| {
+            let ch = if r.channels >= 3 { c } else { 0 };
+            let v = r.get(x as usize, y as usize, ch) / top;
+            if v.is_finite() {
+                (v.clamp(0.0, 1.0) * 255.0).round() as u8
+            } else {
+                0
+            }
+        };
+        image::Rgb([px(0), px(1), px(2)])
+    })
+}
+
 /// A raster in `[0, 1]` as an 8-bit RGB image (grey rasters replicated), scaled so its 99th percentile is white.
 fn raster_rgb(r: &Raster) -> RgbImage {
     let mut v: Vec<f32> = r.data.iter().copied().filter(|x| x.is_finite()).collect();
@@ -266,4 +314,68 @@ pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
                 reason: e.to_string(),
             })
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn factor_preview_maps_the_995th_percentile_to_white_and_enlarges() {
+        // 20×10 blocks, RGB; red ramps over 200 distinct values, green is half of red, blue is constant.
+        let (w, h) = (20usize, 10usize);
+        let r = Raster::from_fn(w, h, 3, |x, y, c| {
+            let v = (y * w + x + 1) as f32 / 1000.0; // 0.001 ..= 0.200
+            [v, v / 2.0, 0.05][c]
+        });
+        // The 99.5th percentile of all 600 samples, by a full sort (independent of select_nth).
+        let mut all = r.data.clone();
+        all.sort_by(f32::total_cmp);
+        let top = all[((all.len() - 1) as f64 * 0.995).round() as usize];
+        let small = scaled_rgb(&r, 0.995);
+        for (x, y) in [(0usize, 0usize), (7, 3), (19, 9), (10, 9)] {
+            let want = |v: f32| ((v / top).clamp(0.0, 1.0) * 255.0).round() as u8;
+            let p = small.get_pixel(x as u32, y as u32).0;
+            assert_eq!(p[0], want(r.get(x, y, 0)), "red at ({x},{y})");
+            assert_eq!(p[1], want(r.get(x, y, 1)), "green at ({x},{y})");
+            assert_eq!(p[2], want(0.05), "blue at ({x},{y})");
+        }
+        assert_eq!(
+            small.get_pixel(19, 9).0[0],
+            255,
+            "the brightest block is white"
+        );
+        // Enlarged to at least 640 wide, aspect kept; never shrunk.
+        let big = factor_preview(&r, 640);
+        assert_eq!(big.dimensions(), (640, 320));
+        assert_eq!(factor_preview(&r, 8).dimensions(), (20, 10));
+        // Smooth: the corners keep their values, and down a column (red rises by 0.02, about 26 levels, per
+        // block) neighbouring pixels differ by a few levels, not by a block's 26 at each block edge.
+        assert!(big.get_pixel(0, 0).0[0] < 10);
+        assert!(big.get_pixel(639, 319).0[0] > 240);
+        let col: Vec<i32> = (0..320)
+            .map(|y| big.get_pixel(320, y).0[0] as i32)
+            .collect();
+        let jump = col.windows(2).map(|p| (p[1] - p[0]).abs()).max().unwrap();
+        assert!(jump <= 4, "largest step down a column: {jump}");
+        assert!(col[319] - col[0] > 150, "the column still spans the ramp");
+    }
+
+    #[test]
+    fn factor_preview_of_grey_and_broken_rasters() {
+        let g = Raster::from_fn(4, 2, 1, |x, y, _| if x + y == 0 { f32::NAN } else { 0.2 });
+        let p = scaled_rgb(&g, 0.995);
+        assert_eq!(p.get_pixel(0, 0).0, [0, 0, 0], "NaN is drawn black");
+        assert_eq!(
+            p.get_pixel(1, 0).0,
+            [255, 255, 255],
+            "grey replicated, scaled to white"
+        );
+        let dark = scaled_rgb(&Raster::filled(3, 3, 3, 0.0), 0.995);
+        assert_eq!(
+            dark.get_pixel(1, 1).0,
+            [0, 0, 0],
+            "an all-black F stays black"
+        );
+    }
 }

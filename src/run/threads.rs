@@ -232,6 +232,16 @@ impl Feed<'_> {
                     .join(&entry.relative)
                     .with_extension("png");
                 crate::io::save_raster_png16(&c.lit, &p)?;
+                // An 8-bit, enlarged preview beside the 16-bit data, for people to look at.
+                let preview = crate::run::pictures::factor_preview(
+                    &c.lit,
+                    crate::run::pictures::PREVIEW_MIN_WIDTH,
+                );
+                let pp = work_dir
+                    .join("factors-preview")
+                    .join(&entry.relative)
+                    .with_extension("png");
+                crate::run::pictures::save_png(&preview, &pp)?;
             }
             self.outcome.totals += c.stats;
             let job = WriteJob {
