@@ -39,6 +39,7 @@ pub mod metadata;
 pub mod monitor;
 pub mod options;
 pub mod overview;
+pub mod paths;
 pub mod pipeline;
 pub mod raster;
 pub mod report;
