@@ -96,6 +96,32 @@ pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[(&str, &Path)]) -> Res
     Ok(())
 }
 
+/// The path checks of a correction run, before anything is written: `--out` (unless `-`) and `--report` against
+/// every input (survey unless `-`, water column, scatter image, mask), and `<out>/_abysslight` not a link.
+pub fn check_run_paths(opts: &crate::Options) -> Result<()> {
+    let dash = |p: &&Path| *p != Path::new("-");
+    let mut inputs: Vec<(&str, &Path)> = Vec::new();
+    for (what, p) in [
+        ("survey folder", opts.survey.as_deref().filter(dash)),
+        ("water-column folder", opts.water_column.as_deref()),
+        ("scatter image", opts.scatter.as_deref()),
+        ("mask", opts.mask.as_deref()),
+    ] {
+        if let Some(p) = p {
+            inputs.push((what, p));
+        }
+    }
+    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    if let Some(out) = opts.out.as_deref().filter(dash) {
+        outputs.push(("--out", out));
+        check_no_links_below(out, &out.join(crate::io::WORK_DIR).join("report.json"))?;
+    }
+    if let Some(r) = opts.report.as_deref() {
+        outputs.push(("--report", r));
+    }
+    check_outputs(&outputs, &inputs)
+}
+
 /// Refuse writing `target` if any existing component of it below `root` (the output folder; `root` itself may be
 /// a link the user chose) is a symbolic link, or an existing parent is not a folder: the write could land outside
 /// `root`. Components that do not exist yet are fine (they are created as real folders).

@@ -40,52 +40,6 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1000.0
 }
 
-/// Absolute, normalised form of a path that may not exist yet (its existing ancestor is canonicalised).
-fn absolute(p: &Path) -> PathBuf {
-    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
-    let mut existing = abs.as_path();
-    let mut rest = Vec::new();
-    loop {
-        if let Ok(c) = existing.canonicalize() {
-            let mut out = c;
-            for r in rest.iter().rev() {
-                out.push(r);
-            }
-            return out;
-        }
-        match (existing.parent(), existing.file_name()) {
-            (Some(parent), Some(name)) => {
-                rest.push(name.to_owned());
-                existing = parent;
-            }
-            _ => return abs,
-        }
-    }
-}
-
-/// Refuse an output folder that would write into an input folder.
-fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
-    let out_abs = absolute(out);
-    for (what, dir) in inputs {
-        let dir_abs = absolute(dir);
-        if out_abs == dir_abs {
-            return Err(Error::Usage(format!(
-                "--out {} is the {what} folder: abysslight never writes over its inputs; choose another folder",
-                out.display()
-            )));
-        }
-        if out_abs.starts_with(&dir_abs) {
-            return Err(Error::Usage(format!(
-                "--out {} is inside the {what} folder {}: outputs would be read back as inputs; choose a folder \
-                 outside it",
-                out.display(),
-                dir.display()
-            )));
-        }
-    }
-    Ok(())
-}
-
 /// Counts the full-resolution photos alive at once (decoded and not yet written or dropped).
 #[derive(Default)]
 struct LiveCount {
@@ -206,16 +160,8 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let stdin = survey == Path::new("-");
     let stdout = out == Path::new("-");
     let streaming = stdin || opts.watch;
-    let mut inputs = Vec::new();
-    if !stdin {
-        inputs.push(("survey", survey));
-    }
-    if let Some(w) = opts.water_column.as_deref() {
-        inputs.push(("water-column", w));
-    }
-    if !stdout {
-        check_output_folder(out, &inputs)?;
-    }
+    // Outputs never equal, lie in or contain an input; no link inside --out (src/paths.rs).
+    crate::paths::check_run_paths(opts)?;
     let window = opts.window_choice()?;
     let n = window.n;
     let k = opts.downsample;
@@ -229,7 +175,8 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         }
         io::Found::default()
     } else {
-        find_photos(survey)?
+        // A survey link pointing at --out is not read back (src/io.rs).
+        io::find_photos_excluding(survey, &[out])?
     };
     if !streaming && found.photos.is_empty() {
         return Err(Error::Usage(format!(
@@ -259,9 +206,34 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     if let Some(w) = &work_dir {
         std::fs::create_dir_all(w).map_err(|e| Error::io(w, e))?;
     }
+    // One run per --out (per shard), the same options as earlier runs there, stale temp files removed
+    // (src/run_guard.rs). Held until the report is written.
+    let _lock = match &work_dir {
+        Some(w) => {
+            let (lock, removed) = crate::run_guard::start(opts, out, w)?;
+            if !removed.is_empty() {
+                warn(
+                    &mut warnings,
+                    format!(
+                        "removed {} temp file(s) left by an interrupted run (e.g. {})",
+                        removed.len(),
+                        removed[0].display()
+                    ),
+                );
+            }
+            Some(lock)
+        }
+        None => None,
+    };
+    // Entries of the survey that could not be taken are failed files (exit 1), named in the report.
+    let mut errors: Vec<FileError> = Vec::new();
+    for s in &found.skipped {
+        let e = s.to_error();
+        progress.file_error(&e);
+        errors.push(FileError::from_error(&s.path, &e));
+    }
 
     // --- S -------------------------------------------------------------------------------------------------
-    let mut errors: Vec<FileError> = Vec::new();
     let mut water_column_failed = 0;
     let mut scatter_info = ScatterInfo {
         source: "none".into(),
@@ -277,6 +249,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         Some(Scatter::load(path)?)
     } else if let Some(dir) = opts.water_column.as_deref() {
         let wc = find_photos(dir)?;
+        for s in &wc.skipped {
+            let e = s.to_error();
+            progress.file_error(&e);
+            water_column_failed += 1;
+            errors.push(FileError::from_error(&s.path, &e));
+        }
         progress.stage(&format!(
             "estimating scatter S from {} water-column frames in {}",
             wc.photos.len(),
@@ -563,7 +541,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let write_errors: Mutex<Vec<FileError>> = Mutex::new(Vec::new());
     let mut totals = CorrectStats::default();
     let mut layout: Option<Layout> = None;
-    let mut survey_failed = 0usize;
+    let mut survey_failed = found.skipped.len();
     let live = LiveCount::default();
     let mut flagged_lit: Vec<(usize, Raster)> = Vec::new();
     let mut streamed = 0usize;
@@ -594,7 +572,13 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
                     // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
                     let (input, output) = (&job.frame.input, &job.frame.output);
                     let warn = |m: &str| progress.warn(m);
-                    let r = sink.write(&job.photo, input, output, settings, &warn);
+                    // Never through a link inside --out (src/paths.rs).
+                    let r = if stdout {
+                        Ok(())
+                    } else {
+                        crate::paths::check_no_links_below(out, output)
+                    }
+                    .and_then(|()| sink.write(&job.photo, input, output, settings, &warn));
                     job.frame.encode_ms = ms(t);
                     progress.photo_done(&job.frame.input, r.is_ok());
                     match r {
@@ -846,7 +830,7 @@ pub fn estimate_scatter_file(
     memory_mib: usize,
     progress: &dyn Progress,
 ) -> Result<ScatterRun> {
-    check_output_folder(out, &[("water-column", water_column)])?;
+    crate::paths::check_outputs(&[("--out", out)], &[("water-column folder", water_column)])?;
     let wc = find_photos(water_column)?;
     progress.stage(&format!(
         "estimating scatter S from {} water-column frames in {}",
@@ -1041,10 +1025,28 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let survey = d.path().join("survey");
         std::fs::create_dir_all(&survey).unwrap();
-        assert!(check_output_folder(&survey, &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&survey.join("out"), &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&survey.join("./x/../"), &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&d.path().join("out"), &[("survey", &survey)]).is_ok());
-        assert!(check_output_folder(&d.path().join("survey2"), &[("survey", &survey)]).is_ok());
+        assert!(
+            crate::paths::check_outputs(&[("--out", &survey)], &[("survey", &survey)]).is_err()
+        );
+        assert!(crate::paths::check_outputs(
+            &[("--out", &survey.join("out"))],
+            &[("survey", &survey)]
+        )
+        .is_err());
+        assert!(crate::paths::check_outputs(
+            &[("--out", &survey.join("./x/../"))],
+            &[("survey", &survey)]
+        )
+        .is_err());
+        assert!(crate::paths::check_outputs(
+            &[("--out", &d.path().join("out"))],
+            &[("survey", &survey)]
+        )
+        .is_ok());
+        assert!(crate::paths::check_outputs(
+            &[("--out", &d.path().join("survey2"))],
+            &[("survey", &survey)]
+        )
+        .is_ok());
     }
 }
