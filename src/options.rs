@@ -451,7 +451,7 @@ impl Options {
             ));
         }
         if let Some(t) = self.idle_timeout {
-            if !(t >= 0.0 && t <= limits::IDLE_TIMEOUT_S) {
+            if !(0.0..=limits::IDLE_TIMEOUT_S).contains(&t) {
                 return usage(format!(
                     "--idle-timeout must be 0 to {} seconds, got {t}",
                     limits::IDLE_TIMEOUT_S

@@ -1018,8 +1018,6 @@ impl Ctx<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-
     #[test]
     fn output_inside_input_is_refused() {
         let d = tempfile::tempdir().unwrap();

@@ -236,10 +236,12 @@ pub fn remove_stale_temps(out: &Path) -> Vec<PathBuf> {
         .flatten()
     {
         let name = e.file_name().to_string_lossy();
-        if e.file_type().is_file() && name.starts_with('.') && name.ends_with(TEMP_SUFFIX) {
-            if std::fs::remove_file(e.path()).is_ok() {
-                removed.push(e.path().to_owned());
-            }
+        if e.file_type().is_file()
+            && name.starts_with('.')
+            && name.ends_with(TEMP_SUFFIX)
+            && std::fs::remove_file(e.path()).is_ok()
+        {
+            removed.push(e.path().to_owned());
         }
     }
     removed
