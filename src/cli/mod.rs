@@ -582,6 +582,17 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         ));
     }
     o.validate()?;
+    // The config file is an input too: no output may overwrite or surround it.
+    if let Some(cfg) = &args.config {
+        let outs: Vec<(&str, &Path)> = [
+            ("--out", o.out.as_deref()),
+            ("--report", o.report.as_deref()),
+        ]
+        .into_iter()
+        .filter_map(|(f, p)| Some((f, p.filter(|p| *p != Path::new("-"))?)))
+        .collect();
+        abysslight::io::paths::check_outputs(&outs, &[("config file", cfg)])?;
+    }
     Ok(o)
 }
 
@@ -734,6 +745,13 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
 }
 
 fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
+    let most = abysslight::run::options::limits::SCATTER_MEMORY_MIB;
+    if !(1..=most).contains(&args.memory) {
+        return Err(Error::Usage(format!(
+            "--memory must be 1 to {most} MiB, got {}",
+            args.memory
+        )));
+    }
     let console = Console::new(args.quiet);
     let s = abysslight::run::estimate_scatter_file(
         &args.water_column,

@@ -2,8 +2,10 @@
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
 pub mod jpeg;
+pub mod jpeg_check;
 pub mod mask;
 pub mod metadata;
+pub mod paths;
 pub mod pnm;
 pub mod scatter;
 
@@ -39,6 +41,25 @@ pub struct Found {
     pub photos: Vec<Entry>,
     /// Files passed over because their name does not end in a photo extension.
     pub ignored: Vec<PathBuf>,
+    /// Entries that could not be taken (unreadable folder, symbolic link loop, dangling link, a name that is not
+    /// valid UTF-8, a link into the output folder), each named with its reason. A run reports them as failed
+    /// files (exit 1); they never stop the scan.
+    pub skipped: Vec<Skipped>,
+}
+
+/// An entry of a folder scan that could not be taken.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Skipped {
+    /// The entry's path; a name that is not valid UTF-8 is shown with U+FFFD in place of the bad bytes.
+    pub path: PathBuf,
+    pub reason: String,
+}
+
+impl Skipped {
+    /// As an error naming the entry (for the run report).
+    pub fn to_error(&self) -> Error {
+        Error::io(&self.path, std::io::Error::other(self.reason.clone()))
+    }
 }
 
 fn is_photo_name(path: &Path) -> bool {
@@ -47,26 +68,94 @@ fn is_photo_name(path: &Path) -> bool {
         .is_some_and(|e| PHOTO_EXTENSIONS.iter().any(|p| e.eq_ignore_ascii_case(p)))
 }
 
+fn lossy(p: &Path) -> PathBuf {
+    PathBuf::from(p.to_string_lossy().into_owned())
+}
+
 /// Find the photos below `dir`, recursively, in natural order. Hidden files and folders (names starting with `.`)
-/// and abysslight's own `_abysslight` folders are skipped.
+/// and abysslight's own `_abysslight` folders are skipped. Only `dir` itself missing or not being a folder is an
+/// error; every entry below it that cannot be taken is a [`Skipped`] entry in [`Found::skipped`].
 pub fn find_photos(dir: &Path) -> Result<Found> {
+    find_photos_excluding(dir, &[])
+}
+
+/// [`find_photos`], and entries reached through symbolic links that lead into one of `exclude` (the output
+/// folder: a survey link pointing at `--out` must not read old outputs back as photos) are skipped entries.
+pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
     let meta = std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
     if !meta.is_dir() {
         return Err(Error::Usage(format!("{}: not a folder", dir.display())));
     }
     let mut found = Found::default();
-    let walker = walkdir::WalkDir::new(dir)
+    let mut walker = walkdir::WalkDir::new(dir)
         .follow_links(true)
         .into_iter()
         .filter_entry(|e| {
             e.depth() == 0
                 || !(e.file_name().to_string_lossy().starts_with('.') || e.file_name() == WORK_DIR)
         });
-    for item in walker {
-        let item = item.map_err(|e| {
-            let path = e.path().unwrap_or(dir).to_owned();
-            Error::io(path, e.into())
-        })?;
+    while let Some(item) = walker.next() {
+        let item = match item {
+            Ok(i) => i,
+            Err(e) => {
+                let path = e.path().unwrap_or(dir);
+                let reason = if let Some(ancestor) = e.loop_ancestor() {
+                    format!(
+                        "symbolic link loop (leads back to {}); skipped",
+                        ancestor.display()
+                    )
+                } else if e
+                    .io_error()
+                    .is_some_and(|i| i.kind() == std::io::ErrorKind::NotFound)
+                {
+                    "dangling symbolic link (its target does not exist); skipped".to_string()
+                } else {
+                    format!(
+                        "{}; skipped",
+                        e.io_error()
+                            .map_or_else(|| e.to_string(), |i| i.to_string())
+                    )
+                };
+                found.skipped.push(Skipped {
+                    path: lossy(path),
+                    reason,
+                });
+                continue;
+            }
+        };
+        if item.path_is_symlink()
+            && exclude
+                .iter()
+                .any(|x| crate::io::paths::is_within(item.path(), x))
+        {
+            found.skipped.push(Skipped {
+                path: lossy(item.path()),
+                reason: "a symbolic link into the output folder: outputs are never read back as inputs;                          skipped"
+                    .into(),
+            });
+            if item.file_type().is_dir() {
+                walker.skip_current_dir();
+            }
+            continue;
+        }
+        if item.depth() > 0
+            && item
+                .path()
+                .strip_prefix(dir)
+                .ok()
+                .and_then(|r| r.to_str())
+                .is_none()
+        {
+            found.skipped.push(Skipped {
+                path: lossy(item.path()),
+                reason: "name is not valid UTF-8 (cannot be named in the report or mirrored reliably);                          rename it; skipped"
+                    .into(),
+            });
+            if item.file_type().is_dir() {
+                walker.skip_current_dir();
+            }
+            continue;
+        }
         if !item.file_type().is_file() {
             continue;
         }
@@ -82,6 +171,70 @@ pub fn find_photos(dir: &Path) -> Result<Found> {
         .photos
         .sort_by(|a, b| alphanumeric_sort::compare_path(&a.relative, &b.relative));
     Ok(found)
+}
+
+/// Largest photo abysslight decodes, in pixels (2^28 = 268 MP, e.g. 16384 × 16384). A header declaring more is
+/// an error before anything is allocated.
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Width and height from a photo's header, reading only the header.
+pub fn header_size(path: &Path) -> Result<(usize, usize)> {
+    let reader = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| Error::io(path, e))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| Error::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    })?;
+    Ok((w as usize, h as usize))
+}
+
+fn check_size(width: usize, height: usize) -> std::result::Result<(), String> {
+    if width == 0 || height == 0 {
+        return Err(format!("header declares an empty image ({width}x{height})"));
+    }
+    if (width as u64).saturating_mul(height as u64) > MAX_PIXELS {
+        return Err(format!(
+            "header declares {width}x{height} pixels, more than the {MAX_PIXELS} abysslight decodes (damaged              or not a survey photo)"
+        ));
+    }
+    Ok(())
+}
+
+/// The mission's photo size chosen robustly: the size most of the first `sample` photos (header only) have; ties
+/// go to the earlier photo. Photos whose header cannot be read do not vote. `None` when no header could be read.
+/// One odd photo (a thumbnail sorting first) is then the only one of its size, and the only one skipped.
+pub fn majority_size(photos: &[Entry], sample: usize) -> Option<(usize, usize)> {
+    let mut votes: Vec<((usize, usize), usize)> = Vec::new();
+    for e in photos.iter().take(sample) {
+        let Ok(size) = header_size(&e.path) else {
+            continue;
+        };
+        match votes.iter_mut().find(|(s, _)| *s == size) {
+            Some((_, n)) => *n += 1,
+            None => votes.push((size, 1)),
+        }
+    }
+    // `max_by_key` keeps the last of equal maxima; iterate in reverse so that ties go to the earlier photo.
+    votes.iter().rev().max_by_key(|(_, n)| *n).map(|(s, _)| *s)
+}
+
+/// [`decode`], after checking the header against the size the mission's photos have (`expected`, when known):
+/// a photo of another size is a mismatch error before it is decoded.
+pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result<Photo> {
+    if let Some((w, h)) = expected {
+        let got = header_size(path)?;
+        if got != (w, h) {
+            return Err(Error::Mismatch {
+                path: path.to_owned(),
+                reason: format!(
+                    "size {}x{} differs from the mission's {w}x{h}; skipped",
+                    got.0, got.1
+                ),
+            });
+        }
+    }
+    decode(path)
 }
 
 /// Image format of a path, from its extension.
@@ -113,9 +266,18 @@ pub fn decode(path: &Path) -> Result<Photo> {
         });
     }
     let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data), format);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(8 << 30);
-    reader.limits(limits);
+    reader.limits(decode_limits());
+    // Header first: an absurd size is refused before the decoder allocates for it.
+    let (w, h) = reader.into_dimensions().map_err(|e| Error::Decode {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    })?;
+    check_size(w as usize, h as usize).map_err(|reason| Error::Decode {
+        path: path.to_owned(),
+        reason,
+    })?;
+    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data), format);
+    reader.limits(decode_limits());
     let img = reader.decode().map_err(|e| Error::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
@@ -124,6 +286,16 @@ pub fn decode(path: &Path) -> Result<Photo> {
         path: path.to_owned(),
         reason,
     })
+}
+
+/// Limits for the `image` decoders: the largest photo of [`MAX_PIXELS`] at 16-bit RGBA, and no side longer than
+/// that many pixels.
+pub fn decode_limits() -> image::Limits {
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(1 << 20);
+    limits.max_image_height = Some(1 << 20);
+    limits.max_alloc = Some(MAX_PIXELS * 8 + (64 << 20));
+    limits
 }
 
 fn decode_jpeg_strict(data: &[u8]) -> std::result::Result<Photo, String> {
@@ -156,6 +328,9 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     let damaged = |e: zune_jpeg::errors::DecodeErrors| format!("damaged or truncated JPEG: {e}");
     dec.decode_headers().map_err(damaged)?;
     let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
+    check_size(width, height)?;
+    // zune-jpeg, even strict, fills data missing at the end with grey: check that it is all there first.
+    crate::io::jpeg_check::check(data).map_err(|why| format!("incomplete JPEG: {why}"))?;
     let grey = matches!(
         dec.input_colorspace(),
         Some(ColorSpace::Luma | ColorSpace::LumaA)

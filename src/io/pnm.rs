@@ -65,6 +65,8 @@ pub struct FrameSplitter<R> {
     /// Frames cut so far.
     pub frames: usize,
     broken: bool,
+    /// The last error left the stream at the start of the next frame (a frame passed over whole).
+    resync: bool,
 }
 
 impl<R: BufRead> FrameSplitter<R> {
@@ -73,6 +75,7 @@ impl<R: BufRead> FrameSplitter<R> {
             r,
             frames: 0,
             broken: false,
+            resync: false,
         }
     }
 
@@ -87,7 +90,7 @@ impl<R: BufRead> FrameSplitter<R> {
             Ok(None) => return None,
             Ok(Some(_)) => self.frames += 1,
             Err(_) => {
-                self.broken = true;
+                self.broken = !std::mem::take(&mut self.resync);
                 self.frames += 1;
             }
         }
@@ -180,13 +183,31 @@ impl<R: BufRead> FrameSplitter<R> {
         let data = width
             .checked_mul(height)
             .and_then(|v| v.checked_mul(channels * per_sample))
-            .filter(|&v| v < (1 << 40))
-            .ok_or_else(|| format!("bad PNM header: size {width}x{height} is too large"))?
-            as usize;
+            .ok_or_else(|| format!("bad PNM header: size {width}x{height} is too large"))?;
+        if width.saturating_mul(height) > crate::io::MAX_PIXELS {
+            // The header is well formed, so the frame's extent is known: pass over its pixel data without
+            // holding it, and the frames after it are read as usual.
+            let skipped = std::io::copy(&mut (&mut self.r).take(data), &mut std::io::sink())
+                .map_err(|e| format!("cannot read the stream: {e}"))?;
+            self.resync = skipped == data;
+            return Err(format!(
+                "PNM header declares {width}x{height} pixels, more than the {} abysslight decodes; frame                  skipped{}",
+                crate::io::MAX_PIXELS,
+                if self.resync {
+                    ""
+                } else {
+                    " (and the stream ends inside its pixel data)"
+                }
+            ));
+        }
+        let data = data as usize;
         let head = bytes.len();
-        bytes.resize(head + data, 0);
-        let got = read_full(&mut self.r, &mut bytes[head..])
+        // Grown as the data arrives: a stream that ends early never makes us hold what its header promised.
+        let got = (&mut self.r)
+            .take(data as u64)
+            .read_to_end(&mut bytes)
             .map_err(|e| format!("cannot read the stream: {e}"))?;
+        debug_assert_eq!(bytes.len(), head + got);
         if got < data {
             return Err(format!(
                 "truncated: the stream ends {got} bytes into the {data} bytes of pixel data of a {width}x{height} \
@@ -262,6 +283,12 @@ pub fn decode_pnm(bytes: &[u8]) -> std::result::Result<Photo, String> {
     let maxval = s.pnm_field(&mut head, "maxval")? as u32;
     let channels = if &magic == b"P6" { 3 } else { 1 };
     let data = s.r;
+    if (width as u64).saturating_mul(height as u64) > crate::io::MAX_PIXELS
+        || width == 0
+        || height == 0
+    {
+        return Err(format!("PNM header declares {width}x{height} pixels"));
+    }
     let count = width * height * channels;
     let samples = if maxval < 256 {
         let v = data.get(..count).ok_or("truncated pixel data")?;
@@ -303,8 +330,12 @@ pub fn decode_frame(frame: &RawFrame) -> std::result::Result<Photo, String> {
     match frame.format {
         FrameFormat::Pnm => decode_pnm(&frame.bytes),
         FrameFormat::Png => {
-            let img = image::load_from_memory_with_format(&frame.bytes, image::ImageFormat::Png)
-                .map_err(|e| e.to_string())?;
+            let mut reader = image::ImageReader::with_format(
+                std::io::Cursor::new(&frame.bytes),
+                image::ImageFormat::Png,
+            );
+            reader.limits(crate::io::decode_limits());
+            let img = reader.decode().map_err(|e| e.to_string())?;
             photo_from_dynamic(img)
         }
     }
@@ -393,6 +424,27 @@ mod tests {
         let e = split(b"P3 1 1 255 0 0 0").pop().unwrap().unwrap_err();
         assert!(e.contains("P3"), "{e}");
         assert!(split(b"").is_empty());
+    }
+
+    #[test]
+    fn huge_pnm_header_is_one_failed_frame_not_an_abort() {
+        // The header of issue 13 alone: one failed frame, nothing allocated for it.
+        let r = split(b"P5 1000000 1000000 255\n");
+        assert_eq!(r.len(), 1);
+        let e = r[0].as_ref().unwrap_err();
+        assert!(e.contains("1000000x1000000"), "{e}");
+        // A declared size just over the limit, with its data present (generated, not held), followed by a good
+        // frame: the good frame is still read.
+        let (w, h) = (1u64 << 14, (1u64 << 14) + 1);
+        let stream = std::io::Cursor::new(format!("P5 {w} {h} 255\n").into_bytes())
+            .chain(std::io::repeat(7).take(w * h))
+            .chain(std::io::Cursor::new(b"P5 2 1 255\n\x01\x02".to_vec()));
+        let mut s = FrameSplitter::new(std::io::BufReader::new(stream));
+        let r: Vec<_> = std::iter::from_fn(|| s.next_frame()).collect();
+        assert_eq!(r.len(), 2);
+        assert!(r[0].as_ref().unwrap_err().contains("more than"));
+        let good = decode_frame(r[1].as_ref().unwrap()).unwrap();
+        assert_eq!(good.samples, Samples::U8(vec![1, 2]));
     }
 
     fn png(w: u32, h: u32, sixteen: bool) -> Vec<u8> {

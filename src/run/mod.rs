@@ -10,6 +10,7 @@
 //! ([`stdin`]). [`options`] holds every setting, shared by the library, the TOML config file and the CLI.
 
 pub mod draw;
+pub mod guard;
 pub mod options;
 pub mod pictures;
 pub mod plan;
@@ -25,12 +26,13 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::io::find_photos;
+use crate::io::paths::check_outputs;
 use crate::method::monitor::{Summary, Thresholds};
 use crate::method::scatter::Scatter;
 use crate::run::options::Options;
-use crate::run::plan::{check_output_folder, Plan};
+use crate::run::plan::Plan;
 use crate::run::prepare::{prepare, spread_indices, Setup};
-use crate::run::report::{FrameReport, Progress, Report};
+use crate::run::report::{FileError, FrameReport, Progress, Report};
 use crate::run::threads::{stream, Outcome};
 
 /// Run `abysslight correct` as described by `opts`.
@@ -50,6 +52,15 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let started = Instant::now();
     let plan = Plan::new(opts, progress)?;
     plan.create_work_dir()?;
+    // One run per --out (per shard), the same options as earlier runs there, stale temp files removed
+    // (src/run/guard.rs). Held until the report is written.
+    let (_lock, removed) = match &plan.work_dir {
+        Some(w) => {
+            let (lock, removed) = guard::start(opts, &plan.out, w)?;
+            (Some(lock), removed)
+        }
+        None => (None, Vec::new()),
+    };
     let setup = prepare(opts, &plan, progress)?;
     let Setup {
         engine,
@@ -58,6 +69,26 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         mut warnings,
     } = setup;
     warnings.splice(0..0, plan.warnings.iter().cloned());
+    if let Some(first) = removed.first() {
+        let m = format!(
+            "removed {} temp file(s) left by an interrupted run (e.g. {})",
+            removed.len(),
+            first.display()
+        );
+        progress.warn(&m);
+        warnings.push(m);
+    }
+    // Entries of the survey that could not be taken are failed files (exit 1), named in the report.
+    let survey_skipped: Vec<FileError> = plan
+        .found
+        .skipped
+        .iter()
+        .map(|s| {
+            let e = s.to_error();
+            progress.file_error(&e);
+            FileError::from_error(&s.path, &e)
+        })
+        .collect();
     let (n, k) = (plan.window.n, opts.downsample);
     if plan.streaming {
         progress.stage(&format!(
@@ -76,6 +107,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     save_pictures(opts, &plan, &outcome)?;
     let water_column_failed = errors.len();
     let mut all_errors = errors;
+    all_errors.extend(survey_skipped);
     all_errors.extend(outcome.errors);
     warnings.extend(outcome.warnings);
     let mut monitor = Summary::default();
@@ -162,7 +194,7 @@ pub fn estimate_scatter_file(
     memory_mib: usize,
     progress: &dyn Progress,
 ) -> Result<ScatterRun> {
-    check_output_folder(out, &[("water-column", water_column)])?;
+    check_outputs(&[("--out", out)], &[("water-column folder", water_column)])?;
     let wc = find_photos(water_column)?;
     progress.stage(&format!(
         "estimating scatter S from {} water-column frames in {}",

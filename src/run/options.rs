@@ -233,6 +233,7 @@ impl Options {
 
     /// Check values that do not depend on the file system.
     pub fn validate(&self) -> Result<(), Error> {
+        self.check_ranges()?;
         let usage = |m: String| Err(Error::Usage(m));
         let w = self.window_choice()?;
         if w.n == 0 || w.n % 2 == 0 {
@@ -241,26 +242,8 @@ impl Options {
                 w.n
             ));
         }
-        if self.downsample == 0 {
-            return usage("--downsample must be at least 1".into());
-        }
         if self.limit == Some(0) {
             return usage("--limit must be at least 1 photo".into());
-        }
-        if !(self.factor_floor > 0.0 && self.factor_floor.is_finite()) {
-            return usage(format!(
-                "--factor-floor must be above 0, got {}",
-                self.factor_floor
-            ));
-        }
-        if let Some(q) = self.jpeg_quality.filter(|q| !(1..=100).contains(q)) {
-            return usage(format!("--jpeg-quality must be 1 to 100, got {q}"));
-        }
-        if self.method == Method::Polynomial && !(1..=8).contains(&self.degree) {
-            return usage(format!("--degree must be 1 to 8, got {}", self.degree));
-        }
-        if self.threads == Some(0) {
-            return usage("--threads must be at least 1".into());
         }
         let stdin = self.survey.as_deref() == Some(Path::new("-"));
         let stdout = self.out.as_deref() == Some(Path::new("-"));
@@ -288,15 +271,6 @@ impl Options {
         if !self.watch && self.idle_timeout.is_some() {
             return usage("--idle-timeout needs --watch".into());
         }
-        if self
-            .idle_timeout
-            .is_some_and(|t| !(t >= 0.0 && t.is_finite()))
-        {
-            return usage("--idle-timeout must be 0 or more seconds".into());
-        }
-        if self.poll_interval == 0 {
-            return usage("--poll-interval must be at least 1 ms".into());
-        }
         if stdout && (self.save_scatter || self.save_factors || self.mask_auto) {
             return usage(
                 "--save-scatter, --save-factors and --mask-auto write into the output folder; with --out - there \
@@ -311,8 +285,8 @@ impl Options {
     }
 }
 
-/// Issue 14: the encoder settings of a run. JPEG quality and subsampling follow each JPEG input unless set.
 impl Options {
+    /// The encoder settings of a run: JPEG quality and subsampling follow each JPEG input unless set.
     pub fn encode_settings(&self) -> crate::io::EncodeSettings {
         let d = crate::io::EncodeSettings::default();
         crate::io::EncodeSettings {
@@ -324,6 +298,124 @@ impl Options {
                 subsampling: self.jpeg_subsampling.is_none(),
             },
         }
+    }
+}
+
+/// Upper limits of the numeric options, checked by [`Options::validate`] before anything is created on disk.
+/// Each is far above any real use and far below what would overflow a size computation or a `Duration`.
+pub mod limits {
+    /// `--window` (also the largest window `--contamination` may choose).
+    pub const WINDOW: usize = crate::method::window::MAX_WINDOW;
+    /// `--downsample` block size K.
+    pub const DOWNSAMPLE: usize = 1024;
+    /// `--factor-floor`: F is normalised so that a normally lit pixel has F ≈ 1; a floor above 1 would cap every
+    /// pixel's gain below that of a normally lit one.
+    pub const FACTOR_FLOOR: f32 = 1.0;
+    /// `--threads`.
+    pub const THREADS: usize = 1024;
+    /// `--degree` of `--method polynomial`.
+    pub const DEGREE: usize = 8;
+    /// `--idle-timeout`, seconds (a year).
+    pub const IDLE_TIMEOUT_S: f64 = 365.0 * 24.0 * 3600.0;
+    /// `--poll-interval`, milliseconds (an hour).
+    pub const POLL_INTERVAL_MS: u64 = 3_600_000;
+    /// `scatter-memory-mib` (1 TiB).
+    pub const SCATTER_MEMORY_MIB: usize = 1 << 20;
+    /// Shard count N of `--shard K/N`.
+    pub const SHARDS: usize = 1_000_000;
+}
+
+impl Options {
+    /// Range checks of every numeric option, each error naming its flag. Part of [`Options::validate`].
+    pub fn check_ranges(&self) -> Result<(), Error> {
+        let usage = |m: String| Err(Error::Usage(m));
+        if let Some(n) = self.window {
+            if n == 0 || n % 2 == 0 || n > limits::WINDOW {
+                return usage(format!(
+                    "--window must be an odd number of photos from 1 to {}, got {n}",
+                    limits::WINDOW
+                ));
+            }
+        }
+        if let Some(c) = self.contamination {
+            if !(0.0..0.5).contains(&c) {
+                return usage(format!("--contamination must be in [0, 0.5), got {c}"));
+            }
+        }
+        if !(self.risk > 0.0 && self.risk < 1.0) {
+            return usage(format!("--risk must be in (0, 1), got {}", self.risk));
+        }
+        if !(1..=limits::DOWNSAMPLE).contains(&self.downsample) {
+            return usage(format!(
+                "--downsample must be 1 to {}, got {}",
+                limits::DOWNSAMPLE,
+                self.downsample
+            ));
+        }
+        if !(self.factor_floor > 0.0 && self.factor_floor <= limits::FACTOR_FLOOR) {
+            return usage(format!(
+                "--factor-floor must be above 0 and at most {}, got {}",
+                limits::FACTOR_FLOOR,
+                self.factor_floor
+            ));
+        }
+        if let Some(q) = self.jpeg_quality.filter(|q| !(1..=100).contains(q)) {
+            return usage(format!("--jpeg-quality must be 1 to 100, got {q}"));
+        }
+        if let Some(t) = self.threads {
+            if !(1..=limits::THREADS).contains(&t) {
+                return usage(format!(
+                    "--threads must be 1 to {}, got {t}",
+                    limits::THREADS
+                ));
+            }
+        }
+        if !(1..=limits::DEGREE).contains(&self.degree) {
+            return usage(format!(
+                "--degree must be 1 to {}, got {}",
+                limits::DEGREE,
+                self.degree
+            ));
+        }
+        if let Some(t) = self.idle_timeout {
+            if !(0.0..=limits::IDLE_TIMEOUT_S).contains(&t) {
+                return usage(format!(
+                    "--idle-timeout must be 0 to {} seconds, got {t}",
+                    limits::IDLE_TIMEOUT_S
+                ));
+            }
+        }
+        if !(1..=limits::POLL_INTERVAL_MS).contains(&self.poll_interval) {
+            return usage(format!(
+                "--poll-interval must be 1 to {} ms, got {}",
+                limits::POLL_INTERVAL_MS,
+                self.poll_interval
+            ));
+        }
+        if !(1..=limits::SCATTER_MEMORY_MIB).contains(&self.scatter_memory_mib) {
+            return usage(format!(
+                "scatter-memory-mib must be 1 to {}, got {}",
+                limits::SCATTER_MEMORY_MIB,
+                self.scatter_memory_mib
+            ));
+        }
+        if let Some(s) = self.shard {
+            if s.count > limits::SHARDS || s.index == 0 || s.index > s.count {
+                return usage(format!(
+                    "--shard K/N needs 1 <= K <= N <= {}, got {}/{}",
+                    limits::SHARDS,
+                    s.index,
+                    s.count
+                ));
+            }
+        }
+        let c = self.seafloor_colour.0;
+        if c.iter().any(|&v| !(v > 0.0 && v <= 1.0)) {
+            return usage(format!(
+                "--seafloor-colour components must be above 0 and at most 1, got {c:?}"
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -5,7 +5,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::io::{self, decode, find_photos, Entry, Found, WORK_DIR};
+use crate::io::paths::{check_no_links_below, check_outputs};
+use crate::io::{self, decode, find_photos, find_photos_excluding, Entry, Found, WORK_DIR};
 use crate::method::baseline::Method;
 use crate::method::window::WindowChoice;
 use crate::run::options::Options;
@@ -65,16 +66,8 @@ impl Plan {
                     .into(),
             ));
         }
-        let mut inputs = Vec::new();
-        if !stdin {
-            inputs.push(("survey", survey.as_path()));
-        }
-        if let Some(w) = opts.water_column.as_deref() {
-            inputs.push(("water-column", w));
-        }
-        if !stdout {
-            check_output_folder(&out, &inputs)?;
-        }
+        // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
+        check_run_paths(opts)?;
         let window = opts.window_choice()?;
         let found = if streaming {
             if opts.watch && !survey.is_dir() {
@@ -85,7 +78,8 @@ impl Plan {
             }
             Found::default()
         } else {
-            find_photos(&survey)?
+            // A survey link pointing at --out is not read back.
+            find_photos_excluding(&survey, &[&out])?
         };
         if !streaming && found.photos.is_empty() {
             return Err(Error::Usage(format!(
@@ -306,50 +300,30 @@ fn roles(
     (items, skipped_existing)
 }
 
-/// Absolute, normalised form of a path that may not exist yet (its existing ancestor is canonicalised).
-fn absolute(p: &Path) -> PathBuf {
-    let abs = std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
-    let mut existing = abs.as_path();
-    let mut rest = Vec::new();
-    loop {
-        if let Ok(c) = existing.canonicalize() {
-            let mut out = c;
-            for r in rest.iter().rev() {
-                out.push(r);
-            }
-            return out;
-        }
-        match (existing.parent(), existing.file_name()) {
-            (Some(parent), Some(name)) => {
-                rest.push(name.to_owned());
-                existing = parent;
-            }
-            _ => return abs,
+/// The path checks of a correction run, before anything is written: `--out` (unless `-`) and `--report` against
+/// every input (survey unless `-`, water column, scatter image, mask), and `<out>/_abysslight` not a link.
+pub fn check_run_paths(opts: &Options) -> Result<()> {
+    let dash = |p: &&Path| *p != Path::new("-");
+    let mut inputs: Vec<(&str, &Path)> = Vec::new();
+    for (what, p) in [
+        ("survey folder", opts.survey.as_deref().filter(dash)),
+        ("water-column folder", opts.water_column.as_deref()),
+        ("scatter image", opts.scatter.as_deref()),
+        ("mask", opts.mask.as_deref()),
+    ] {
+        if let Some(p) = p {
+            inputs.push((what, p));
         }
     }
-}
-
-/// Refuse an output folder that would write into an input folder.
-pub fn check_output_folder(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
-    let out_abs = absolute(out);
-    for (what, dir) in inputs {
-        let dir_abs = absolute(dir);
-        if out_abs == dir_abs {
-            return Err(Error::Usage(format!(
-                "--out {} is the {what} folder: abysslight never writes over its inputs; choose another folder",
-                out.display()
-            )));
-        }
-        if out_abs.starts_with(&dir_abs) {
-            return Err(Error::Usage(format!(
-                "--out {} is inside the {what} folder {}: outputs would be read back as inputs; choose a folder \
-                 outside it",
-                out.display(),
-                dir.display()
-            )));
-        }
+    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    if let Some(out) = opts.out.as_deref().filter(dash) {
+        outputs.push(("--out", out));
+        check_no_links_below(out, &out.join(crate::io::WORK_DIR).join("report.json"))?;
     }
-    Ok(())
+    if let Some(r) = opts.report.as_deref() {
+        outputs.push(("--report", r));
+    }
+    check_outputs(&outputs, &inputs)
 }
 
 /// True when `path` holds an output of an earlier run. Outputs are only ever renamed into place once complete,
@@ -393,10 +367,11 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let survey = d.path().join("survey");
         std::fs::create_dir_all(&survey).unwrap();
-        assert!(check_output_folder(&survey, &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&survey.join("out"), &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&survey.join("./x/../"), &[("survey", &survey)]).is_err());
-        assert!(check_output_folder(&d.path().join("out"), &[("survey", &survey)]).is_ok());
-        assert!(check_output_folder(&d.path().join("survey2"), &[("survey", &survey)]).is_ok());
+        let check = |out: &Path| check_outputs(&[("--out", out)], &[("survey", &survey)]);
+        assert!(check(&survey).is_err());
+        assert!(check(&survey.join("out")).is_err());
+        assert!(check(&survey.join("./x/../")).is_err());
+        assert!(check(&d.path().join("out")).is_ok());
+        assert!(check(&d.path().join("survey2")).is_ok());
     }
 }

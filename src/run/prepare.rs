@@ -116,6 +116,11 @@ fn scatter(
         return Ok((None, info));
     };
     let wc = crate::io::find_photos(dir)?;
+    for s in &wc.skipped {
+        let e = s.to_error();
+        progress.file_error(&e);
+        errors.push(FileError::from_error(&s.path, &e));
+    }
     progress.stage(&format!(
         "estimating scatter S from {} water-column frames in {}",
         wc.photos.len(),

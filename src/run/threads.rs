@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{bounded, Sender};
 
 use crate::error::{Error, Result};
+use crate::io::paths::check_no_links_below;
 use crate::io::EncodeSettings;
 use crate::method::correct::CorrectStats;
 use crate::method::engine::{Corrected, Engine, Use};
@@ -306,7 +307,8 @@ pub fn stream(
         for _ in 0..writers {
             let rx = wr_rx.clone();
             let (done, write_errors, sink) = (&done, &write_errors, &sink);
-            scope.spawn(move || write_all(rx, done, write_errors, sink, settings, progress));
+            let out = (!plan.stdout).then_some(plan.out.as_path());
+            scope.spawn(move || write_all(rx, done, write_errors, sink, out, settings, progress));
         }
         drop(wr_rx);
 
@@ -370,6 +372,7 @@ fn write_all(
     done: &Mutex<Vec<FrameReport>>,
     write_errors: &Mutex<Vec<FileError>>,
     sink: &Sink,
+    out: Option<&Path>,
     settings: EncodeSettings,
     progress: &dyn Progress,
 ) {
@@ -378,7 +381,10 @@ fn write_all(
         // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
         let (input, output) = (&job.frame.input, &job.frame.output);
         let warn = |m: &str| progress.warn(m);
-        let r = sink.write(&job.photo, input, output, settings, &warn);
+        // Never through a link inside --out (src/io/paths.rs).
+        let r = out
+            .map_or(Ok(()), |out| check_no_links_below(out, output))
+            .and_then(|()| sink.write(&job.photo, input, output, settings, &warn));
         job.frame.encode_ms = ms(t);
         progress.photo_done(&job.frame.input, r.is_ok());
         match r {

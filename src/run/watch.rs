@@ -163,3 +163,49 @@ impl Source for WatchFolder {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn jpeg(seed: u8) -> Vec<u8> {
+        let px: Vec<u8> = (0..48 * 32 * 3)
+            .map(|i| (i as u8).wrapping_mul(seed))
+            .collect();
+        let mut out = Vec::new();
+        jpeg_encoder::Encoder::new(&mut out, 90)
+            .encode(&px, 48, 32, jpeg_encoder::ColorType::Rgb)
+            .unwrap();
+        out
+    }
+
+    /// A JPEG the camera is still writing (cut short and closed, or with a zero-filled tail) is not taken: it is
+    /// held back and taken once it is complete.
+    #[test]
+    fn an_incomplete_jpeg_is_held_back_until_complete() {
+        let d = tempfile::tempdir().unwrap();
+        let full = jpeg(7);
+        let mut cut = full[..full.len() / 2].to_vec();
+        cut.extend_from_slice(&[0xFF, 0xD9]);
+        let mut zeros = full.clone();
+        let n = zeros.len();
+        zeros[n / 2..].fill(0);
+        let stop = Arc::new(AtomicBool::new(false));
+        for partial in [cut, zeros] {
+            let p = d.path().join("IMG_0001.jpg");
+            std::fs::write(&p, &partial).unwrap();
+            let mut w = WatchFolder::new(d.path(), Duration::from_millis(1), None, stop.clone());
+            w.scan();
+            w.scan();
+            w.scan();
+            assert!(w.ready.is_empty(), "an incomplete JPEG was taken");
+            assert!(w.undecodable.contains_key(&p));
+            std::fs::write(&p, &full).unwrap();
+            // A new stamp (size, and mtime where the file system keeps it finely enough) counts as a change.
+            w.scan();
+            w.scan();
+            assert_eq!(w.ready.len(), 1, "the complete JPEG was not taken");
+            std::fs::remove_file(&p).unwrap();
+        }
+    }
+}

@@ -148,6 +148,25 @@ impl Metadata {
             && self.png_chunks.is_empty()
     }
 
+    /// Drop the ICC profile when it does not describe an output with `channels` colour channels (a CMYK or
+    /// grey profile on an RGB output, an RGB profile on a grey one, or no valid ICC header at all): a viewer
+    /// would interpret the pixels with the wrong colour space. Returns why it was dropped.
+    pub fn drop_mismatched_icc(&mut self, channels: usize) -> Option<String> {
+        let icc = self.icc.as_deref()?;
+        let want: &[u8; 4] = if channels == 1 { b"GRAY" } else { b"RGB " };
+        let why = match icc_colour_space(icc) {
+            None => "the ICC profile has no valid header".to_string(),
+            Some(space) if &space == want => return None,
+            Some(space) => format!(
+                "the ICC profile is for {:?} data, the output is {}",
+                String::from_utf8_lossy(&space).trim_end(),
+                if channels == 1 { "grey" } else { "RGB" }
+            ),
+        };
+        self.icc = None;
+        Some(format!("{why}; profile dropped"))
+    }
+
     /// The EXIF orientation (1–8), if the EXIF block has one.
     pub fn orientation(&self) -> Option<u16> {
         let blob = self.exif.as_deref()?;
@@ -180,6 +199,15 @@ impl Metadata {
         };
         (bytes, dropped)
     }
+}
+
+/// The data colour space of an ICC profile (header bytes 16–19, e.g. `RGB `, `GRAY`, `CMYK`), when the profile
+/// has a valid header (at least 128 bytes, signature `acsp` at byte 36).
+pub fn icc_colour_space(icc: &[u8]) -> Option<[u8; 4]> {
+    if icc.len() < 128 || &icc[36..40] != b"acsp" {
+        return None;
+    }
+    icc[16..20].try_into().ok()
 }
 
 fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
@@ -286,6 +314,8 @@ pub fn write_carrying(
         }
         Err(e) => (Metadata::default(), vec![e.to_string()]),
     };
+    let mut meta = meta;
+    notes.extend(meta.drop_mismatched_icc(photo.layout.channels));
     notes.extend(io::write_atomic_with_metadata(
         photo, output, settings, &meta,
     )?);
@@ -304,6 +334,43 @@ pub fn write_carrying(
 mod tests {
     use super::*;
     use ifd::{Entry, Ifd, Order};
+
+    fn icc_profile(space: &[u8; 4]) -> Vec<u8> {
+        let mut p = vec![0u8; 132];
+        p[..4].copy_from_slice(&132u32.to_be_bytes());
+        p[16..20].copy_from_slice(space);
+        p[36..40].copy_from_slice(b"acsp");
+        p
+    }
+
+    #[test]
+    fn icc_profiles_of_another_colour_space_are_dropped() {
+        for (space, channels, kept) in [
+            (b"RGB ", 3, true),
+            (b"GRAY", 1, true),
+            (b"CMYK", 3, false),
+            (b"GRAY", 3, false),
+            (b"RGB ", 1, false),
+            (b"Lab ", 3, false),
+        ] {
+            let mut m = Metadata {
+                icc: Some(icc_profile(space)),
+                ..Metadata::default()
+            };
+            let note = m.drop_mismatched_icc(channels);
+            assert_eq!(m.icc.is_some(), kept, "{space:?} on {channels}");
+            assert_eq!(note.is_none(), kept);
+            if let Some(n) = note {
+                assert!(n.contains("dropped"), "{n}");
+            }
+        }
+        let mut junk = Metadata {
+            icc: Some(b"not a profile".to_vec()),
+            ..Metadata::default()
+        };
+        assert!(junk.drop_mismatched_icc(3).is_some() && junk.icc.is_none());
+        assert!(Metadata::default().drop_mismatched_icc(3).is_none());
+    }
 
     /// An EXIF block with IFD0 (Model), IFD1 and a thumbnail at its end, laid out as cameras do.
     fn exif_with_thumbnail(order: Order) -> (Vec<u8>, usize) {

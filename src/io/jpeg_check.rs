@@ -1,0 +1,457 @@
+//! Does a JPEG hold all its data? A decoder that reaches the end of the compressed data early (a file cut short
+//! with an end marker added) or never finds the end (a zero-filled tail: a preallocated file, a power cut) fills
+//! the rest with grey or with garbage and reports success; zune-jpeg does so even in strict mode. [`check`] walks
+//! the markers and, for baseline (sequential Huffman) JPEGs, Huffman-decodes every scan without the inverse DCT,
+//! counting blocks: each scan must hold every MCU of the frame (with every restart marker in place) within its
+//! own data, and an end-of-image marker must follow the last scan. Progressive and other JPEGs get the marker
+//! walk and the end-marker check only.
+
+/// Why a JPEG is incomplete, for an error message (the caller names the file).
+pub type Why = String;
+
+#[derive(Clone, Copy, Default)]
+struct Component {
+    id: u8,
+    h: usize,
+    v: usize,
+}
+
+/// A Huffman table in canonical form (JPEG Annex C), with a lookup table for codes of up to `FAST` bits.
+#[derive(Clone)]
+struct Huffman {
+    /// `(symbol, length)` for each `FAST`-bit prefix; length 0: longer code.
+    fast: Vec<(u8, u8)>,
+    maxcode: [i32; 18],
+    valptr: [i32; 17],
+    mincode: [i32; 17],
+    values: Vec<u8>,
+}
+
+const FAST: u32 = 9;
+
+impl Huffman {
+    fn new(counts: &[u8; 16], values: Vec<u8>) -> Result<Self, Why> {
+        let total: usize = counts.iter().map(|&c| c as usize).sum();
+        if total != values.len() || total > 256 {
+            return Err("bad Huffman table".into());
+        }
+        let mut fast = vec![(0u8, 0u8); 1 << FAST];
+        let (mut maxcode, mut valptr, mut mincode) = ([-1i32; 18], [0i32; 17], [0i32; 17]);
+        let (mut code, mut k) = (0i32, 0usize);
+        for len in 1..=16usize {
+            let n = counts[len - 1] as usize;
+            valptr[len] = k as i32;
+            mincode[len] = code;
+            for _ in 0..n {
+                if len as u32 <= FAST {
+                    let shift = FAST - len as u32;
+                    let first = (code as usize) << shift;
+                    for e in fast.iter_mut().skip(first).take(1 << shift) {
+                        *e = (values[k], len as u8);
+                    }
+                }
+                code += 1;
+                k += 1;
+            }
+            maxcode[len] = if n > 0 { code - 1 } else { -1 };
+            if code > (1 << len) {
+                return Err("bad Huffman table (over-subscribed)".into());
+            }
+            code <<= 1;
+        }
+        maxcode[17] = i32::MAX;
+        Ok(Huffman {
+            fast,
+            maxcode,
+            valptr,
+            mincode,
+            values,
+        })
+    }
+}
+
+/// Bits of one entropy-coded segment: byte stuffing removed; stops at a marker or the end of the data and pads
+/// with zero bits from there, counting how many real bits there were.
+struct Bits<'a> {
+    data: &'a [u8],
+    pos: usize,
+    acc: u64,
+    n: u32,
+    real_pushed: u64,
+    consumed: u64,
+    /// The marker (second byte) the segment stopped at, if any; `pos` is at its `0xFF`.
+    marker: Option<u8>,
+    ended: bool,
+}
+
+impl<'a> Bits<'a> {
+    fn new(data: &'a [u8], pos: usize) -> Self {
+        Bits {
+            data,
+            pos,
+            acc: 0,
+            n: 0,
+            real_pushed: 0,
+            consumed: 0,
+            marker: None,
+            ended: false,
+        }
+    }
+
+    #[inline]
+    fn fill(&mut self) {
+        while self.n <= 56 {
+            let mut byte = 0u8;
+            let mut real = false;
+            if !self.ended {
+                match self.data.get(self.pos) {
+                    None => self.ended = true,
+                    Some(&0xFF) => match self.data.get(self.pos + 1) {
+                        Some(0) => {
+                            byte = 0xFF;
+                            real = true;
+                            self.pos += 2;
+                        }
+                        Some(&0xFF) => {
+                            // Fill byte before a marker.
+                            self.pos += 1;
+                            continue;
+                        }
+                        Some(&m) => {
+                            self.marker = Some(m);
+                            self.ended = true;
+                        }
+                        None => self.ended = true,
+                    },
+                    Some(&b) => {
+                        byte = b;
+                        real = true;
+                        self.pos += 1;
+                    }
+                }
+            }
+            self.acc |= (byte as u64) << (56 - self.n);
+            self.n += 8;
+            if real {
+                self.real_pushed += 8;
+            }
+        }
+    }
+
+    #[inline]
+    fn skip(&mut self, k: u32) {
+        if self.n < k {
+            self.fill();
+        }
+        self.acc <<= k;
+        self.n -= k;
+        self.consumed += k as u64;
+    }
+
+    #[inline]
+    fn decode(&mut self, t: &Huffman) -> Result<u8, Why> {
+        if self.n < 16 {
+            self.fill();
+        }
+        let (sym, len) = t.fast[(self.acc >> (64 - FAST)) as usize];
+        if len > 0 {
+            self.skip(len as u32);
+            return Ok(sym);
+        }
+        for len in (FAST as usize + 1)..=16 {
+            let code = (self.acc >> (64 - len)) as i32;
+            if code <= t.maxcode[len] {
+                let i = t.valptr[len] + code - t.mincode[len];
+                let sym = *t
+                    .values
+                    .get(i as usize)
+                    .ok_or("corrupt compressed data (bad Huffman code)")?;
+                self.skip(len as u32);
+                return Ok(sym);
+            }
+        }
+        Err("corrupt compressed data (bad Huffman code)".into())
+    }
+
+    /// Whether the bits taken so far were all in the file (not padding past a marker or the end).
+    fn within_data(&self) -> bool {
+        self.consumed <= self.real_pushed
+    }
+}
+
+fn be16(d: &[u8], at: usize) -> Result<usize, Why> {
+    match d.get(at..at + 2) {
+        Some(b) => Ok(u16::from_be_bytes([b[0], b[1]]) as usize),
+        None => Err("the file ends inside a header segment".into()),
+    }
+}
+
+/// Position of the next marker (its `0xFF`) at or after `pos` that ends an entropy-coded segment (not a stuffed
+/// byte, not a restart marker), if any.
+fn next_marker(d: &[u8], mut pos: usize) -> Option<usize> {
+    while pos + 1 < d.len() {
+        if d[pos] == 0xFF {
+            let m = d[pos + 1];
+            if m != 0 && m != 0xFF && !(0xD0..=0xD7).contains(&m) {
+                return Some(pos);
+            }
+            pos += if m == 0xFF { 1 } else { 2 };
+        } else {
+            pos += 1;
+        }
+    }
+    None
+}
+
+/// `Ok` when the JPEG in `data` holds all its compressed data and ends with an end-of-image marker; `Err` says
+/// what is missing. See the module documentation.
+pub fn check(data: &[u8]) -> Result<(), Why> {
+    if data.get(..2) != Some(&[0xFF, 0xD8]) {
+        return Err("not a JPEG (no start-of-image marker)".into());
+    }
+    let mut pos = 2;
+    let mut frame: Option<(usize, usize, Vec<Component>)> = None;
+    let mut baseline = false;
+    let mut dc: [Option<Huffman>; 4] = [None, None, None, None];
+    let mut ac: [Option<Huffman>; 4] = [None, None, None, None];
+    let mut restart = 0usize;
+    let mut scans = 0usize;
+    loop {
+        // Markers may be preceded by fill bytes 0xFF.
+        while data.get(pos) == Some(&0xFF) && data.get(pos + 1) == Some(&0xFF) {
+            pos += 1;
+        }
+        let (Some(&0xFF), Some(&m)) = (data.get(pos), data.get(pos + 1)) else {
+            return Err(if pos >= data.len() {
+                "the file ends before its end-of-image marker (truncated)".into()
+            } else if data[pos..].iter().all(|&b| b == 0) {
+                format!(
+                    "{} zero bytes where the next marker should be (a zero-filled tail: the file was not \
+                     completely written)",
+                    data.len() - pos
+                )
+            } else {
+                format!("no marker at byte {pos} (damaged)")
+            });
+        };
+        pos += 2;
+        match m {
+            0xD9 => {
+                return if scans == 0 {
+                    Err("end-of-image marker before any image data".into())
+                } else {
+                    Ok(())
+                };
+            }
+            0x01 | 0xD0..=0xD7 => continue,
+            _ => {}
+        }
+        let len = be16(data, pos)?;
+        if len < 2 || pos + len > data.len() {
+            return Err("the file ends inside a header segment (truncated)".into());
+        }
+        let seg = &data[pos + 2..pos + len];
+        match m {
+            0xC0..=0xCF if m != 0xC4 && m != 0xC8 && m != 0xCC => {
+                baseline = m == 0xC0 || m == 0xC1;
+                if seg.len() < 6 {
+                    return Err("bad frame header".into());
+                }
+                let height = u16::from_be_bytes([seg[1], seg[2]]) as usize;
+                let width = u16::from_be_bytes([seg[3], seg[4]]) as usize;
+                let nc = seg[5] as usize;
+                if seg.len() < 6 + 3 * nc || nc == 0 || width == 0 || height == 0 {
+                    return Err("bad frame header".into());
+                }
+                let comps: Vec<Component> = (0..nc)
+                    .map(|i| Component {
+                        id: seg[6 + 3 * i],
+                        h: (seg[7 + 3 * i] >> 4) as usize,
+                        v: (seg[7 + 3 * i] & 15) as usize,
+                    })
+                    .collect();
+                if comps
+                    .iter()
+                    .any(|c| !(1..=4).contains(&c.h) || !(1..=4).contains(&c.v))
+                {
+                    return Err("bad sampling factors in the frame header".into());
+                }
+                frame = Some((width, height, comps));
+            }
+            0xC4 => {
+                let mut p = 0;
+                while p < seg.len() {
+                    let tc = seg[p] >> 4;
+                    let th = (seg[p] & 15) as usize;
+                    let counts: [u8; 16] = seg
+                        .get(p + 1..p + 17)
+                        .and_then(|c| c.try_into().ok())
+                        .ok_or("bad Huffman table segment")?;
+                    let total: usize = counts.iter().map(|&c| c as usize).sum();
+                    let values = seg
+                        .get(p + 17..p + 17 + total)
+                        .ok_or("bad Huffman table segment")?
+                        .to_vec();
+                    if th > 3 || tc > 1 {
+                        return Err("bad Huffman table segment".into());
+                    }
+                    let t = Huffman::new(&counts, values)?;
+                    if tc == 0 {
+                        dc[th] = Some(t);
+                    } else {
+                        ac[th] = Some(t);
+                    }
+                    p += 17 + total;
+                }
+            }
+            0xDD => restart = be16(data, pos + 2)?,
+            0xDA => {
+                scans += 1;
+                let start = pos + len;
+                let end = if baseline {
+                    let (w, h, comps) = frame.as_ref().ok_or("scan before the frame header")?;
+                    scan_baseline(data, start, seg, *w, *h, comps, &dc, &ac, restart)?
+                } else {
+                    start
+                };
+                pos = next_marker(data, end).ok_or_else(|| {
+                    if data[end..].iter().rev().take(64).all(|&b| b == 0) {
+                        "the compressed data runs into a zero-filled tail without an end marker (the file was \
+                         not completely written)"
+                            .to_string()
+                    } else {
+                        "the file ends inside the compressed data (truncated)".to_string()
+                    }
+                })?;
+                continue;
+            }
+            _ => {}
+        }
+        pos += len;
+    }
+}
+
+/// Huffman-decode one baseline scan starting at `start`; returns the position where its data ends.
+#[allow(clippy::too_many_arguments)]
+fn scan_baseline(
+    data: &[u8],
+    start: usize,
+    seg: &[u8],
+    width: usize,
+    height: usize,
+    comps: &[Component],
+    dc: &[Option<Huffman>; 4],
+    ac: &[Option<Huffman>; 4],
+    restart: usize,
+) -> Result<usize, Why> {
+    let ns = *seg.first().ok_or("bad scan header")? as usize;
+    if ns == 0 || seg.len() < 1 + 2 * ns + 3 {
+        return Err("bad scan header".into());
+    }
+    let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
+    let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
+    // For each component of the scan: (blocks per MCU across, down, DC table, AC table).
+    let mut parts = Vec::with_capacity(ns);
+    let mut single = None;
+    for i in 0..ns {
+        let id = seg[1 + 2 * i];
+        let t = seg[2 + 2 * i];
+        let c = comps
+            .iter()
+            .find(|c| c.id == id)
+            .ok_or("scan names a component the frame does not have")?;
+        let (td, ta) = ((t >> 4) as usize, (t & 15) as usize);
+        let d = dc
+            .get(td)
+            .and_then(|t| t.as_ref())
+            .ok_or("missing DC Huffman table")?;
+        let a = ac
+            .get(ta)
+            .and_then(|t| t.as_ref())
+            .ok_or("missing AC Huffman table")?;
+        if ns == 1 {
+            let cw = (width * c.h).div_ceil(hmax);
+            let ch = (height * c.v).div_ceil(vmax);
+            single = Some(cw.div_ceil(8) * ch.div_ceil(8));
+            parts.push((1usize, d, a));
+        } else {
+            parts.push((c.h * c.v, d, a));
+        }
+    }
+    let mcus = match single {
+        Some(n) => n,
+        None => width.div_ceil(8 * hmax) * height.div_ceil(8 * vmax),
+    };
+    let mut bits = Bits::new(data, start);
+    let short = |done: usize| {
+        format!(
+            "the compressed data ends after {done} of {mcus} blocks/MCUs ({:.0} % of the image): the file was \
+             cut short",
+            100.0 * done as f64 / mcus as f64
+        )
+    };
+    for m in 0..mcus {
+        if restart > 0 && m > 0 && m % restart == 0 {
+            // Byte-aligned restart marker expected here.
+            if !bits.within_data() {
+                return Err(short(m));
+            }
+            // The reader stops at a marker; at most a padding byte (possibly stuffed) lies before it.
+            let p = next_marker_any(data, bits.pos);
+            match data.get(p + 1) {
+                Some(&r) if (0xD0..=0xD7).contains(&r) && p - bits.pos <= 3 => {
+                    bits = Bits::new(data, p + 2);
+                }
+                _ => return Err(short(m)),
+            }
+        }
+        for &(blocks, d, a) in &parts {
+            for _ in 0..blocks {
+                let s = bits.decode(d)? as u32;
+                if s > 16 {
+                    return Err("corrupt compressed data (bad DC size)".into());
+                }
+                bits.skip(s);
+                let mut k = 1;
+                while k < 64 {
+                    let rs = bits.decode(a)?;
+                    let (r, s) = ((rs >> 4) as usize, (rs & 15) as u32);
+                    if s == 0 {
+                        if r == 15 {
+                            k += 16;
+                            continue;
+                        }
+                        break;
+                    }
+                    k += r;
+                    bits.skip(s);
+                    k += 1;
+                }
+                if k > 64 {
+                    return Err(
+                        "corrupt compressed data (more than 64 coefficients in a block)".into(),
+                    );
+                }
+            }
+        }
+        if bits.ended && !bits.within_data() {
+            return Err(short(m));
+        }
+    }
+    if !bits.within_data() {
+        return Err(short(mcus));
+    }
+    // The reader never passes a marker: the rest of this scan's data (if any) starts at its position.
+    Ok(bits.pos)
+}
+
+/// The next `0xFF xx` marker of any kind (restart markers included) at or after `pos`.
+fn next_marker_any(d: &[u8], mut pos: usize) -> usize {
+    while pos + 1 < d.len() {
+        if d[pos] == 0xFF && d[pos + 1] != 0 && d[pos + 1] != 0xFF {
+            return pos;
+        }
+        pos += 1;
+    }
+    d.len()
+}
