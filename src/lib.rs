@@ -41,6 +41,7 @@ pub mod options;
 pub mod overview;
 pub mod pipeline;
 pub mod raster;
+pub mod refine;
 pub mod report;
 pub mod scatter;
 pub mod simulate;

@@ -185,7 +185,8 @@ pub struct Options {
     #[serde(alias = "seafloor-color")]
     pub seafloor_colour: SeafloorColour,
     /// Smallest value of `F` a pixel is divided by, so that dark corners do not explode (a gain of at most
-    /// `1/factor_floor` relative to a normally lit pixel). Default: 0.05.
+    /// `1/factor_floor` relative to a normally lit pixel), for every method but `abyss` (which uses
+    /// `relative_floor`). Default: 0.05.
     pub factor_floor: f32,
     /// Write `S` to `<out>/_abysslight/scatter.png` (16-bit). Default: false.
     pub save_scatter: bool,
@@ -217,8 +218,9 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
-    /// How the lighting is estimated: `paper` (Köser et al.), or the baselines `mean` (mission mean image,
-    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: paper.
+    /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
+    /// [`crate::refine`]), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
+    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
     pub method: Method,
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
     pub degree: usize,
@@ -232,6 +234,21 @@ pub struct Options {
     pub poll_interval: u64,
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
+    /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
+    /// with a smooth hand-over ([`crate::refine::soft_floor`]). Default: 0.03.
+    #[serde(default = "default_relative_floor")]
+    pub relative_floor: f32,
+    /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
+    #[serde(default = "default_true")]
+    pub photo_gain: bool,
+}
+
+fn default_relative_floor() -> f32 {
+    0.03
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl Default for Options {
@@ -264,6 +281,8 @@ impl Default for Options {
             idle_timeout: None,
             poll_interval: 500,
             report: None,
+            relative_floor: default_relative_floor(),
+            photo_gain: true,
         }
     }
 }
@@ -337,6 +356,12 @@ impl Options {
             return usage(format!(
                 "--factor-floor must be above 0, got {}",
                 self.factor_floor
+            ));
+        }
+        if !(self.relative_floor > 0.0 && self.relative_floor < 1.0) {
+            return usage(format!(
+                "--relative-floor must be above 0 and below 1, got {}",
+                self.relative_floor
             ));
         }
         if !(1..=100).contains(&self.jpeg_quality) {

@@ -991,9 +991,15 @@ impl Ctx<'_> {
                     .with_extension("png");
                 io::save_raster_png16(&lit, &p)?;
             }
+            // --method abyss: per-photo gain and relative soft floor (src/refine.rs).
+            let abyss = self.opts.method == Method::Abyss;
+            if abyss {
+                crate::refine::refine_factor(&mut f, own, &m, self.scatter_low, self.opts);
+            }
             let t = Instant::now();
             let l = w.photo.layout;
-            let floor = self.opts.factor_floor;
+            // abyss: F is floored softly above (at block resolution); the kernel's floor only guards against 0.
+            let floor = if abyss { 1e-6 } else { self.opts.factor_floor };
             let (c8, c16) = self.curves;
             let stats = match &mut w.photo.samples {
                 Samples::U8(v) => correct_in_place(v, l, self.scatter, &f, self.k, floor, c8),
