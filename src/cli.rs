@@ -311,7 +311,7 @@ struct CorrectArgs {
     #[arg(long, value_name = "D")]
     degree: Option<usize>,
 
-    /// --method abyss: floor of F as a share of the photo's lit level, with a smooth hand-over [default: 0.03].
+    /// --method abyss: floor of F as a share of the photo's lit level, with a smooth hand-over [default: 0.01].
     #[arg(long, value_name = "SHARE")]
     relative_floor: Option<f32>,
 

@@ -235,7 +235,8 @@ pub struct Options {
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
     /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
-    /// with a smooth hand-over ([`crate::refine::soft_floor`]). Default: 0.03.
+    /// with a smooth hand-over ([`crate::refine::soft_floor`]). Default: 0.01 (measured on the dive matrix,
+    /// docs/evaluation.md).
     #[serde(default = "default_relative_floor")]
     pub relative_floor: f32,
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
@@ -244,7 +245,7 @@ pub struct Options {
 }
 
 fn default_relative_floor() -> f32 {
-    0.03
+    0.01
 }
 
 fn default_true() -> bool {

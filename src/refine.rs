@@ -129,9 +129,9 @@ pub fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
             photo_gain: false,
             ..o
         }),
-        ("abyss-floor-0.01", |o| Options {
+        ("abyss-floor-0.03", |o| Options {
             method: Method::Abyss,
-            relative_floor: 0.01,
+            relative_floor: 0.03,
             ..o
         }),
         ("abyss-floor-0.1", |o| Options {
