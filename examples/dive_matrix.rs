@@ -27,6 +27,9 @@ use abysslight::simulate::{Dive, Exposure, Rig, Simulation, Water};
 use abysslight::transfer::Transfer;
 use abysslight::{correct_mission, Silent};
 
+/// Options of one column, made from the options every column shares.
+type MakeOptions = Box<dyn Fn(Options) -> Options>;
+
 /// One dive of the matrix.
 struct DiveSpec {
     name: &'static str,
@@ -42,6 +45,7 @@ struct DiveSpec {
     fov: f32,
 }
 
+#[allow(clippy::too_many_arguments)]
 const fn d(
     name: &'static str,
     rig: Rig,
@@ -220,7 +224,7 @@ fn main() {
         );
     }
     // (label, options relative to the paper-as-published baseline)
-    let mut methods: Vec<(String, Box<dyn Fn(Options) -> Options>)> = vec![
+    let mut methods: Vec<(String, MakeOptions)> = vec![
         (
             "mean".into(),
             Box::new(|o| Options {
