@@ -235,6 +235,35 @@ struct SimulateArgs {
     /// Sensor noise multiplier (0: none).
     #[arg(long, value_name = "X", default_value_t = 1.0)]
     noise: f32,
+    /// Water: a preset (mild, oceanic-i, oceanic-iii, coastal) or attenuation per metre r,g,b (e.g. 0.4,0.07,0.03).
+    #[arg(long, value_name = "PRESET|R,G,B", default_value = "mild")]
+    water: abysslight::eval::simulate::Water,
+    /// Altitude swing, metres (a slow and a faster oscillation) [default: 5 % of the altitude, slow].
+    #[arg(long, value_name = "M")]
+    altitude_swing: Option<f32>,
+    /// Camera white-balance gains r,g,b (applied after the sensor noise), e.g. 6,1.3,1 for deep water.
+    #[arg(long, value_name = "R,G,B", default_value = "1,1,1", value_parser = parse_gains)]
+    white_balance: [f32; 3],
+    /// Exposure: centre (sediment at the centre reads 0.7) or brightest (the brightest sediment reads 0.8).
+    #[arg(long, value_name = "MODE", default_value = "centre")]
+    exposure: abysslight::eval::simulate::Exposure,
+    /// Also write each survey photo's true lighting: truth/lit/ (F·0.4) and truth/backscatter/ (S), linear 16-bit.
+    #[arg(long)]
+    truth_lighting: bool,
+}
+
+fn parse_gains(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("invalid gains {s:?}: expected R,G,B such as 6,1.3,1"))?;
+    match v.as_slice() {
+        [r, g, b] => Ok([*r, *g, *b]),
+        _ => Err(format!(
+            "invalid gains {s:?}: expected R,G,B such as 6,1.3,1"
+        )),
+    }
 }
 
 #[derive(Args, Debug)]
@@ -372,12 +401,24 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_OUT)]
     save_scatter: bool,
 
-    /// How the lighting is estimated: paper, mean or polynomial [default: paper].
+    /// How the lighting is estimated: abyss, paper, mean or polynomial [default: abyss].
     ///
-    /// paper is Köser et al.; the baselines are mean (divide by the mission's mean image) and polynomial
+    /// abyss is the paper's sliding-window F with a per-photo gain against its window and a floor relative to
+    /// the photo's lit level with a smooth hand-over (docs/evaluation.md); paper is Köser et al. as published
+    /// (absolute --factor-floor); the baselines are mean (divide by the mission's mean image) and polynomial
     /// (per-photo robust polynomial fit of log intensity).
     #[arg(long, value_name = "METHOD", help_heading = H_METHOD)]
     method: Option<Method>,
+
+    /// --method abyss: floor of F as a share of the photo's lit level [default: 0.01].
+    ///
+    /// The lit level is the 95th percentile of F per channel; F is floored softly, F' = (F^4 + phi^4)^(1/4).
+    #[arg(long, value_name = "SHARE", help_heading = H_METHOD)]
+    relative_floor: Option<f32>,
+
+    /// --method abyss: no per-photo gain against the window (on by default).
+    #[arg(long, help_heading = H_METHOD)]
+    no_photo_gain: bool,
 
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     ///
@@ -407,7 +448,7 @@ struct CorrectArgs {
     #[arg(long, value_name = "COLOUR", visible_alias = "seafloor-color", help_heading = H_METHOD)]
     seafloor_colour: Option<SeafloorColour>,
 
-    /// Smallest F a pixel is divided by [default: 0.05].
+    /// Smallest F a pixel is divided by, for every method but abyss [default: 0.05].
     ///
     /// Caps the gain in dark corners (at 20x a normally lit pixel for 0.05); the count of floored pixels is
     /// reported.
@@ -528,6 +569,12 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if let Some(d) = args.degree {
         o.degree = d;
+    }
+    if let Some(v) = args.relative_floor {
+        o.relative_floor = v;
+    }
+    if args.no_photo_gain {
+        o.photo_gain = false;
     }
     o.mask_auto |= args.mask_auto;
     if args.water_column.is_some() {
@@ -837,9 +884,17 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         fov_deg: a.fov,
         noise: a.noise,
         beam_deg: a.beam,
+        water: a.water,
+        altitude_swing: a.altitude_swing,
+        white_balance: a.white_balance,
+        exposure: a.exposure,
     };
     let t = std::time::Instant::now();
-    sim.write(&a.out)?;
+    if a.truth_lighting {
+        sim.render_with_lighting()?.write(&a.out)?;
+    } else {
+        sim.write(&a.out)?;
+    }
     eprintln!(
         "abysslight: simulated {} survey photos and {} water-column frames in {:.1} s into {}",
         sim.frames,

@@ -1,5 +1,6 @@
 //! `abysslight demo`: simulate a small dive, correct it with every method, score the results against the truth and
-//! draw a contact sheet (raw | mean | polynomial | paper | truth) — a one-command tour with no data needed.
+//! draw a contact sheet (raw | mean | polynomial | paper | abyss (the default) | truth) — a one-command tour with
+//! no data needed.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -65,7 +66,12 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
         dive.display()
     ));
     let truth = sim.write(&dive)?;
-    let methods = [Method::Mean, Method::Polynomial, Method::Paper];
+    let methods = [
+        Method::Mean,
+        Method::Polynomial,
+        Method::Paper,
+        Method::Abyss,
+    ];
     let mut sets = vec![("raw".to_string(), dive.join("survey"))];
     for m in methods {
         progress.stage(&format!("correcting with --method {m}"));
@@ -211,7 +217,8 @@ fn sheet(
         );
         draw::text(&mut img, margin + 4, y + 4, name, 1, WHITE);
     }
-    let foot = "raw: as recorded; mean / polynomial: baselines; paper: Koser et al.; truth: simulated albedo";
+    let foot = "raw: as recorded; mean / polynomial: baselines; paper: Koser et al. as published; abyss: the default; \
+                truth: simulated albedo";
     draw::text(
         &mut img,
         margin,

@@ -36,6 +36,9 @@ pub enum Rig {
     Three,
     /// Four lights on a ring around the camera.
     Four,
+    /// An AUV's layout: two lights well behind the camera and one beside it, all tilted forward, so the lit
+    /// area is off-centre and the frame's leading edge is dim.
+    Aft,
 }
 
 impl FromStr for Rig {
@@ -45,7 +48,10 @@ impl FromStr for Rig {
             "two" | "2" => Ok(Rig::Two),
             "three" | "3" => Ok(Rig::Three),
             "four" | "4" => Ok(Rig::Four),
-            _ => Err(format!("invalid rig {s:?}: expected two, three or four")),
+            "aft" => Ok(Rig::Aft),
+            _ => Err(format!(
+                "invalid rig {s:?}: expected two, three, four or aft"
+            )),
         }
     }
 }
@@ -92,6 +98,11 @@ impl Rig {
                 l(0.0, -0.6, 0.0, 0.0, 0.15, 0.85),
                 l(0.0, 0.6, 0.0, 0.0, -0.15, 0.9),
             ],
+            Rig::Aft => vec![
+                l(-0.5, 1.4, 0.0, 0.1, -0.32, 1.0),
+                l(0.5, 1.4, 0.0, -0.1, -0.32, 0.95),
+                l(0.9, 0.1, 0.0, -0.2, 0.0, 0.6),
+            ],
         }
     }
 }
@@ -125,6 +136,118 @@ pub struct Simulation {
     /// Beam width of the lights (σ of the fall-off, degrees): 36 lights the whole frame evenly in the middle; with
     /// narrower beams the edges of the light cones come into the frame, as on many real rigs. Default: 36.
     pub beam_deg: f32,
+    /// Water: per-channel attenuation `η` (1/m) and scattering `b` (1/m). Default: the mild water of the first
+    /// versions ([`Water::MILD`]); see [`Water::preset`] for Jerlov-like presets.
+    pub water: Water,
+    /// Altitude swing, metres (amplitude of a slow and a faster oscillation around `altitude`, like a sledge or
+    /// an AUV bouncing over terrain). Default: none, i.e. 5 % of the altitude, slowly.
+    pub altitude_swing: Option<f32>,
+    /// Camera white-balance gains applied to the sensor values (after the sensor noise, as a camera does), red,
+    /// green, blue. Default: 1,1,1.
+    pub white_balance: [f32; 3],
+    /// How the exposure is set: `centre` (sediment at the image centre of a level camera reads 0.7 in green;
+    /// default) or `brightest` (the brightest sediment anywhere in the frame, any channel after white balance,
+    /// reads 0.8 — as an auto-exposure avoiding clipping does, so red-starved photos become dark and noisy).
+    pub exposure: Exposure,
+}
+
+/// How a simulated camera sets its exposure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Exposure {
+    #[default]
+    Centre,
+    Brightest,
+}
+
+impl FromStr for Exposure {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "centre" | "center" => Ok(Exposure::Centre),
+            "brightest" => Ok(Exposure::Brightest),
+            _ => Err(format!(
+                "invalid exposure {s:?}: expected centre or brightest"
+            )),
+        }
+    }
+}
+
+/// Optical properties of the simulated water, per channel (red, green, blue).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub struct Water {
+    /// Attenuation coefficient `η`, 1/m.
+    pub attenuation: [f32; 3],
+    /// Scattering coefficient `b`, 1/m (drives the backscatter).
+    pub scattering: [f32; 3],
+}
+
+impl Default for Water {
+    fn default() -> Self {
+        Water::MILD
+    }
+}
+
+impl Water {
+    /// The water of the first simulator versions (and of `demo`): mild, red only 3× blue.
+    pub const MILD: Water = Water {
+        attenuation: [0.25, 0.07, 0.09],
+        scattering: [0.03, 0.04, 0.045],
+    };
+
+    /// Jerlov-like presets by name: `mild` (the default), `oceanic-i` (clear open ocean: red ~0.4/m, blue
+    /// ~0.03/m), `oceanic-iii` (more particles: stronger scattering, blue and green attenuated more) and
+    /// `coastal` (turbid, green water). Values follow the shape of Jerlov's diffuse attenuation curves at
+    /// 600/530/470 nm, rounded; they are meant to make realistic test dives, not to model a given site.
+    pub fn preset(name: &str) -> Option<Water> {
+        Some(match name {
+            "mild" => Water::MILD,
+            "oceanic-i" | "jerlov-i" => Water {
+                attenuation: [0.40, 0.065, 0.035],
+                scattering: [0.02, 0.03, 0.035],
+            },
+            "oceanic-iii" | "jerlov-iii" => Water {
+                attenuation: [0.45, 0.11, 0.10],
+                scattering: [0.05, 0.06, 0.065],
+            },
+            "coastal" | "jerlov-3c" => Water {
+                attenuation: [0.55, 0.20, 0.32],
+                scattering: [0.09, 0.10, 0.10],
+            },
+            _ => return None,
+        })
+    }
+}
+
+impl FromStr for Water {
+    type Err = String;
+
+    /// A preset name, or `ηr,ηg,ηb` (attenuation only; scattering stays that of `mild`).
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        let t = s.trim().to_ascii_lowercase();
+        if let Some(w) = Water::preset(&t) {
+            return Ok(w);
+        }
+        let bad = || {
+            format!(
+                "invalid water {s:?}: expected mild, oceanic-i, oceanic-iii, coastal or three attenuation \
+                 coefficients per metre such as 0.4,0.07,0.03"
+            )
+        };
+        let v: Vec<f32> = t
+            .split(',')
+            .map(|p| p.trim().parse::<f32>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| bad())?;
+        match v.as_slice() {
+            [r, g, b] if v.iter().all(|x| (0.0..5.0).contains(x)) => Ok(Water {
+                attenuation: [*r, *g, *b],
+                ..Water::MILD
+            }),
+            _ => Err(bad()),
+        }
+    }
 }
 
 impl Default for Simulation {
@@ -144,6 +267,10 @@ impl Default for Simulation {
             fov_deg: 75.0,
             noise: 1.0,
             beam_deg: 36.0,
+            water: Water::MILD,
+            altitude_swing: None,
+            white_balance: [1.0; 3],
+            exposure: Exposure::Centre,
         }
     }
 }
@@ -191,9 +318,9 @@ pub struct Truth {
     pub water: Vec<String>,
 }
 
-const ETA: [f32; 3] = [0.25, 0.07, 0.09];
-/// Scattering coefficient (1/m) per channel and Henyey–Greenstein asymmetry.
-const SCATTER_B: [f32; 3] = [0.03, 0.04, 0.045];
+/// Albedo of the grey seafloor whose look `truth/lit/` records (`F·LIT_GREY`).
+pub const LIT_GREY: f32 = 0.4;
+/// Henyey–Greenstein asymmetry.
 const HG_G: f32 = 0.6;
 /// Water-column rays are integrated this far (metres).
 const OPEN_WATER: f32 = 12.0;
@@ -444,9 +571,10 @@ struct WorldLight {
     axis: V3,
     power: f32,
     inv_sigma: f32,
+    eta: [f32; 3],
 }
 
-fn world_lights(lights: &[Light], r: &[f64; 9], c: V3) -> Vec<WorldLight> {
+fn world_lights(lights: &[Light], r: &[f64; 9], c: V3, eta: [f32; 3]) -> Vec<WorldLight> {
     lights
         .iter()
         .map(|l| {
@@ -456,6 +584,7 @@ fn world_lights(lights: &[Light], r: &[f64; 9], c: V3) -> Vec<WorldLight> {
                 axis: norm(mat_vec(r, l.axis)),
                 power: l.power,
                 inv_sigma: 1.0 / l.sigma_deg.to_radians(),
+                eta,
             }
         })
         .collect()
@@ -472,9 +601,9 @@ impl WorldLight {
         let base = self.power * (-0.5 * (th * self.inv_sigma).powi(6)).exp() / (d * d);
         (
             [
-                base * (-ETA[0] * d).exp(),
-                base * (-ETA[1] * d).exp(),
-                base * (-ETA[2] * d).exp(),
+                base * (-self.eta[0] * d).exp(),
+                base * (-self.eta[1] * d).exp(),
+                base * (-self.eta[2] * d).exp(),
             ],
             dir,
             d,
@@ -489,6 +618,7 @@ struct View<'a> {
     c: V3,
     lights: Vec<WorldLight>,
     floor: Option<&'a Floor>,
+    water: Water,
 }
 
 impl View<'_> {
@@ -519,7 +649,11 @@ impl View<'_> {
                 let (e, dir, _) = l.reach(q);
                 let phase = hg(dot(dir, [-d[0], -d[1], -d[2]]));
                 for ch in 0..3 {
-                    s[ch] += SCATTER_B[ch] * e[ch] * phase * (-ETA[ch] * t).exp() * (t1 - t0);
+                    s[ch] += self.water.scattering[ch]
+                        * e[ch]
+                        * phase
+                        * (-self.water.attenuation[ch] * t).exp()
+                        * (t1 - t0);
                 }
             }
         }
@@ -527,9 +661,20 @@ impl View<'_> {
     }
 }
 
-/// Render a frame in linear light, before exposure: returns (radiance, albedo) rasters.
-fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
+/// A rendered frame: radiance after exposure, and for survey frames the true albedo; with `lighting`, also the
+/// true factor `F` (what an albedo of 1 would read, per pixel and channel) and backscatter `S`, both after
+/// exposure and before white balance and noise.
+struct Rendered {
+    img: Raster,
+    albedo: Option<Raster>,
+    factor: Option<Raster>,
+    backscatter: Option<Raster>,
+}
+
+/// Render a frame in linear light.
+fn render(view: &View, exposure: f32, lighting: bool) -> Rendered {
     let (w, h) = (view.cam.width, view.cam.height);
+    let eta = view.water.attenuation;
     // Backscatter is smooth: computed on a coarse grid and interpolated.
     let step = 4usize;
     let (gw, gh) = (w.div_ceil(step) + 1, h.div_ceil(step) + 1);
@@ -547,9 +692,13 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
         .collect();
     let mut img = Raster::filled(w, h, 3, 0.0);
     let mut alb = view.floor.map(|_| Raster::filled(w, h, 3, 0.0));
-    let rows_img = img.data.par_chunks_mut(w * 3);
-    let body = |y: usize, row: &mut [f32], arow: Option<&mut [f32]>| {
-        let mut arow = arow;
+    let mut fac = (lighting && view.floor.is_some()).then(|| Raster::filled(w, h, 3, 0.0));
+    let mut bsc = lighting.then(|| Raster::filled(w, h, 3, 0.0));
+    let body = |y: usize,
+                row: &mut [f32],
+                mut arow: Option<&mut [f32]>,
+                mut frow: Option<&mut [f32]>,
+                mut srow: Option<&mut [f32]>| {
         for x in 0..w {
             let (fx, fy) = (x as f32 / step as f32, y as f32 / step as f32);
             let (x0, y0) = (fx as usize, fy as usize);
@@ -560,6 +709,11 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
                 let a = g(x0, y0)[ch] + (g(x0 + 1, y0)[ch] - g(x0, y0)[ch]) * tx;
                 let b = g(x0, y0 + 1)[ch] + (g(x0 + 1, y0 + 1)[ch] - g(x0, y0 + 1)[ch]) * tx;
                 *p = a + (b - a) * ty;
+            }
+            if let Some(sr) = srow.as_deref_mut() {
+                for ch in 0..3 {
+                    sr[x * 3 + ch] = px[ch] * exposure;
+                }
             }
             if let Some(floor) = view.floor {
                 let d = view.ray(x as f32 + 0.5, y as f32 + 0.5);
@@ -578,7 +732,15 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
                 let vignette = cos_cam.powi(4);
                 for ch in 0..3 {
                     px[ch] +=
-                        a[ch] * e[ch] / std::f32::consts::PI * (-ETA[ch] * t).exp() * vignette;
+                        a[ch] * e[ch] / std::f32::consts::PI * (-eta[ch] * t).exp() * vignette;
+                }
+                if let Some(fr) = frow.as_deref_mut() {
+                    for ch in 0..3 {
+                        fr[x * 3 + ch] = e[ch] / std::f32::consts::PI
+                            * (-eta[ch] * t).exp()
+                            * vignette
+                            * exposure;
+                    }
                 }
                 if let Some(ar) = arow.as_deref_mut() {
                     ar[x * 3..x * 3 + 3].copy_from_slice(&a);
@@ -589,14 +751,30 @@ fn render(view: &View, exposure: f32) -> (Raster, Option<Raster>) {
             }
         }
     };
-    match alb.as_mut() {
-        Some(a) => rows_img
-            .zip(a.data.par_chunks_mut(w * 3))
-            .enumerate()
-            .for_each(|(y, (row, arow))| body(y, row, Some(arow))),
-        None => rows_img.enumerate().for_each(|(y, row)| body(y, row, None)),
+    fn rows(r: &mut Option<Raster>, w: usize, h: usize) -> Vec<Option<&mut [f32]>> {
+        match r {
+            Some(r) => r.data.chunks_mut(w * 3).map(Some).collect(),
+            None => (0..h).map(|_| None).collect(),
+        }
     }
-    (img, alb)
+    let (ar, fr, sr) = (
+        rows(&mut alb, w, h),
+        rows(&mut fac, w, h),
+        rows(&mut bsc, w, h),
+    );
+    img.data
+        .par_chunks_mut(w * 3)
+        .zip(ar)
+        .zip(fr)
+        .zip(sr)
+        .enumerate()
+        .for_each(|(y, (((row, a), f), s))| body(y, row, a, f, s));
+    Rendered {
+        img,
+        albedo: alb,
+        factor: fac,
+        backscatter: bsc,
+    }
 }
 
 /// Floating particles: small bright blobs lit by the lights.
@@ -621,8 +799,8 @@ fn add_particles(img: &mut Raster, rng: &mut Rng, count: usize) {
     }
 }
 
-/// Shot and read noise, then the transfer curve and quantisation.
-fn finish(img: &Raster, seed: u64, noise: f32, bits: u32, encode: Transfer) -> Photo {
+/// Shot and read noise, the white-balance gains, then the transfer curve and quantisation.
+fn finish(img: &Raster, seed: u64, noise: f32, bits: u32, encode: Transfer, wb: [f32; 3]) -> Photo {
     let max = if bits == 16 { 65535.0 } else { 255.0 };
     let vals: Vec<f32> = img
         .data
@@ -633,7 +811,7 @@ fn finish(img: &Raster, seed: u64, noise: f32, bits: u32, encode: Transfer) -> P
             // Sum of four uniforms: approximately normal, unit variance.
             let n = (0..4).map(|k| unit(mix(h ^ k)) - 0.5).sum::<f32>() * 3.0f32.sqrt();
             let sigma = noise * (0.0003 * v.max(0.0) + 0.003f32.powi(2)).sqrt();
-            let l = (v + sigma * n).clamp(0.0, 1.0);
+            let l = ((v + sigma * n) * wb[i % 3]).clamp(0.0, 1.0);
             encode.from_linear(l) * max
         })
         .collect();
@@ -661,6 +839,11 @@ pub struct Dive {
     pub water: Vec<Photo>,
     /// True albedo of each survey photo (linear).
     pub albedo: Vec<Raster>,
+    /// With [`Simulation::render_with_lighting`]: each survey photo's true `F` (the linear value an albedo of 1
+    /// would read, white balance included) and true backscatter `S` (linear, white balance included), so that an
+    /// oracle correction `(I − S)/F` can be scored. Empty otherwise.
+    pub factor: Vec<Raster>,
+    pub backscatter: Vec<Raster>,
 }
 
 impl Simulation {
@@ -699,6 +882,21 @@ impl Simulation {
                 self.overlap
             ));
         }
+        if self
+            .altitude_swing
+            .is_some_and(|m| !(m >= 0.0 && m < 0.8 * self.altitude))
+        {
+            return bad(format!(
+                "--altitude-swing must be from 0 to 80 % of the altitude, got {:?}",
+                self.altitude_swing
+            ));
+        }
+        if self.white_balance.iter().any(|g| !(*g > 0.0 && *g < 50.0)) {
+            return bad(format!(
+                "--white-balance gains must be above 0 and below 50, got {:?}",
+                self.white_balance
+            ));
+        }
         if !(20.0..150.0).contains(&self.fov_deg) {
             return bad(format!(
                 "--fov must be 20 to 150 degrees, got {}",
@@ -722,6 +920,16 @@ impl Simulation {
 
     /// Render the dive in memory.
     pub fn render(&self) -> Result<Dive> {
+        self.render_inner(false)
+    }
+
+    /// Render the dive in memory with each survey photo's true `F` and `S` ([`Dive::factor`],
+    /// [`Dive::backscatter`]).
+    pub fn render_with_lighting(&self) -> Result<Dive> {
+        self.render_inner(true)
+    }
+
+    fn render_inner(&self, lighting: bool) -> Result<Dive> {
         self.validate()?;
         let cam = self.camera();
         let floor = Floor::new(self.seed, self.contamination);
@@ -736,7 +944,13 @@ impl Simulation {
         let ppm = cam.fy / alt;
         let pose = |i: usize| {
             let t = i as f64;
-            let z = alt * (1.0 + 0.05 * (0.1 * t + phase[0]).sin());
+            let z = match self.altitude_swing {
+                None => alt * (1.0 + 0.05 * (0.1 * t + phase[0]).sin()),
+                Some(m) => {
+                    alt + m as f64
+                        * (0.6 * (0.1 * t + phase[0]).sin() + 0.4 * (0.9 * t + phase[5]).sin())
+                }
+            };
             let roll = 3.0 * (0.17 * t + phase[1]).sin();
             let pitch = 3.0 * (0.13 * t + phase[2]).sin();
             let yaw = 2.0 * (0.09 * t + phase[3]).sin();
@@ -790,8 +1004,10 @@ impl Simulation {
                     p.position[1] as f32,
                     p.position[2] as f32,
                 ],
+                self.water.attenuation,
             ),
             floor: if with_floor { Some(&floor) } else { None },
+            water: self.water,
         };
         // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
         let level = Pose {
@@ -800,7 +1016,38 @@ impl Simulation {
             ..poses[0].clone()
         };
         let probe = view(&level, true);
-        let exposure = {
+        let eta = self.water.attenuation;
+        let wb = self.white_balance;
+        let exposure = if self.exposure == Exposure::Brightest {
+            // The brightest sediment of the frame, any channel, after white balance, reads 0.8.
+            let mut brightest = 0.0f32;
+            for gy in 0..=16 {
+                for gx in 0..=16 {
+                    let u = (gx as f32 / 16.0) * (cam.width as f32 - 1.0) + 0.5;
+                    let v = (gy as f32 / 16.0) * (cam.height as f32 - 1.0) + 0.5;
+                    let d = probe.ray(u, v);
+                    let t = -probe.c[2] / d[2];
+                    let q = [probe.c[0] + t * d[0], probe.c[1] + t * d[1], 0.0];
+                    let cos_cam = dot(d, mat_vec(&probe.r, [0.0, 0.0, 1.0])).max(0.0);
+                    for ch in 0..3 {
+                        let e: f32 = probe
+                            .lights
+                            .iter()
+                            .map(|l| {
+                                let (r, dir, _) = l.reach(q);
+                                r[ch] * (-dir[2]).max(0.0)
+                            })
+                            .sum();
+                        let read = floor.sediment[ch] * e / std::f32::consts::PI
+                            * (-eta[ch] * t).exp()
+                            * cos_cam.powi(4)
+                            * wb[ch];
+                        brightest = brightest.max(read);
+                    }
+                }
+            }
+            0.8 / brightest
+        } else {
             let d = probe.ray(cam.cx as f32, cam.cy as f32);
             let t = -probe.c[2] / d[2];
             let q = [probe.c[0] + t * d[0], probe.c[1] + t * d[1], 0.0];
@@ -812,14 +1059,26 @@ impl Simulation {
                     r[1] * (-dir[2]).max(0.0)
                 })
                 .sum();
-            0.7 / (floor.sediment[1] * e / std::f32::consts::PI * (-ETA[1] * t).exp())
+            0.7 / (floor.sediment[1] * e / std::f32::consts::PI * (-eta[1] * t).exp())
         };
         let bits = self.bit_depth;
         let mut survey = Vec::with_capacity(self.frames);
         let mut albedo = Vec::with_capacity(self.frames);
+        let (mut factors, mut scatters) = (Vec::new(), Vec::new());
         let particles = (self.width * self.height / 2500).max(3);
+        let with_wb = |mut r: Raster| {
+            for (i, v) in r.data.iter_mut().enumerate() {
+                *v *= wb[i % 3];
+            }
+            r
+        };
         for (i, p) in poses.iter().enumerate() {
-            let (mut img, alb) = render(&view(p, true), exposure);
+            let Rendered {
+                mut img,
+                albedo: alb,
+                factor,
+                backscatter,
+            } = render(&view(p, true), exposure, lighting);
             let mut prng = Rng(mix(self.seed ^ 0x5A11 ^ ((i as u64) << 20)));
             add_particles(&mut img, &mut prng, particles / 2);
             survey.push(finish(
@@ -828,14 +1087,19 @@ impl Simulation {
                 self.noise,
                 bits,
                 self.encode,
+                wb,
             ));
             albedo.push(alb.expect("survey frames see the floor"));
+            if let (Some(f), Some(s)) = (factor, backscatter) {
+                factors.push(with_wb(f));
+                scatters.push(with_wb(s));
+            }
         }
         // Water column: the same rig and camera on the way down, open water in view.
         let mut water = Vec::new();
         let mut names = Vec::new();
         if self.water_column > 0 {
-            let (base, _) = render(&view(&level, false), exposure);
+            let base = render(&view(&level, false), exposure, false).img;
             for i in 0..self.water_column {
                 let mut img = base.clone();
                 let mut prng = Rng(mix(self.seed ^ 0x3A7E ^ ((i as u64) << 24)));
@@ -846,6 +1110,7 @@ impl Simulation {
                     self.noise,
                     bits,
                     self.encode,
+                    wb,
                 ));
                 names.push(format!("{:04}.png", i + 1));
             }
@@ -855,7 +1120,7 @@ impl Simulation {
             settings: self.clone(),
             camera: cam,
             mosaic_pixels_per_metre: ppm,
-            attenuation: ETA,
+            attenuation: eta,
             lights: serde_json::to_value(&lights).unwrap_or_default(),
             poses,
             water: names,
@@ -865,6 +1130,8 @@ impl Simulation {
             survey,
             water,
             albedo,
+            factor: factors,
+            backscatter: scatters,
         })
     }
 
@@ -877,6 +1144,39 @@ impl Simulation {
 }
 
 impl Dive {
+    /// With true lighting rendered: `truth/lit/NNNN.png` (`F·0.4`, what a grey seafloor of albedo 0.4 reads,
+    /// linear 16-bit) and `truth/backscatter/NNNN.png` (`S`, linear 16-bit).
+    fn lighting_jobs(&self, out: &Path) -> Vec<(PathBuf, Photo)> {
+        let photo = |r: &Raster, scale: f32| {
+            let mut r = r.clone();
+            for v in &mut r.data {
+                *v *= scale;
+            }
+            Photo {
+                layout: r.layout(),
+                samples: Samples::U16(r.to_u16()),
+                alpha: None,
+            }
+        };
+        let mut jobs = Vec::new();
+        for (pose, (f, s)) in self
+            .truth
+            .poses
+            .iter()
+            .zip(self.factor.iter().zip(&self.backscatter))
+        {
+            jobs.push((
+                out.join("truth").join("lit").join(&pose.file),
+                photo(f, LIT_GREY),
+            ));
+            jobs.push((
+                out.join("truth").join("backscatter").join(&pose.file),
+                photo(s, 1.0),
+            ));
+        }
+        jobs
+    }
+
     /// Write `water/`, `survey/` and `truth/` below `out`.
     pub fn write(&self, out: &Path) -> Result<()> {
         let settings = EncodeSettings::default();
@@ -901,8 +1201,13 @@ impl Dive {
                     },
                 )
             }))
+            .chain(self.lighting_jobs(out))
             .collect();
-        for dir in ["water", "survey", "truth/albedo"] {
+        let mut dirs = vec!["water", "survey", "truth/albedo"];
+        if !self.factor.is_empty() {
+            dirs.extend(["truth/lit", "truth/backscatter"]);
+        }
+        for dir in dirs {
             let d = out.join(dir);
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }

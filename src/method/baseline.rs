@@ -20,8 +20,13 @@ use crate::method::raster::Raster;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum Method {
-    /// Köser et al.: temporal median over a sliding window of block medians.
+    /// The default: the paper's sliding-window `F`, then per photo a robust gain against its window, a floor
+    /// relative to the photo's lit level with a smooth hand-over, and `S` scaled by a factor estimated from the
+    /// mission (see [`crate::method::refine`]).
     #[default]
+    Abyss,
+    /// Köser et al. as published: temporal median over a sliding window of block medians, `F = (M − S)/C`,
+    /// `A = (I − S)/max(F, factor_floor)` with the absolute `--factor-floor` (default 0.05).
     Paper,
     /// Divide by the mission's mean image (Pizarro & Singh).
     Mean,
@@ -33,11 +38,12 @@ impl FromStr for Method {
     type Err = String;
     fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
         match s.trim().to_ascii_lowercase().as_str() {
+            "abyss" => Ok(Method::Abyss),
             "paper" => Ok(Method::Paper),
             "mean" => Ok(Method::Mean),
             "polynomial" | "poly" => Ok(Method::Polynomial),
             _ => Err(format!(
-                "invalid method {s:?}: expected paper, mean or polynomial"
+                "invalid method {s:?}: expected abyss, paper, mean or polynomial"
             )),
         }
     }
@@ -46,6 +52,7 @@ impl FromStr for Method {
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
+            Method::Abyss => "abyss",
             Method::Paper => "paper",
             Method::Mean => "mean",
             Method::Polynomial => "polynomial",

@@ -33,6 +33,7 @@ use crate::method::median::{block_median, stack_median};
 use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Samples};
+use crate::method::refine::refine_factor;
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::transfer::Curve;
 use crate::method::window::window_range;
@@ -365,8 +366,15 @@ impl<T> Engine<T> {
         let t = Instant::now();
         let mut stats = CorrectStats::default();
         let mut photo = w.photo;
+        // --method abyss: per-photo gain and a floor relative to the lit level, softly (method/refine.rs); the
+        // monitor above saw the window's F. The kernel's floor then only guards against 0.
+        let mut floor = self.params.factor_floor;
+        if self.params.method == Method::Abyss {
+            refine_factor(&mut f, own, &m, self.scatter_low.as_ref(), &self.params);
+            floor = 1e-6;
+        }
         if let Some(p) = &mut photo {
-            let (l, k, floor) = (p.layout, self.params.downsample, self.params.factor_floor);
+            let (l, k) = (p.layout, self.params.downsample);
             let s = self.scatter.as_ref();
             stats = match &mut p.samples {
                 Samples::U8(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.0),

@@ -25,6 +25,7 @@ pub mod median;
 pub mod monitor;
 pub mod params;
 pub mod raster;
+pub mod refine;
 pub mod scatter;
 pub mod transfer;
 pub mod window;

@@ -124,6 +124,11 @@ pub struct Params {
     pub transfer: Transfer,
     /// Degree of the polynomial of [`Method::Polynomial`]. Default: 4.
     pub degree: usize,
+    /// [`Method::Abyss`]: the floor of `F` as a share of the photo's lit level, with a smooth hand-over
+    /// ([`crate::method::refine::soft_floor`]). Default: 0.01.
+    pub relative_floor: f32,
+    /// [`Method::Abyss`]: one robust gain per photo and channel against its window's `M`. Default: true.
+    pub photo_gain: bool,
 }
 
 impl Default for Params {
@@ -136,6 +141,8 @@ impl Default for Params {
             factor_floor: 0.05,
             transfer: Transfer::default(),
             degree: 4,
+            relative_floor: 0.01,
+            photo_gain: true,
         }
     }
 }

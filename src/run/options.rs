@@ -88,7 +88,8 @@ pub struct Options {
     #[serde(alias = "seafloor-color")]
     pub seafloor_colour: SeafloorColour,
     /// Smallest value of `F` a pixel is divided by, so that dark corners do not explode (a gain of at most
-    /// `1/factor_floor` relative to a normally lit pixel). Default: 0.05.
+    /// `1/factor_floor` relative to a normally lit pixel), for every method but `abyss` (which uses
+    /// `relative_floor`). Default: 0.05.
     pub factor_floor: f32,
     /// Write `S` to `<out>/_abysslight/scatter.png` (16-bit). Default: false.
     pub save_scatter: bool,
@@ -123,8 +124,9 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
-    /// How the lighting is estimated: `paper` (Köser et al.), or the baselines `mean` (mission mean image,
-    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: paper.
+    /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
+    /// [`crate::refine`]), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
+    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
     pub method: Method,
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
     pub degree: usize,
@@ -141,6 +143,22 @@ pub struct Options {
     pub limit: Option<usize>,
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
+    /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
+    /// with a smooth hand-over ([`crate::method::refine::soft_floor`]). Default: 0.01 (measured on the dive matrix,
+    /// docs/evaluation.md).
+    #[serde(default = "default_relative_floor")]
+    pub relative_floor: f32,
+    /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
+    #[serde(default = "default_true")]
+    pub photo_gain: bool,
+}
+
+fn default_relative_floor() -> f32 {
+    0.01
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl Default for Options {
@@ -175,6 +193,8 @@ impl Default for Options {
             poll_interval: 500,
             limit: None,
             report: None,
+            relative_floor: default_relative_floor(),
+            photo_gain: true,
         }
     }
 }
@@ -244,6 +264,12 @@ impl Options {
         }
         if self.limit == Some(0) {
             return usage("--limit must be at least 1 photo".into());
+        }
+        if !(self.relative_floor > 0.0 && self.relative_floor < 1.0) {
+            return usage(format!(
+                "--relative-floor must be above 0 and below 1, got {}",
+                self.relative_floor
+            ));
         }
         let stdin = self.survey.as_deref() == Some(Path::new("-"));
         let stdout = self.out.as_deref() == Some(Path::new("-"));

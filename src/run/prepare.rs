@@ -67,6 +67,8 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         factor_floor: opts.factor_floor,
         transfer: opts.transfer,
         degree: opts.degree,
+        relative_floor: opts.relative_floor,
+        photo_gain: opts.photo_gain,
     };
     let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
     drop(scatter);

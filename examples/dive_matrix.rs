@@ -1,0 +1,453 @@
+//! The dive matrix of docs/evaluation.md: simulated abyssal dives (rigs × water × altitude swing × contamination ×
+//! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
+//!
+//! ```sh
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation]
+//! ```
+//! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
+//! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
+//! with `--factor-floor 0.001`), `default` (`Options::default()`, i.e. `--method abyss`), `oracle` (`(I − S)/F` with
+//! the simulator's true `F` and `S`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
+//! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
+//! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on).
+//!
+//! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency over overlapping
+//! photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
+//! printed.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use abysslight::eval::evaluate::{albedo_error, consistency, residual_pattern};
+use abysslight::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
+use abysslight::io::{decode, write_atomic, EncodeSettings};
+use abysslight::method::raster::Raster;
+use abysslight::method::transfer::Transfer;
+use abysslight::run::options::{Method, Options};
+use abysslight::{correct_mission, Silent};
+
+/// Options of one column, made from the options every column shares.
+type MakeOptions = Box<dyn Fn(Options) -> Options>;
+
+/// One dive of the matrix.
+struct DiveSpec {
+    name: &'static str,
+    rig: Rig,
+    beam: f32,
+    water: &'static str,
+    altitude: f32,
+    swing: f32,
+    contamination: f64,
+    bits: u32,
+    srgb: bool,
+    jpeg: bool,
+    fov: f32,
+}
+
+#[allow(clippy::too_many_arguments)]
+const fn d(
+    name: &'static str,
+    rig: Rig,
+    beam: f32,
+    water: &'static str,
+    altitude: f32,
+    swing: f32,
+    contamination: f64,
+    bits: u32,
+    srgb: bool,
+    jpeg: bool,
+    fov: f32,
+) -> DiveSpec {
+    DiveSpec {
+        name,
+        rig,
+        beam,
+        water,
+        altitude,
+        swing,
+        contamination,
+        bits,
+        srgb,
+        jpeg,
+        fov,
+    }
+}
+
+#[rustfmt::skip]
+const DIVES: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     bits srgb   jpeg   fov
+    d("a01", Rig::Three, 36.0, "oceanic-i",   5.0, 0.3, 0.10, 8,  true,  false, 90.0),
+    d("a02", Rig::Aft,   36.0, "oceanic-i",   6.0, 0.6, 0.20, 16, false, false, 80.0),
+    d("a03", Rig::Two,   36.0, "oceanic-iii", 4.0, 0.2, 0.35, 8,  true,  true,  75.0),
+    d("a04", Rig::Four,  36.0, "coastal",     4.5, 0.5, 0.25, 16, false, false, 85.0),
+    d("a05", Rig::Three, 25.0, "oceanic-i",   5.0, 0.4, 0.15, 8,  true,  false, 80.0),
+    d("a06", Rig::Aft,   36.0, "oceanic-iii", 7.0, 0.6, 0.30, 8,  true,  true,  90.0),
+    d("a07", Rig::Two,   25.0, "coastal",     5.5, 0.3, 0.20, 16, true,  false, 75.0),
+    d("a08", Rig::Four,  36.0, "oceanic-i",   6.5, 0.0, 0.10, 8,  false, false, 90.0),
+    d("a09", Rig::Three, 36.0, "oceanic-iii", 4.0, 0.6, 0.35, 8,  true,  true,  80.0),
+    d("a10", Rig::Aft,   30.0, "oceanic-i",   5.0, 0.5, 0.25, 16, false, false, 85.0),
+    d("a11", Rig::Two,   36.0, "oceanic-i",   7.0, 0.2, 0.30, 8,  true,  false, 90.0),
+    d("a12", Rig::Four,  28.0, "oceanic-iii", 5.0, 0.4, 0.15, 8,  true,  true,  80.0),
+];
+
+impl DiveSpec {
+    fn simulation(&self, seed: u64) -> Simulation {
+        let water = Water::preset(self.water).expect("known water preset");
+        // The camera's white balance makes the sediment grey at the centre: gains from the two-way path.
+        let path = 2.0 * self.altitude;
+        let eta = water.attenuation;
+        let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
+        Simulation {
+            frames: 30,
+            water_column: 15,
+            width: 320,
+            height: 240,
+            seed,
+            contamination: self.contamination,
+            bit_depth: self.bits,
+            encode: if self.srgb {
+                Transfer::Srgb
+            } else {
+                Transfer::Linear
+            },
+            rig: self.rig,
+            altitude: self.altitude,
+            fov_deg: self.fov,
+            beam_deg: self.beam,
+            water,
+            altitude_swing: Some(self.swing),
+            white_balance: [gain(0), 1.0, gain(2)],
+            exposure: Exposure::Brightest,
+            ..Simulation::default()
+        }
+    }
+}
+
+/// Scores of one method on one dive.
+#[derive(Clone, Copy)]
+struct Score {
+    albedo: f64,
+    pattern: f64,
+    consistency: f64,
+}
+
+fn linear(p: &abysslight::Photo, t: Transfer) -> Raster {
+    let mut r = Raster::from_photo(p);
+    if !t.is_linear() {
+        for v in &mut r.data {
+            *v = t.to_linear(*v);
+        }
+    }
+    r
+}
+
+fn score(photos: &[Raster], dive: &Dive) -> Score {
+    let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
+    Score {
+        albedo: albedo_error(photos, &dive.albedo),
+        pattern: residual_pattern(photos, &dive.albedo, (8, 6)),
+        consistency: consistency(photos, &hs, 8.0).unwrap_or(f64::NAN),
+    }
+}
+
+fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
+    names
+        .iter()
+        .map(|n| {
+            let p = dir.join(n);
+            linear(
+                &decode(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+                t,
+            )
+        })
+        .collect()
+}
+
+/// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`).
+fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
+    dive.survey
+        .iter()
+        .zip(dive.factor.iter().zip(&dive.backscatter))
+        .map(|(p, (f, s))| {
+            let mut r = linear(p, t);
+            for ((v, &f), &s) in r.data.iter_mut().zip(&f.data).zip(&s.data) {
+                *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
+            }
+            r
+        })
+        .collect()
+}
+
+fn main() {
+    let mut out =
+        PathBuf::from(std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
+            .join("dive-matrix");
+    let mut seed_offset = 0u64;
+    let mut only: Option<Vec<String>> = None;
+    let mut ablation = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--out" => out = PathBuf::from(args.next().expect("--out DIR")),
+            "--seed-offset" => {
+                seed_offset = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .expect("--seed-offset K")
+            }
+            "--only" => {
+                only = Some(
+                    args.next()
+                        .expect("--only NAME[,NAME]")
+                        .split(',')
+                        .map(str::to_owned)
+                        .collect(),
+                )
+            }
+            "--ablation" => ablation = true,
+            _ => panic!("unknown argument {a:?}; see the example's docs"),
+        }
+    }
+    let peer_python = PathBuf::from("/work/peer-venv/bin/python");
+    let peer_script = [
+        "../shared/peers/paper_numpy.py",
+        "/work/shared/peers/paper_numpy.py",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .find(|p| p.exists());
+    let peer = peer_script.filter(|_| peer_python.exists());
+    if peer.is_none() {
+        eprintln!(
+            "dive_matrix: numpy peer not found (/work/peer-venv, paper_numpy.py): no numpy column"
+        );
+    }
+    // (label, options relative to the paper-as-published baseline)
+    let mut methods: Vec<(String, MakeOptions)> = vec![
+        (
+            "mean".into(),
+            Box::new(|o| Options {
+                method: Method::Mean,
+                ..o
+            }),
+        ),
+        (
+            "polynomial".into(),
+            Box::new(|o| Options {
+                method: Method::Polynomial,
+                ..o
+            }),
+        ),
+        (
+            "paper".into(),
+            Box::new(|o| Options {
+                method: Method::Paper,
+                factor_floor: 0.05,
+                ..o
+            }),
+        ),
+        (
+            "paper-f0.001".into(),
+            Box::new(|o| Options {
+                method: Method::Paper,
+                factor_floor: 0.001,
+                ..o
+            }),
+        ),
+        ("default".into(), Box::new(|o| o)),
+    ];
+    if ablation {
+        for (label, f) in ablations() {
+            methods.push((label.to_string(), Box::new(f)));
+        }
+    }
+    let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
+    let started = Instant::now();
+    for (i, spec) in DIVES.iter().enumerate() {
+        if only
+            .as_ref()
+            .is_some_and(|o| !o.iter().any(|n| n == spec.name))
+        {
+            continue;
+        }
+        let t = Instant::now();
+        let sim = spec.simulation(1000 + seed_offset * 100 + i as u64);
+        let dive = sim.render_with_lighting().expect("render");
+        let dir = out.join(spec.name);
+        let _ = std::fs::remove_dir_all(&dir);
+        let root = dir.join("dive");
+        dive.write(&root).expect("write dive");
+        // JPEG dives: the camera wrote JPEGs (quality 92) instead of PNGs.
+        let ext = if spec.jpeg { "jpg" } else { "png" };
+        if spec.jpeg {
+            let settings = EncodeSettings {
+                jpeg_quality: 92,
+                ..EncodeSettings::default()
+            };
+            for sub in ["survey", "water"] {
+                let (from, to) = (root.join(sub), dir.join(format!("{sub}-jpeg")));
+                for e in std::fs::read_dir(&from).unwrap() {
+                    let p = e.unwrap().path();
+                    let photo = decode(&p).unwrap();
+                    write_atomic(
+                        &photo,
+                        &to.join(p.with_extension("jpg").file_name().unwrap()),
+                        settings,
+                    )
+                    .unwrap();
+                }
+            }
+        }
+        let (survey, water) = if spec.jpeg {
+            (dir.join("survey-jpeg"), dir.join("water-jpeg"))
+        } else {
+            (root.join("survey"), root.join("water"))
+        };
+        let names: Vec<String> = dive
+            .truth
+            .poses
+            .iter()
+            .map(|p| {
+                Path::new(&p.file)
+                    .with_extension(ext)
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect();
+        let t_enc = sim.encode;
+        let mut scores = vec![(
+            "raw".to_string(),
+            score(&load_set(&survey, &names, t_enc), &dive),
+        )];
+        for (label, make) in &methods {
+            let o = make(Options {
+                water_column: Some(water.clone()),
+                survey: Some(survey.clone()),
+                out: Some(dir.join(label)),
+                contamination: Some(spec.contamination),
+                transfer: t_enc,
+                ..Options::default()
+            });
+            correct_mission(&o, &Silent).unwrap_or_else(|e| panic!("{} {label}: {e}", spec.name));
+            scores.push((
+                label.clone(),
+                score(&load_set(&dir.join(label), &names, t_enc), &dive),
+            ));
+            let _ = std::fs::remove_dir_all(dir.join(label));
+        }
+        scores.push(("oracle".into(), score(&oracle(&dive, t_enc), &dive)));
+        if let Some(script) = &peer {
+            let o = dir.join("numpy");
+            let window = abysslight::choose_window(spec.contamination, 0.01)
+                .map(|w| w.n)
+                .unwrap_or(7);
+            let ok = Command::new(&peer_python)
+                .arg(script)
+                .arg("paper")
+                .arg(&water)
+                .arg(&survey)
+                .arg(&o)
+                .args(["--window", &window.to_string()])
+                .status()
+                .is_ok_and(|s| s.success());
+            if ok {
+                scores.push(("numpy".into(), score(&load_set(&o, &names, t_enc), &dive)));
+            }
+        }
+        eprintln!(
+            "dive_matrix: {} done in {:.1} s",
+            spec.name,
+            t.elapsed().as_secs_f64()
+        );
+        let desc = format!(
+            "{} | {:?}{} | {} | {}±{} m | {:.2} | {}-bit {} {}",
+            spec.name,
+            spec.rig,
+            if spec.beam < 36.0 {
+                format!(" {}°", spec.beam)
+            } else {
+                String::new()
+            },
+            spec.water,
+            spec.altitude,
+            spec.swing,
+            spec.contamination,
+            spec.bits,
+            if spec.srgb { "sRGB" } else { "linear" },
+            if spec.jpeg { "JPEG" } else { "PNG" },
+        );
+        rows.push((desc, scores));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let md = table(&rows);
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("matrix.md"), &md).unwrap();
+    println!("{md}");
+    eprintln!(
+        "dive_matrix: {} dives in {:.0} s, table in {}",
+        rows.len(),
+        started.elapsed().as_secs_f64(),
+        out.join("matrix.md").display()
+    );
+}
+
+fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {
+    let Some((_, first)) = rows.first() else {
+        return String::new();
+    };
+    let labels: Vec<&str> = first.iter().map(|(l, _)| l.as_str()).collect();
+    let mut s = String::new();
+    for (metric, get) in [
+        ("albedo error", (|x: &Score| x.albedo) as fn(&Score) -> f64),
+        ("residual pattern", |x: &Score| x.pattern),
+        ("consistency", |x: &Score| x.consistency),
+    ] {
+        s.push_str(&format!(
+            "\n**{metric}** (lower is better)\n\n| dive | rig | water | altitude | c | format | {} | default/paper | default/oracle |\n|---|---|---|---|---:|---|{}---:|---:|\n",
+            labels.join(" | "),
+            "---:|".repeat(labels.len())
+        ));
+        for (desc, scores) in rows {
+            let v = |l: &str| scores.iter().find(|(x, _)| x == l).map(|(_, s)| get(s));
+            let cells: Vec<String> = labels
+                .iter()
+                .map(|l| v(l).map_or("-".into(), |x| format!("{x:.4}")))
+                .collect();
+            let ratio = |a: &str, b: &str| match (v(a), v(b)) {
+                (Some(a), Some(b)) => format!("{:.2}", a / b),
+                _ => "-".into(),
+            };
+            s.push_str(&format!(
+                "| {desc} | {} | {} | {} |\n",
+                cells.join(" | "),
+                ratio("default", "paper"),
+                ratio("default", "oracle")
+            ));
+        }
+    }
+    s
+}
+
+/// The abyss method with one lever at a time turned off or changed, for the ablation of the dive matrix
+/// (`examples/dive_matrix.rs --ablation`).
+#[allow(clippy::type_complexity)]
+fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
+    vec![
+        ("abyss-no-gain", |o| Options {
+            method: Method::Abyss,
+            photo_gain: false,
+            ..o
+        }),
+        ("abyss-floor-0.03", |o| Options {
+            method: Method::Abyss,
+            relative_floor: 0.03,
+            ..o
+        }),
+        ("abyss-floor-0.1", |o| Options {
+            method: Method::Abyss,
+            relative_floor: 0.1,
+            ..o
+        }),
+    ]
+}
