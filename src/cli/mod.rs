@@ -30,7 +30,8 @@ Exit status:
 const CORRECT_LONG_HELP: &str = "\
 Examples:
   Correct a dive, with S from the frames of the descent:
-    abysslight correct --water-column dive042/descent --survey dive042/survey --out dive042/corrected
+    abysslight correct --water-column dive042/descent --survey dive042/survey \\
+        --out dive042/corrected
 
   Cluttered terrain, JPEGs from an sRGB camera, pictures to check the estimate:
     abysslight correct --water-column descent --survey survey --out corrected \\
@@ -45,8 +46,8 @@ Examples:
   Options from a file, one flag overridden:
     abysslight correct --config dive042.toml --window 9
 
-Afterwards look at <out>/_abysslight/overview.png and flagged.png, and make a before/after sheet with
-`abysslight sheet SURVEY OUT sheet.png`.
+Afterwards look at <out>/_abysslight/overview.png and flagged.png, and draw a before/after sheet:
+  abysslight sheet SURVEY OUT sheet.png
 
 Exit status:
   0    every photo was corrected
