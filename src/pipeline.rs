@@ -630,7 +630,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             mask: mask.as_ref(),
             curves: &curves,
             mission_mean: mission_mean.as_ref(),
-            monitor: Monitor::new(Thresholds::default()),
+            monitor: Monitor::new(Thresholds::default()).with_window(n),
             flagged_lit: Vec::new(),
             out,
             work_dir: work_dir.as_deref(),
