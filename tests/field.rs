@@ -236,7 +236,7 @@ fn seafloor_colour_change_half_way_is_flagged() {
             .health
             .flags
             .iter()
-            .any(|f| f.contains("colour")),
+            .any(|f| matches!(f, abysslight::monitor::Flag::ColourShift { .. })),
         "{:?}",
         r.frames[25].health.flags
     );
