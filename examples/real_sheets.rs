@@ -81,6 +81,38 @@ const SETS: &[Set] = &[
         mask_auto: false,
         why: "six overlapping 11 MP photos, strong cone",
     },
+    Set {
+        name: "mbari-midwater",
+        survey: "mbari-deepsea-track/midwater_frames",
+        water_column: None,
+        window: 5,
+        mask_auto: false,
+        why: "five midwater frames (no seafloor): the method does not apply, flags expected",
+    },
+    Set {
+        name: "habcam-samples",
+        survey: "habcam-seafloorexplorer/sample-images",
+        water_column: None,
+        window: 5,
+        mask_auto: false,
+        why: "unrelated pre-processed singles (no sequence): the method does not apply",
+    },
+    Set {
+        name: "habcam-subjects",
+        survey: "habcam-seafloorexplorer/subjects_standard",
+        water_column: None,
+        window: 5,
+        mask_auto: false,
+        why: "unrelated pre-processed singles (no sequence): the method does not apply",
+    },
+    Set {
+        name: "funie-euvp",
+        survey: "funie-gan-euvp-test",
+        water_column: None,
+        window: 7,
+        mask_auto: false,
+        why: "unrelated 256x256 singles (no sequence, too small for the texture figures)",
+    },
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -118,15 +150,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .filter(|f| !f.health.flags.is_empty())
             .count();
+        let mut kinds: std::collections::BTreeMap<&str, usize> = Default::default();
+        for f in report.frames.iter().flat_map(|f| &f.health.flags) {
+            *kinds.entry(f.kind()).or_default() += 1;
+        }
         let sheet = abysslight::run::pictures::before_after_sheet(&survey, &corrected, 4, 360)?;
         let sheet_path = out.join(format!("{}.png", set.name));
         abysslight::run::pictures::save_png(&sheet, &sheet_path)?;
         println!(
-            "{:<18} {:>4} photos, {:>3} failed, {:>3} flagged, {:>6.1} s -> {}  ({})",
+            "{:<18} {:>4} photos, {:>3} failed, {:>3} flagged {:?}, {:>6.1} s -> {}  ({})",
             set.name,
             report.corrected,
             report.failed,
             flagged,
+            kinds,
             started.elapsed().as_secs_f64(),
             sheet_path.display(),
             set.why

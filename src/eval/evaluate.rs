@@ -209,6 +209,13 @@ const CELL_SAMPLES: usize = 4;
 /// The consistency metric (see the module docs); `cell` is the mosaic cell size in mosaic units. `None` when no
 /// cell is seen by two photos.
 pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> {
+    consistency_parts(photos, h, cell).map(|c| c.0)
+}
+
+/// [`consistency`] and the overlap difference: the same RMS difference divided by the mean of all pixels instead
+/// of their standard deviation (a correction flattens the photos, which lowers the standard deviation and so
+/// raises the consistency figure even when the overlaps agree better; the mean is not moved by that).
+pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<(f64, f64)> {
     assert_eq!(photos.len(), h.len(), "one placement per photo");
     let c = photos.first()?.channels;
     // Per photo: (cell, per-channel mean) of the cells it covers completely.
@@ -298,14 +305,15 @@ pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> 
             m += 1;
         }
     }
-    let mut total = 0.0;
+    let (mut total, mut relative) = (0.0, 0.0);
     for ch in 0..c {
         let rms = (ss[ch] / n as f64).sqrt();
         let mean = s1[ch] / m as f64;
         let sd = (s2[ch] / m as f64 - mean * mean).max(0.0).sqrt();
         total += rms / sd.max(1e-30);
+        relative += rms / mean.abs().max(1e-30);
     }
-    Some(total / c as f64)
+    Some((total / c as f64, relative / c as f64))
 }
 
 /// Settings of [`evaluate`].
@@ -349,6 +357,8 @@ pub struct Scores {
     pub albedo_error: Option<f64>,
     pub residual_pattern: Option<f64>,
     pub consistency: Option<f64>,
+    /// RMS difference over overlaps divided by the mean of all pixels (see [`consistency_parts`]).
+    pub overlap_difference: Option<f64>,
 }
 
 /// How the registration of `--register` went.
@@ -554,12 +564,12 @@ pub fn evaluate(
                 }
             }
         }
-        let consistency = placed.as_ref().and_then(|pl| {
+        let parts = placed.as_ref().and_then(|pl| {
             let hs: Vec<[f64; 9]> = names
                 .iter()
                 .map(|n| pl.iter().find(|p| &p.name == n).map(|p| scale_h(&p.h, k)))
                 .collect::<Option<_>>()?;
-            consistency(&photos, &hs, settings.cell)
+            consistency_parts(&photos, &hs, settings.cell)
         });
         scores.push(Scores {
             label: label.clone(),
@@ -569,7 +579,8 @@ pub fn evaluate(
             residual_pattern: albedo
                 .as_ref()
                 .map(|a| residual_pattern(&photos, a, settings.grid)),
-            consistency,
+            consistency: parts.map(|p| p.0),
+            overlap_difference: parts.map(|p| p.1),
         });
     }
     Ok(Evaluation {
@@ -589,16 +600,18 @@ impl Evaluation {
     pub fn table(&self) -> String {
         let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
         let mut s = String::from(
-            "| method | photos | albedo error | residual pattern | consistency |\n|---|---:|---:|---:|---:|\n",
+            "| method | photos | albedo error | residual pattern | consistency | overlap difference |\n\
+             |---|---:|---:|---:|---:|---:|\n",
         );
         for r in &self.sets {
             s.push_str(&format!(
-                "| {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} |\n",
                 r.label,
                 r.photos,
                 f(r.albedo_error),
                 f(r.residual_pattern),
-                f(r.consistency)
+                f(r.consistency),
+                f(r.overlap_difference)
             ));
         }
         s
@@ -612,5 +625,43 @@ impl Evaluation {
                 reason: e.to_string(),
             })
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ID: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+    #[test]
+    fn overlap_difference_by_hand() {
+        // Two constant photos on the same place: RMS difference 0.1, standard deviation 0.1, mean 0.3.
+        let a = Raster::filled(16, 16, 3, 0.2);
+        let b = Raster::filled(16, 16, 3, 0.4);
+        let (c, d) = consistency_parts(&[a, b], &[ID; 2], 4.0).unwrap();
+        assert!((c - 1.0).abs() < 1e-6, "{c}");
+        assert!((d - 0.1 / 0.3).abs() < 1e-6, "{d}");
+    }
+
+    #[test]
+    fn reduced_photos_with_scaled_placements_score_like_full_ones() {
+        // A horizontal ramp seen by two photos 8 pixels apart, one of them 10 % brighter.
+        let ramp =
+            |x0: usize, k: f32| Raster::from_fn(32, 16, 1, move |x, _, _| k * (x + x0) as f32);
+        let (a, b) = (ramp(0, 1.0), ramp(8, 1.1));
+        let h = [ID, [1.0, 0.0, 8.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]];
+        let full = consistency_parts(&[a.clone(), b.clone()], &h, 4.0).unwrap();
+        let (ra, rb) = (reduce(&a, 2), reduce(&b, 2));
+        assert_eq!((ra.width, ra.height), (16, 8));
+        // Box average by hand: pixels 0 and 1 of row 0.
+        assert_eq!(ra.get(0, 0, 0), 0.5);
+        let hs = [scale_h(&h[0], 2), scale_h(&h[1], 2)];
+        let small = consistency_parts(&[ra, rb], &hs, 4.0).unwrap();
+        // A linear ramp is reproduced exactly by the box average and bilinear sampling inside the photo.
+        assert!(
+            (full.1 - small.1).abs() < 0.02 * full.1,
+            "{full:?} {small:?}"
+        );
     }
 }

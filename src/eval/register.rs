@@ -80,7 +80,22 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
             *g = s / (scale * scale * c) as f32;
         }
     }
-    let mut sorted: Vec<f32> = grey.iter().copied().filter(|v| v.is_finite()).collect();
+    // Masked (NaN) pixels take the mean grey level: no texture there.
+    let (sum, count) = grey
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((0.0f64, 0usize), |(s, n), &v| (s + v as f64, n + 1));
+    let fill = if count > 0 {
+        (sum / count as f64) as f32
+    } else {
+        0.0
+    };
+    for g in &mut grey {
+        if !g.is_finite() {
+            *g = fill;
+        }
+    }
+    let mut sorted: Vec<f32> = grey.clone();
     let floor = if sorted.is_empty() {
         1e-6
     } else {

@@ -162,7 +162,7 @@ impl<T> Engine<T> {
             curves: (Curve::new(transfer, 256), Curve::new(transfer, 65536)),
             colour: Vec::new(),
             layout: None,
-            monitor: Monitor::new(Thresholds::default()),
+            monitor: Monitor::new(Thresholds::default()).with_window(n),
             ring: VecDeque::with_capacity(n + 1),
             waiting: VecDeque::new(),
             seq: 0,

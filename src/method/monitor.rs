@@ -77,6 +77,12 @@ pub enum Flag {
         /// The photo's level relative to its window's `M` (1: as predicted).
         level: f32,
     },
+    /// The camera hardly moves: over a window the ground moves less than a quarter of the frame, so `F` holds
+    /// the scene (the method needs a moving camera).
+    CameraStill {
+        /// Ground moved over a window, as a share of the frame's short side.
+        span: f32,
+    },
     /// Fewer photos in the mission than the window: every `F` is the median of all of them.
     ShortMission {
         /// Photos in the mission.
@@ -95,6 +101,7 @@ impl Flag {
             Flag::ColourShift { .. } => "colour-shift",
             Flag::SceneInFactor { .. } => "scene-in-factor",
             Flag::ExposureJump { .. } => "exposure-jump",
+            Flag::CameraStill { .. } => "camera-still",
             Flag::ShortMission { .. } => "short-mission",
         }
     }
@@ -134,6 +141,12 @@ impl std::fmt::Display for Flag {
                 "exposure jump: the photo is {:+.0} % off its window's level while the lighting pattern stays",
                 100.0 * (level - 1.0)
             ),
+            Flag::CameraStill { span } => write!(
+                f,
+                "the camera hardly moves (the ground moves {:.0} % of the frame over a window): F holds the \
+                 scene; the method needs photos of changing ground",
+                100.0 * span
+            ),
             Flag::ShortMission { photos, window } => write!(
                 f,
                 "only {photos} photos in the mission, fewer than the window n = {window}"
@@ -172,6 +185,14 @@ pub struct Health {
     /// Fine structure in `F` (see [`roughness`]): lights make smooth patterns, a window short of seafloor leaves
     /// the scene in `F`.
     pub roughness: f32,
+    /// Shift from the previous photo, in blocks, found by phase correlation of the block medians' texture
+    /// (see [`crate::eval::register`]); `None` for the first photo or images too small.
+    pub motion: Option<f32>,
+    /// Correlation of the two texture images at that shift (how sure the match is).
+    pub motion_ncc: Option<f32>,
+    /// How far the ground moves over a window, as a share of the frame's short side (median step of the last
+    /// few trusted matches times `n − 1`); `None` until enough photos were seen.
+    pub window_span: Option<f32>,
     /// Why this photo's correction is likely wrong (empty: no reason to doubt it).
     pub flags: Vec<Flag>,
 }
@@ -538,7 +559,24 @@ pub struct Monitor {
     colour_fit: ColourFit,
     scratch: Scratch,
     sorted_changes: Vec<f32>,
+    /// Texture image of the previous photo's block medians, for its motion (see [`Health::motion`]).
+    previous_texture: Option<crate::eval::register::Texture>,
+    /// Recent (motion, correlation) of consecutive photos, at most [`STILL_PHOTOS`].
+    recent_motion: std::collections::VecDeque<(f32, f32)>,
+    /// The window `n` (0: not told; [`STILL_DEFAULT_WINDOW`] is assumed).
+    window: usize,
 }
+
+/// Consecutive matches whose medians decide whether the camera hardly moves.
+const STILL_PHOTOS: usize = 5;
+/// Median correlation of those matches above which their shifts are trusted (below it, on Nephrops, the match
+/// locks on to what stays in the frame: laser dots, the lamps' fine structure).
+const STILL_NCC: f32 = 0.6;
+/// The ground a window sees moves less than this share of the frame's short side: objects larger than that stay
+/// at one place in most of the window, so the median keeps them in `F`.
+const STILL_SPAN: f32 = 0.25;
+/// Window assumed when the monitor is not told.
+const STILL_DEFAULT_WINDOW: usize = 7;
 
 /// Photos whose balance makes up the mission's reference.
 const REFERENCE_PHOTOS: usize = 5;
@@ -608,6 +646,12 @@ impl Monitor {
         }
     }
 
+    /// Tell the monitor the window `n` (for the still-camera test of [`Monitor::observe_photo`]).
+    pub fn with_window(mut self, n: usize) -> Self {
+        self.window = n;
+        self
+    }
+
     /// Health of the next photo from everything the method knows about it: its own block medians `own`, its
     /// window's `M − S` (`m_minus_s`, before any per-photo adjustment), the scatter at block resolution and the
     /// factor image `f`. Adds the photo's level (exposure jumps) and the texture the correction kept (scene in
@@ -624,6 +668,44 @@ impl Monitor {
         let mut h = self.observe(f, fit.contamination);
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
+        let texture = crate::eval::register::texture(own, 1);
+        if let Some(prev) = &self.previous_texture {
+            if (prev.width, prev.height) == (texture.width, texture.height)
+                && texture.width >= MIN_ROUGHNESS_SIZE.0
+                && texture.height >= MIN_ROUGHNESS_SIZE.1
+            {
+                let m = crate::eval::register::match_pair(prev, &texture);
+                h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
+                h.motion_ncc = Some(m.ncc as f32);
+                if self.recent_motion.len() == STILL_PHOTOS {
+                    self.recent_motion.pop_front();
+                }
+                self.recent_motion
+                    .push_back((m.shift.0.hypot(m.shift.1) as f32, m.ncc as f32));
+            }
+        }
+        let short_side = texture.width.min(texture.height) as f32;
+        self.previous_texture = Some(texture);
+        // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
+        // benthic, Sparus). Judged on the median of the last few trusted matches.
+        if self.recent_motion.len() == STILL_PHOTOS {
+            let med = |v: &mut Vec<f32>| {
+                v.sort_by(f32::total_cmp);
+                v[v.len() / 2]
+            };
+            let ncc = med(&mut self.recent_motion.iter().map(|m| m.1).collect());
+            let step = med(&mut self.recent_motion.iter().map(|m| m.0).collect());
+            let n = if self.window > 0 {
+                self.window
+            } else {
+                STILL_DEFAULT_WINDOW
+            };
+            let span = step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
+            h.window_span = Some(span);
+            if ncc >= STILL_NCC && span < STILL_SPAN {
+                h.flags.push(Flag::CameraStill { span });
+            }
+        }
         if (fit.level - 1.0).abs() > t.exposure_jump {
             h.flags.push(Flag::ExposureJump { level: fit.level });
         }
@@ -746,6 +828,7 @@ pub struct Summary {
     /// Photos flagged [`Flag::SceneInFactor`] (the name is kept for existing report readers).
     pub roughness: usize,
     pub exposure_jump: usize,
+    pub camera_still: usize,
     pub short_mission: usize,
 }
 
@@ -762,6 +845,7 @@ impl Summary {
                 Flag::ColourShift { .. } => self.colour_shift += 1,
                 Flag::SceneInFactor { .. } => self.roughness += 1,
                 Flag::ExposureJump { .. } => self.exposure_jump += 1,
+                Flag::CameraStill { .. } => self.camera_still += 1,
                 Flag::ShortMission { .. } => self.short_mission += 1,
             }
         }
@@ -779,6 +863,7 @@ impl Summary {
             (self.colour_shift, "colour change of F"),
             (self.roughness, "scene left in F"),
             (self.exposure_jump, "exposure jump"),
+            (self.camera_still, "camera hardly moving"),
             (self.short_mission, "too few photos for the window"),
         ] {
             if n > 0 {
@@ -964,5 +1049,163 @@ mod tests {
         let mut s = Summary::default();
         s.add(&h.flags);
         assert_eq!((s.roughness, s.short_mission), (1, 0));
+    }
+
+    #[test]
+    fn exposure_jump_is_named_as_such_and_not_contamination() {
+        // The window's M − S: a cone; the photo: the same pattern 1.6 times brighter, with some texture.
+        let lit = Raster::from_fn(40, 30, 3, |x, y, c| {
+            let (dx, dy) = (x as f32 - 20.0, y as f32 - 15.0);
+            (0.1 + (-(dx * dx + dy * dy) / 300.0).exp()) * [1.0, 0.9, 0.7][c]
+        });
+        let texture = |x: usize, y: usize| 1.0 + 0.05 * (((x * 7 + y * 13) % 5) as f32 - 2.0);
+        let own = Raster::from_fn(40, 30, 3, |x, y, c| 1.6 * lit.get(x, y, c) * texture(x, y));
+        let fit = photo_fit(&own, &lit, None, 0.5);
+        assert!((fit.level - 1.6).abs() < 0.1, "{fit:?}");
+        assert_eq!(fit.contamination, 0.0);
+        // The old figure (ratio against 1) would have called every block contaminated.
+        assert!(contamination(&own, &lit, None, 0.5) > 0.5);
+        let f = lit.clone();
+        let h = Monitor::new(Thresholds::default()).observe_photo(&own, &lit, None, &f);
+        assert!(
+            matches!(h.flags.as_slice(), [Flag::ExposureJump { .. }]),
+            "{:?}",
+            h.flags
+        );
+        // The same photo at the window's level: no flag.
+        let own = Raster::from_fn(40, 30, 3, |x, y, c| lit.get(x, y, c) * texture(x, y));
+        let h = Monitor::new(Thresholds::default()).observe_photo(&own, &lit, None, &f);
+        assert!(h.flags.is_empty(), "{:?}", h.flags);
+        assert!((h.level - 1.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn texture_kept_tells_a_smooth_factor_from_a_copy_of_the_scene() {
+        let cone = |x: usize, y: usize| {
+            let (dx, dy) = (x as f32 - 32.0, y as f32 - 20.0);
+            0.2 + (-(dx * dx + dy * dy) / 900.0).exp()
+        };
+        let scene = |x: usize, y: usize| if (x / 3 + y / 3) % 2 == 0 { 0.6 } else { 1.0 };
+        let own = Raster::from_fn(64, 40, 3, |x, y, _| cone(x, y) * scene(x, y));
+        let smooth = Raster::from_fn(64, 40, 3, |x, y, _| cone(x, y) * 0.8);
+        let copy = own.clone();
+        let good = photo_fit(&own, &smooth, None, 0.5).texture_kept;
+        let bad = photo_fit(&own, &copy, None, 0.5).texture_kept;
+        assert!(good > 0.9, "{good}");
+        assert!(bad < 0.05, "{bad}");
+    }
+
+    #[test]
+    fn colour_that_follows_the_level_is_not_a_colour_shift() {
+        // Altitude swings of ±0.6 m at 6 m, as slow as the simulator's (0.1 rad a photo): F's level changes and red
+        // falls off faster than green and blue (attenuation).
+        let f_at = |alt: f32| {
+            Raster::from_fn(8, 6, 3, |x, _, c| {
+                let eta = [0.25, 0.07, 0.09][c];
+                (0.5 + 0.02 * x as f32) * (-eta * 2.0 * alt).exp() / (alt * alt)
+            })
+        };
+        let mut mon = Monitor::new(Thresholds::default());
+        for i in 0..80 {
+            let alt = 6.0 + 0.6 * (0.1 * i as f32).sin();
+            let h = mon.observe(&f_at(alt), 0.1);
+            assert!(h.flags.is_empty(), "photo {i}: {:?}", h.flags);
+        }
+        // The same level with a bluer seafloor: flagged.
+        let blue = Raster::from_fn(8, 6, 3, |x, y, c| {
+            f_at(6.0).get(x, y, c) * [0.7, 1.0, 1.25][c]
+        });
+        let h = mon.observe(&blue, 0.1);
+        assert!(
+            h.flags
+                .iter()
+                .any(|f| matches!(f, Flag::ColourShift { .. })),
+            "{:?}",
+            h.flags
+        );
+    }
+
+    #[test]
+    fn flags_serialise_as_kind_and_message() {
+        let f = Flag::ExposureJump { level: 1.5 };
+        let v = serde_json::to_value(f).unwrap();
+        assert_eq!(v["kind"], "exposure-jump");
+        assert_eq!(v["message"], f.to_string());
+        assert!(f.to_string().contains("+50 %"), "{f}");
+        let all = [
+            Flag::Contamination { share: 0.5 },
+            Flag::FactorChange { change: 0.5 },
+            Flag::ColourShift { shift: 0.5 },
+            Flag::SceneInFactor {
+                roughness: 0.2,
+                texture_kept: 0.3,
+            },
+            Flag::ExposureJump { level: 0.5 },
+            Flag::CameraStill { span: 0.1 },
+            Flag::ShortMission {
+                photos: 3,
+                window: 7,
+            },
+        ];
+        let mut s = Summary::default();
+        s.add(&all);
+        assert_eq!(
+            (
+                s.flagged,
+                s.contamination,
+                s.factor_change,
+                s.colour_shift,
+                s.roughness,
+                s.exposure_jump,
+                s.camera_still,
+                s.short_mission
+            ),
+            (1, 1, 1, 1, 1, 1, 1, 1)
+        );
+        let kinds: std::collections::BTreeSet<&str> = all.iter().map(Flag::kind).collect();
+        assert_eq!(kinds.len(), all.len());
+    }
+
+    #[test]
+    fn a_still_camera_is_flagged_a_moving_one_is_not() {
+        // Block images of ground with blobs of a few blocks, seen from a camera that moves `step` blocks a photo.
+        let ground = |x: f32, y: f32| {
+            let h = |i: i64, j: i64| {
+                let v = (i.wrapping_mul(73_856_093) ^ j.wrapping_mul(19_349_663)).rem_euclid(1000);
+                v as f32 / 1000.0
+            };
+            let (i, j) = ((x / 3.0).floor() as i64, (y / 3.0).floor() as i64);
+            0.6 + 0.4 * h(i, j)
+        };
+        let run = |step: f32| {
+            let mut mon = Monitor::new(Thresholds::default()).with_window(7);
+            let mut last = Health::default();
+            for k in 0..10 {
+                let own = Raster::from_fn(64, 48, 3, |x, y, _| {
+                    ground(x as f32 + step * k as f32, y as f32)
+                });
+                let lit = Raster::filled(64, 48, 3, 0.8);
+                last = mon.observe_photo(&own, &lit, None, &lit);
+            }
+            last
+        };
+        let still = run(1.0);
+        assert!(
+            still
+                .flags
+                .iter()
+                .any(|f| matches!(f, Flag::CameraStill { .. })),
+            "{still:?}"
+        );
+        assert!((still.motion.unwrap() - 1.0).abs() < 0.3, "{still:?}");
+        let moving = run(9.0);
+        assert!(
+            !moving
+                .flags
+                .iter()
+                .any(|f| matches!(f, Flag::CameraStill { .. })),
+            "{moving:?}"
+        );
+        assert!((moving.motion.unwrap() - 9.0).abs() < 0.5, "{moving:?}");
     }
 }
