@@ -40,6 +40,8 @@ fn shot(i: usize) -> Shot {
 fn icc() -> Vec<u8> {
     let mut v: Vec<u8> = (0..3000).map(|i| (i * 13 % 251) as u8).collect();
     v[..4].copy_from_slice(&3000u32.to_be_bytes());
+    // A valid header as far as abysslight looks: RGB data (profiles of another colour space are dropped).
+    v[16..20].copy_from_slice(b"RGB ");
     v[36..40].copy_from_slice(b"acsp");
     v
 }
