@@ -175,3 +175,48 @@ fn engine_and_folder_run_give_the_same_photos() {
         );
     }
 }
+
+#[test]
+fn masked_pixels_are_copied_unchanged() {
+    let dive = small_dive(9, 7);
+    let (w, h) = (128, 96);
+    let mut mask = abysslight::method::mask::Mask::empty(w, h);
+    // A burned-in label in the top-left corner.
+    for y in 2..12 {
+        for x in 3..40 {
+            mask.ignore[y * w + x] = true;
+        }
+    }
+    let mut engine = Engine::new(
+        Params {
+            window: 3,
+            ..Params::default()
+        },
+        None,
+        Some(mask.clone()),
+    )
+    .unwrap();
+    let mut out = Vec::new();
+    for (i, p) in dive.survey.iter().cloned().enumerate() {
+        out.extend(engine.push(p, i).unwrap());
+    }
+    out.extend(engine.finish());
+    assert_eq!(out.len(), 7);
+    for c in out {
+        let (Samples::U8(got), Samples::U8(input)) =
+            (&c.photo.unwrap().samples, &dive.survey[c.tag].samples)
+        else {
+            panic!("8-bit dive")
+        };
+        let mut changed_outside = 0;
+        for p in 0..w * h {
+            let (a, b) = (&got[p * 3..p * 3 + 3], &input[p * 3..p * 3 + 3]);
+            if mask.ignore[p] {
+                assert_eq!(a, b, "masked pixel {p} changed");
+            } else if a != b {
+                changed_outside += 1;
+            }
+        }
+        assert!(changed_outside > w * h / 2, "the rest is corrected");
+    }
+}
