@@ -347,7 +347,8 @@ struct CorrectArgs {
 
     /// Mask image, white = not seafloor (overlays, laser dots, vehicle parts).
     ///
-    /// The size of the photos. White pixels are left out of every median and copied unchanged to the output.
+    /// The size of the photos. White pixels are left out of every median; F beneath them is interpolated from the
+    /// seafloor around them and they are corrected with it (burned-in text stays readable).
     #[arg(long, value_name = "FILE", help_heading = H_IN)]
     mask: Option<PathBuf>,
 

@@ -376,25 +376,9 @@ impl<T> Engine<T> {
         if let Some(p) = &mut photo {
             let (l, k) = (p.layout, self.params.downsample);
             let s = self.scatter.as_ref();
-            let (c, mask) = (l.channels, self.mask.as_ref());
-            // Masked pixels (overlays, vehicle parts) go to the output as they came in, readable.
             stats = match &mut p.samples {
-                Samples::U8(v) => {
-                    let kept = mask.map(|m| m.gather(v, c));
-                    let stats = correct_in_place(v, l, s, &f, k, floor, &self.curves.0);
-                    if let (Some(m), Some(kept)) = (mask, kept) {
-                        m.restore(v, c, &kept);
-                    }
-                    stats
-                }
-                Samples::U16(v) => {
-                    let kept = mask.map(|m| m.gather(v, c));
-                    let stats = correct_in_place(v, l, s, &f, k, floor, &self.curves.1);
-                    if let (Some(m), Some(kept)) = (mask, kept) {
-                        m.restore(v, c, &kept);
-                    }
-                    stats
-                }
+                Samples::U8(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.0),
+                Samples::U16(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.1),
             };
         }
         Corrected {

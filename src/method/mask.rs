@@ -32,24 +32,6 @@ impl Mask {
         }
     }
 
-    /// The samples of the ignored pixels of `samples` (interleaved, `c` per pixel), in order.
-    pub fn gather<T: Copy>(&self, samples: &[T], c: usize) -> Vec<T> {
-        self.ignore
-            .iter()
-            .enumerate()
-            .filter(|(_, &i)| i)
-            .flat_map(|(p, _)| samples[p * c..(p + 1) * c].iter().copied())
-            .collect()
-    }
-
-    /// Put back into `samples` what [`Mask::gather`] took out of them.
-    pub fn restore<T: Copy>(&self, samples: &mut [T], c: usize, kept: &[T]) {
-        let masked = self.ignore.iter().enumerate().filter(|(_, &i)| i);
-        for ((p, _), px) in masked.zip(kept.chunks_exact(c)) {
-            samples[p * c..(p + 1) * c].copy_from_slice(px);
-        }
-    }
-
     /// Pixels ignored.
     pub fn count(&self) -> usize {
         self.ignore.iter().filter(|&&m| m).count()
