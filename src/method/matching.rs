@@ -152,8 +152,25 @@ pub fn remove_fixed_pattern(textures: &mut [Texture]) {
 
 /// In-place radix-2 FFT of `re`/`im` (length a power of two); `inverse` without the `1/n` factor.
 pub(crate) fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
+    fft_with(re, im, &twiddles(re.len(), inverse));
+}
+
+/// `e^(∓2πik/n)` for `k < n/2` (the sign by direction): the butterflies' factors, computed once per size.
+fn twiddles(n: usize, inverse: bool) -> Vec<(f64, f64)> {
+    let sign = if inverse { 1.0 } else { -1.0 };
+    (0..n / 2)
+        .map(|k| {
+            let a = sign * std::f64::consts::TAU * k as f64 / n as f64;
+            (a.cos(), a.sin())
+        })
+        .collect()
+}
+
+/// [`fft`] with the factors of [`twiddles`] for this length.
+fn fft_with(re: &mut [f64], im: &mut [f64], table: &[(f64, f64)]) {
     let n = re.len();
     debug_assert!(n.is_power_of_two());
+    debug_assert_eq!(table.len(), n / 2);
     let mut j = 0;
     for i in 1..n {
         let mut bit = n >> 1;
@@ -167,13 +184,12 @@ pub(crate) fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
             im.swap(i, j);
         }
     }
-    let sign = if inverse { 1.0 } else { -1.0 };
     let mut len = 2;
     while len <= n {
-        let ang = sign * std::f64::consts::TAU / len as f64;
+        let step = n / len;
         for start in (0..n).step_by(len) {
             for k in 0..len / 2 {
-                let (wr, wi) = ((ang * k as f64).cos(), (ang * k as f64).sin());
+                let (wr, wi) = table[k * step];
                 let (a, b) = (start + k, start + k + len / 2);
                 let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
                 re[b] = re[a] - xr;
@@ -188,11 +204,12 @@ pub(crate) fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
 
 /// 2-D FFT of a row-major `w`×`h` complex image (both powers of two).
 pub(crate) fn fft2(re: &mut [f64], im: &mut [f64], w: usize, h: usize, inverse: bool) {
+    let (row_table, column_table) = (twiddles(w, inverse), twiddles(h, inverse));
     for y in 0..h {
-        fft(
+        fft_with(
             &mut re[y * w..(y + 1) * w],
             &mut im[y * w..(y + 1) * w],
-            inverse,
+            &row_table,
         );
     }
     let (mut cr, mut ci) = (vec![0.0; h], vec![0.0; h]);
@@ -201,7 +218,7 @@ pub(crate) fn fft2(re: &mut [f64], im: &mut [f64], w: usize, h: usize, inverse: 
             cr[y] = re[y * w + x];
             ci[y] = im[y * w + x];
         }
-        fft(&mut cr, &mut ci, inverse);
+        fft_with(&mut cr, &mut ci, &column_table);
         for y in 0..h {
             re[y * w + x] = cr[y];
             im[y * w + x] = ci[y];
