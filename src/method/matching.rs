@@ -151,6 +151,7 @@ pub fn remove_fixed_pattern(textures: &mut [Texture]) {
 }
 
 /// In-place radix-2 FFT of `re`/`im` (length a power of two); `inverse` without the `1/n` factor.
+#[cfg(test)]
 pub(crate) fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
     fft_with(re, im, &twiddles(re.len(), inverse));
 }
