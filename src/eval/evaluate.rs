@@ -31,6 +31,7 @@ use crate::method::transfer::Transfer;
 /// Placement of one photo in the mosaic.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Placement {
+    /// File name of the photo (as listed in the placement file).
     pub name: String,
     /// Photo pixel → mosaic, row-major.
     pub h: [f64; 9],
@@ -351,11 +352,17 @@ impl Default for EvalSettings {
 /// Scores of one set of photos.
 #[derive(Debug, Clone, Serialize)]
 pub struct Scores {
+    /// Name of the set in the table (e.g. the method).
     pub label: String,
+    /// Folder the photos were read from.
     pub folder: PathBuf,
+    /// Photos scored.
     pub photos: usize,
+    /// `Σ|g − s_c·t| / Σ s_c·t` against the true albedo (see [`albedo_error`]); `None` without truth.
     pub albedo_error: Option<f64>,
+    /// Robust spread of per-cell `g / (s_c·t)` medians: lighting left in the photos; `None` without truth.
     pub residual_pattern: Option<f64>,
+    /// RMS difference over overlaps divided by the standard deviation of all pixels; `None` without placements.
     pub consistency: Option<f64>,
     /// RMS difference over overlaps divided by the mean of all pixels (see [`consistency_parts`]).
     pub overlap_difference: Option<f64>,
@@ -396,12 +403,17 @@ impl RegistrationSummary {
 /// What `abysslight evaluate` writes as JSON.
 #[derive(Debug, Clone, Serialize)]
 pub struct Evaluation {
+    /// The truth file (`truth/dive.json`) scored against, if any.
     pub truth: Option<PathBuf>,
+    /// The placement file used (given or saved by `--register`), if any.
     pub placements: Option<PathBuf>,
     /// With `--register`: how many consecutive pairs were matched.
     pub registration: Option<RegistrationSummary>,
+    /// Transfer curve assumed between photo values and linear light.
     pub transfer: Transfer,
+    /// The settings of the run.
     pub settings: EvalSettings,
+    /// Scores per set of photos, in the order given.
     pub sets: Vec<Scores>,
 }
 

@@ -36,10 +36,13 @@ const CHAIN_GAP: f64 = 100.0;
 /// A texture image prepared for matching.
 #[derive(Debug, Clone)]
 pub struct Texture {
+    /// Width in texture pixels.
     pub width: usize,
+    /// Height in texture pixels.
     pub height: usize,
     /// Pixels of the reduced photo per pixel of the texture image.
     pub scale: usize,
+    /// Row-major log grey level minus its local box mean (local contrast), `width × height` values.
     pub data: Vec<f32>,
 }
 
@@ -334,7 +337,9 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
 /// each photo against the previous one (`None` for the first).
 #[derive(Debug, Clone)]
 pub struct Registration {
+    /// One placement per photo, in input order.
     pub placements: Vec<Placement>,
+    /// Match of each photo against the previous one; `None` for the first.
     pub matches: Vec<Option<Match>>,
 }
 

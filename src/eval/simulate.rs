@@ -115,8 +115,11 @@ pub struct Simulation {
     pub frames: usize,
     /// Water-column frames. Default: 15.
     pub water_column: usize,
+    /// Photo width in pixels. Default: 320.
     pub width: usize,
+    /// Photo height in pixels. Default: 240.
     pub height: usize,
+    /// Seed of every random choice (floor, poses, particles, noise); same seed, same dive. Default: 1.
     pub seed: u64,
     /// Share of the seafloor covered by dark nodules. Default: 0.2.
     pub contamination: f64,
@@ -124,6 +127,7 @@ pub struct Simulation {
     pub bit_depth: u32,
     /// Curve applied before quantisation: `linear` or `srgb` (any [`Transfer`]). Default: linear.
     pub encode: Transfer,
+    /// Layout of the lights around the camera. Default: [`Rig::Three`].
     pub rig: Rig,
     /// Mean altitude above the floor, metres. Default: 3.
     pub altitude: f32,
@@ -155,8 +159,10 @@ pub struct Simulation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Exposure {
+    /// Sediment at the image centre of a level camera reads 0.7 in green (default).
     #[default]
     Centre,
+    /// The brightest sediment anywhere in the frame, any channel after white balance, reads 0.8.
     Brightest,
 }
 
@@ -278,11 +284,17 @@ impl Default for Simulation {
 /// Pinhole camera model (pixel centres at integer + 0.5 are pixel `(x, y)`; `u = fx·X/Z + cx`).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct Camera {
+    /// Image width in pixels.
     pub width: usize,
+    /// Image height in pixels.
     pub height: usize,
+    /// Horizontal focal length in pixels.
     pub fx: f64,
+    /// Vertical focal length in pixels (equal to `fx`: square pixels).
     pub fy: f64,
+    /// Principal point, x in pixels (the image centre).
     pub cx: f64,
+    /// Principal point, y in pixels (the image centre).
     pub cy: f64,
 }
 
@@ -293,8 +305,11 @@ pub struct Pose {
     pub file: String,
     /// Camera centre in world metres (`z` = altitude above the floor).
     pub position: [f64; 3],
+    /// Roll about the track (world y), degrees.
     pub roll_deg: f64,
+    /// Pitch about world x, degrees.
     pub pitch_deg: f64,
+    /// Yaw about the vertical (world z), degrees.
     pub yaw_deg: f64,
     /// Camera-to-world rotation, row-major (columns: camera x right, y down in the image, z optical axis).
     pub rotation: [f64; 9],
@@ -305,14 +320,19 @@ pub struct Pose {
 /// `truth/dive.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Truth {
+    /// What wrote the dive (`abysslight VERSION simulate`).
     pub tool: String,
+    /// The settings the dive was rendered with.
     pub settings: Simulation,
+    /// The camera model of every photo.
     pub camera: Camera,
     /// Mosaic pixels per metre on the floor (the placements' unit).
     pub mosaic_pixels_per_metre: f64,
     /// Per-channel attenuation coefficient η (1/m).
     pub attenuation: [f32; 3],
+    /// The rig's lights in the camera frame, as JSON.
     pub lights: serde_json::Value,
+    /// Pose of each survey photo, in order.
     pub poses: Vec<Pose>,
     /// Water-column file names in `water/`.
     pub water: Vec<String>,
@@ -834,8 +854,11 @@ fn finish(img: &Raster, seed: u64, noise: f32, bits: u32, encode: Transfer, wb: 
 
 /// The rendered dive, in memory.
 pub struct Dive {
+    /// Everything `truth/dive.json` records: settings, camera, poses, file names.
     pub truth: Truth,
+    /// The survey photos, as the camera encoded them.
     pub survey: Vec<Photo>,
+    /// The water-column photos (open water, no floor in view).
     pub water: Vec<Photo>,
     /// True albedo of each survey photo (linear).
     pub albedo: Vec<Raster>,
@@ -843,10 +866,12 @@ pub struct Dive {
     /// would read, white balance included) and true backscatter `S` (linear, white balance included), so that an
     /// oracle correction `(I − S)/F` can be scored. Empty otherwise.
     pub factor: Vec<Raster>,
+    /// True backscatter `S` of each survey photo with [`Simulation::render_with_lighting`]; empty otherwise.
     pub backscatter: Vec<Raster>,
 }
 
 impl Simulation {
+    /// Refuse settings the renderer cannot use (size under 16×16, no frames, field of view outside 20–150°).
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Usage(m));
         if self.width < 16 || self.height < 16 {
@@ -906,6 +931,7 @@ impl Simulation {
         Ok(())
     }
 
+    /// The pinhole camera of these settings: `width`×`height`, horizontal field of view `fov_deg`, centred.
     pub fn camera(&self) -> Camera {
         let f = (self.width as f64 / 2.0) / (self.fov_deg as f64 / 2.0).to_radians().tan();
         Camera {
