@@ -955,19 +955,17 @@ impl Simulation {
         self.render_inner(true)
     }
 
-    fn render_inner(&self, lighting: bool) -> Result<Dive> {
-        self.validate()?;
-        let cam = self.camera();
-        let floor = Floor::new(self.seed, self.contamination);
-        let lights = self.rig.lights(self.beam_deg);
+    /// Pose of each survey photo along the track (slow random swings of altitude, roll, pitch, yaw and a side
+    /// drift), with homographies into a mosaic whose origin is the top-left of all footprints.
+    fn poses(&self, cam: &Camera) -> Vec<Pose> {
         let alt = self.altitude as f64;
+        let ppm = cam.fy / alt;
         let footprint = alt * self.height as f64 / cam.fy;
         let step = footprint * (1.0 - self.overlap as f64);
         let mut rng = Rng(mix(self.seed ^ 0xD1E));
         let phase: Vec<f64> = (0..6)
             .map(|_| rng.f32() as f64 * std::f64::consts::TAU)
             .collect();
-        let ppm = cam.fy / alt;
         let pose = |i: usize| {
             let t = i as f64;
             let z = match self.altitude_swing {
@@ -983,7 +981,7 @@ impl Simulation {
             let x = 0.15 * alt * (0.11 * t + phase[4]).sin();
             let y = step * t;
             let r = rotation(roll, pitch, yaw);
-            let to_floor = pixel_to_floor(&cam, &r, [x, y, z]);
+            let to_floor = pixel_to_floor(cam, &r, [x, y, z]);
             let to_mosaic = [ppm, 0.0, 0.0, 0.0, -ppm, 0.0, 0.0, 0.0, 1.0];
             Pose {
                 file: format!("{:04}.png", i + 1),
@@ -1014,37 +1012,15 @@ impl Simulation {
             let shift = [1.0, 0.0, -mx.floor(), 0.0, 1.0, -my.floor(), 0.0, 0.0, 1.0];
             p.homography = mat_mul(&shift, &p.homography);
         }
-        let view = |p: &Pose, with_floor: bool| View {
-            cam,
-            r: p.rotation,
-            c: [
-                p.position[0] as f32,
-                p.position[1] as f32,
-                p.position[2] as f32,
-            ],
-            lights: world_lights(
-                &lights,
-                &p.rotation,
-                [
-                    p.position[0] as f32,
-                    p.position[1] as f32,
-                    p.position[2] as f32,
-                ],
-                self.water.attenuation,
-            ),
-            floor: if with_floor { Some(&floor) } else { None },
-            water: self.water,
-        };
-        // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
-        let level = Pose {
-            rotation: rotation(0.0, 0.0, 0.0),
-            position: [0.0, 0.0, alt],
-            ..poses[0].clone()
-        };
-        let probe = view(&level, true);
+        poses
+    }
+
+    /// Exposure gain of the dive from the view of a level camera at the mean altitude (see [`Exposure`]).
+    fn exposure_gain(&self, probe: &View, floor: &Floor) -> f32 {
+        let cam = probe.cam;
         let eta = self.water.attenuation;
         let wb = self.white_balance;
-        let exposure = if self.exposure == Exposure::Brightest {
+        if self.exposure == Exposure::Brightest {
             // The brightest sediment of the frame, any channel, after white balance, reads 0.8.
             let mut brightest = 0.0f32;
             for gy in 0..=16 {
@@ -1086,7 +1062,70 @@ impl Simulation {
                 })
                 .sum();
             0.7 / (floor.sediment[1] * e / std::f32::consts::PI * (-eta[1] * t).exp())
+        }
+    }
+
+    /// The water-column photos: `base` (the rig's backscatter in open water) with fresh particles and noise each.
+    fn water_column(&self, base: &Raster, particles: usize) -> (Vec<Photo>, Vec<String>) {
+        let wb = self.white_balance;
+        let mut water = Vec::new();
+        let mut names = Vec::new();
+        for i in 0..self.water_column {
+            let mut img = base.clone();
+            let mut prng = Rng(mix(self.seed ^ 0x3A7E ^ ((i as u64) << 24)));
+            add_particles(&mut img, &mut prng, particles * 2);
+            water.push(finish(
+                &img,
+                mix(self.seed ^ 0xBEEF ^ i as u64),
+                self.noise,
+                self.bit_depth,
+                self.encode,
+                wb,
+            ));
+            names.push(format!("{:04}.png", i + 1));
+        }
+        (water, names)
+    }
+
+    fn render_inner(&self, lighting: bool) -> Result<Dive> {
+        self.validate()?;
+        let cam = self.camera();
+        let floor = Floor::new(self.seed, self.contamination);
+        let lights = self.rig.lights(self.beam_deg);
+        let alt = self.altitude as f64;
+        let ppm = cam.fy / alt;
+        let poses = self.poses(&cam);
+        let view = |p: &Pose, with_floor: bool| View {
+            cam,
+            r: p.rotation,
+            c: [
+                p.position[0] as f32,
+                p.position[1] as f32,
+                p.position[2] as f32,
+            ],
+            lights: world_lights(
+                &lights,
+                &p.rotation,
+                [
+                    p.position[0] as f32,
+                    p.position[1] as f32,
+                    p.position[2] as f32,
+                ],
+                self.water.attenuation,
+            ),
+            floor: if with_floor { Some(&floor) } else { None },
+            water: self.water,
         };
+        // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
+        let level = Pose {
+            rotation: rotation(0.0, 0.0, 0.0),
+            position: [0.0, 0.0, alt],
+            ..poses[0].clone()
+        };
+        let probe = view(&level, true);
+        let eta = self.water.attenuation;
+        let wb = self.white_balance;
+        let exposure = self.exposure_gain(&probe, &floor);
         let bits = self.bit_depth;
         let mut survey = Vec::with_capacity(self.frames);
         let mut albedo = Vec::with_capacity(self.frames);
@@ -1122,25 +1161,12 @@ impl Simulation {
             }
         }
         // Water column: the same rig and camera on the way down, open water in view.
-        let mut water = Vec::new();
-        let mut names = Vec::new();
-        if self.water_column > 0 {
+        let (water, names) = if self.water_column > 0 {
             let base = render(&view(&level, false), exposure, false).img;
-            for i in 0..self.water_column {
-                let mut img = base.clone();
-                let mut prng = Rng(mix(self.seed ^ 0x3A7E ^ ((i as u64) << 24)));
-                add_particles(&mut img, &mut prng, particles * 2);
-                water.push(finish(
-                    &img,
-                    mix(self.seed ^ 0xBEEF ^ i as u64),
-                    self.noise,
-                    bits,
-                    self.encode,
-                    wb,
-                ));
-                names.push(format!("{:04}.png", i + 1));
-            }
-        }
+            self.water_column(&base, particles)
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let truth = Truth {
             tool: format!("abysslight {} simulate", env!("CARGO_PKG_VERSION")),
             settings: self.clone(),
