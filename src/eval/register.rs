@@ -333,7 +333,7 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
     }
 }
 
-/// What [`register`] found: one placement per photo (translations, in full-resolution pixels) and the match of
+/// What [`register_rasters`] and [`register_folder`] found: one placement per photo (translations, in full-resolution pixels) and the match of
 /// each photo against the previous one (`None` for the first).
 #[derive(Debug, Clone)]
 pub struct Registration {

@@ -126,7 +126,7 @@ pub struct Options {
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
     /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
-    /// [`crate::refine`]), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
+    /// [`crate::method::refine`]), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
     /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
     pub method: Method,
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
