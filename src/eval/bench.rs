@@ -81,7 +81,7 @@ impl Default for BenchOptions {
 /// What one child `correct` run measured.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct ChildResult {
-    /// Survey photos the run corrected.
+    /// Survey photos the run corrected (its report's `corrected`).
     pub photos: usize,
     /// Wall-clock seconds of the whole run.
     pub seconds: f64,

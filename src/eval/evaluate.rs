@@ -405,7 +405,7 @@ impl RegistrationSummary {
 pub struct Evaluation {
     /// The truth file (`truth/dive.json`) scored against, if any.
     pub truth: Option<PathBuf>,
-    /// The placement file used (given or saved by `--register`), if any.
+    /// The placement file given with `--placements`, or the one `--save-placements` wrote, if any.
     pub placements: Option<PathBuf>,
     /// With `--register`: how many consecutive pairs were matched.
     pub registration: Option<RegistrationSummary>,

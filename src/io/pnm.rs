@@ -72,7 +72,7 @@ pub struct FrameSplitter<R> {
 }
 
 impl<R: BufRead> FrameSplitter<R> {
-    /// A splitter reading frames from `r`, starting at frame 0.
+    /// A splitter reading frames from `r`.
     pub fn new(r: R) -> Self {
         FrameSplitter {
             r,
