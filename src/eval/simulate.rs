@@ -1116,7 +1116,7 @@ impl Simulation {
             floor: if with_floor { Some(&floor) } else { None },
             water: self.water,
         };
-        // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
+        // Exposure: from the view of a level camera at the mean altitude (see [`Exposure`]).
         let level = Pose {
             rotation: rotation(0.0, 0.0, 0.0),
             position: [0.0, 0.0, alt],
