@@ -98,6 +98,17 @@ fn resume_rewrites_only_missing_outputs_identically() {
     assert_eq!(r.corrected, 3);
     assert_eq!(r.skipped_existing, 9);
     assert_eq!(outputs(&d.path().join("out")), reference);
+    // The report and pictures cover the whole mission: the photos already written are in it, marked resumed.
+    assert_eq!(r.frames.len(), 12, "report covers every photo");
+    assert_eq!(r.frames.iter().filter(|f| f.resumed).count(), 9);
+    assert!(r.frames.windows(2).all(|w| w[0].index < w[1].index));
+    let written: Vec<usize> = r
+        .frames
+        .iter()
+        .filter(|f| !f.resumed)
+        .map(|f| f.index)
+        .collect();
+    assert_eq!(written, vec![0, 5, 11]);
     assert_eq!(
         std::fs::metadata(&kept).unwrap().modified().unwrap(),
         mtime,

@@ -493,3 +493,82 @@ fn ctrl_c_in_a_batch_run_says_how_to_resume_and_exits_130() {
         "{log}"
     );
 }
+
+#[test]
+fn dry_run_writes_nothing_and_limit_corrects_the_first_photos_as_a_whole_run_does() {
+    let d = tempfile::tempdir().unwrap();
+    let dive = dive(32, 24, 9, 3, 0.1, false, 2);
+    write_all(&dive.water, &d.path().join("water"), "w", "png");
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    let run = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "correct",
+            "--water-column",
+            "water",
+            "--survey",
+            "survey",
+            "--out",
+            out,
+            "--window",
+            "3",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        abysslight(&args, d.path())
+    };
+    let listing = |dir: &Path| -> Vec<std::path::PathBuf> {
+        let mut v: Vec<_> = walk(dir);
+        v.sort();
+        v
+    };
+    let before = listing(d.path());
+    let o = run("out", &["--dry-run"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("9 photos"), "{said}");
+    assert!(said.contains("n = 3"), "{said}");
+    assert!(said.contains("water-column"), "{said}");
+    assert_eq!(listing(d.path()), before, "a dry run writes nothing");
+    assert!(!d.path().join("out").exists());
+
+    // --limit 4: the first four photos, byte-identical to the same photos of a whole run.
+    let o = run("limited", &["--limit", "4"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run("whole", &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let photos = |dir: &str| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d.path().join(dir))
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".png"))
+            .collect();
+        v.sort();
+        v
+    };
+    let limited = photos("limited");
+    assert_eq!(limited, ["img1.png", "img2.png", "img3.png", "img4.png"]);
+    for name in &limited {
+        assert_eq!(
+            std::fs::read(d.path().join("limited").join(name)).unwrap(),
+            std::fs::read(d.path().join("whole").join(name)).unwrap(),
+            "{name}"
+        );
+    }
+    let o = run("zero", &["--limit", "0"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--limit"), "{}", stderr(&o));
+}
+
+/// Every file below `dir`.
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        }
+        out.push(p);
+    }
+    out
+}

@@ -347,7 +347,8 @@ struct CorrectArgs {
 
     /// Mask image, white = not seafloor (overlays, laser dots, vehicle parts).
     ///
-    /// The size of the photos. White pixels are left out of every median and copied unchanged to the output.
+    /// The size of the photos. White pixels are left out of every median; F beneath them is interpolated from the
+    /// seafloor around them and they are corrected with it (burned-in text stays readable).
     #[arg(long, value_name = "FILE", help_heading = H_IN)]
     mask: Option<PathBuf>,
 
@@ -489,6 +490,20 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_RUN)]
     resume: bool,
 
+    /// Print what would be read and written, then stop: nothing is written.
+    ///
+    /// The photos to correct and those read for the windows only, outputs that exist already, the window n,
+    /// where S comes from, the method and its parameters, and about how much disk the outputs need.
+    #[arg(long, help_heading = H_RUN)]
+    dry_run: bool,
+
+    /// Correct only the first N photos (of the survey, or of the shard), with the windows of a whole run.
+    ///
+    /// A quick look at a new rig: the photos after them are read for the windows, so these N come out exactly as
+    /// in a run over everything.
+    #[arg(long, value_name = "N", help_heading = H_RUN)]
+    limit: Option<usize>,
+
     /// Write only chunk K of N contiguous chunks of the survey (K = 1..N).
     ///
     /// Reads the neighbours its windows need: the union of all N shards equals one run. For SLURM/PBS array
@@ -615,6 +630,9 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     o.save_scatter |= args.save_scatter;
     o.resume |= args.resume;
+    if let Some(v) = args.limit {
+        o.limit = Some(v);
+    }
     if let Some(v) = args.shard {
         o.shard = Some(v);
     }
@@ -738,6 +756,13 @@ impl Progress for Console {
 
 fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
     let opts = options_from(&args)?;
+    if args.dry_run {
+        // The same checks and listing as a run, and nothing written.
+        let plan = abysslight::run::plan::Plan::new(&opts, &abysslight::Silent)?;
+        print!("{}", plan.describe(&opts));
+        println!("dry run: nothing was written");
+        return Ok(ExitCode::from(EXIT_OK));
+    }
     if opts.watch {
         // Ctrl-C or SIGTERM ends the watch cleanly (the last photos are finished, the report is written); a
         // second one kills at once. signal-hook rather than raw libc: its handlers only set an atomic flag, which
@@ -776,7 +801,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
                 .unwrap_or(Path::new("-"))
                 .display()
         );
-        eprintln!("abysslight: {}", report.monitor.line(report.corrected));
+        eprintln!("abysslight: {}", report.monitor.line(report.frames.len()));
         extras::print_flagged(&report, batch_out.as_deref());
         if report.floored_pixels > 0 {
             eprintln!(

@@ -40,7 +40,8 @@ Lower is better in every column. Each method corrected the same simulated dive; 
 with the dive's true albedo (details: docs/evaluation.md in the abysslight repository).
 
 - **method**: `raw` is the uncorrected photos; `mean` divides by the mission's mean image; `polynomial` fits a
-  robust polynomial of log intensity per photo; `paper` is Köser et al. (abysslight's default).
+  robust polynomial of log intensity per photo; `paper` is Köser et al. as published; `abyss` (abysslight's
+  default) is the paper's window plus a per-photo gain and a floor relative to the photo's lit level.
 - **photos**: photos scored.
 - **albedo error**: sum of |corrected - s*true albedo| / sum of s*true albedo over every sample of every photo,
   with s the least-squares scale per channel (so a white balance is not counted as error). 0 is perfect.
@@ -50,6 +51,8 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
 - **consistency** (Köser et al.): overlapping photos should show a patch of seafloor alike. Per mosaic cell seen
   whole by two or more photos, the RMS difference of each photo's mean from the cell's mean, divided by the
   standard deviation of all pixels. 0 means overlapping photos agree exactly.
+- **overlap difference**: the same RMS difference over overlaps, divided by the mean of all pixels instead of their
+  standard deviation (so a correction that flattens the photos is not rewarded or punished through the divisor).
 ";
 
 /// The dive the demo renders: 30 photos of 320×240 with 20 % nodules.
@@ -277,7 +280,7 @@ mod tests {
             .skip(2)
             .filter_map(|l| l.split('|').nth(1).map(str::trim))
             .collect();
-        assert_eq!(methods.len(), 4, "{table}");
+        assert_eq!(methods.len(), 5, "{table}");
         for m in methods {
             assert!(
                 legend.contains(&format!("`{m}`")),

@@ -2,14 +2,14 @@
 //! (`abysslight evaluate --register RAW_DIR`).
 //!
 //! Model: a translation between consecutive photos (a downward camera over flat ground at a steady altitude).
-//! Each photo is reduced to a texture image at about [`TARGET_SIDE`] pixels on its long side: the log of its grey
+//! Each photo is reduced to a texture image at about [`TARGET_SIDE`](crate::method::matching::TARGET_SIDE) pixels on its long side: the log of its grey
 //! level, box-averaged down, minus a local box average (the lights' smooth pattern goes, the texture stays). The
 //! per-pixel median of those images over the sequence, the part that stays in the frame (vignetting residue,
 //! overlays, laser dots), is subtracted when the sequence has at least 15 photos, so it cannot pull the match
 //! to zero shift. Consecutive texture images are matched by phase correlation (FFT of a Hann-windowed copy,
 //! normalised cross-power spectrum, peak refined to sub-pixel by a parabola through its neighbours). A match is
-//! accepted only when the photos overlap over at least [`MIN_OVERLAP`] of their area and the texture images
-//! correlate there (normalised cross-correlation at least [`MIN_NCC`]); unrelated photos fail that test. The
+//! accepted only when the photos overlap over at least [`MIN_OVERLAP`](crate::method::matching::MIN_OVERLAP) of their area and the texture images
+//! correlate there (normalised cross-correlation at least [`MIN_NCC`](crate::method::matching::MIN_NCC)); unrelated photos fail that test. The
 //! placements are chained along the sequence; after a rejected pair a new chain starts far away, so photos of
 //! different chains never share a mosaic cell.
 //!
@@ -22,316 +22,13 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::eval::evaluate::Placement;
+use crate::method::matching::{
+    match_pair, reduction, remove_fixed_pattern, texture, Match, Texture,
+};
 use crate::method::raster::Raster;
 
-/// Long side, in pixels, of the texture images photos are matched on (at least; the reduction is an integer).
-pub const TARGET_SIDE: usize = 256;
-/// Smallest overlap (share of the photo's area) of an accepted match.
-pub const MIN_OVERLAP: f64 = 0.2;
-/// Smallest normalised cross-correlation of the texture images over the overlap of an accepted match.
-pub const MIN_NCC: f64 = 0.25;
 /// Vertical distance, in photo heights, between chains of placements that could not be joined.
 const CHAIN_GAP: f64 = 100.0;
-
-/// A texture image prepared for matching.
-#[derive(Debug, Clone)]
-pub struct Texture {
-    /// Width in texture pixels.
-    pub width: usize,
-    /// Height in texture pixels.
-    pub height: usize,
-    /// Pixels of the reduced photo per pixel of the texture image.
-    pub scale: usize,
-    /// Row-major log grey level minus its local box mean (local contrast), `width × height` values.
-    pub data: Vec<f32>,
-}
-
-/// Result of matching one photo against the previous one.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Match {
-    /// Shift `(dx, dy)` in full-resolution pixels: a point at `(u, v)` in the first photo is at `(u + dx, v + dy)`
-    /// in the second.
-    pub shift: (f64, f64),
-    /// Normalised cross-correlation of the texture images over the overlap.
-    pub ncc: f64,
-    /// Overlap, as a share of the photo's area.
-    pub overlap: f64,
-    /// Whether the match passed the confidence test.
-    pub accepted: bool,
-}
-
-/// Reduction factor giving a long side of at least [`TARGET_SIDE`] (1 for small photos).
-pub fn reduction(width: usize, height: usize) -> usize {
-    (width.max(height) / TARGET_SIDE).max(1)
-}
-
-/// The texture image of a photo (any channels, linear or not: only the log of its grey level's local contrast
-/// counts), reduced by `scale`.
-pub fn texture(photo: &Raster, scale: usize) -> Texture {
-    let (w, h) = (photo.width / scale, photo.height / scale);
-    let c = photo.channels;
-    let mut grey = vec![0.0f32; w * h];
-    for (y, row) in grey.chunks_exact_mut(w.max(1)).enumerate().take(h) {
-        for (x, g) in row.iter_mut().enumerate() {
-            let mut s = 0.0f32;
-            for yy in y * scale..(y + 1) * scale {
-                let line = photo.row(yy);
-                for v in &line[x * scale * c..(x + 1) * scale * c] {
-                    s += v;
-                }
-            }
-            *g = s / (scale * scale * c) as f32;
-        }
-    }
-    // Masked (NaN) pixels take the mean grey level: no texture there.
-    let (sum, count) = grey
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold((0.0f64, 0usize), |(s, n), &v| (s + v as f64, n + 1));
-    let fill = if count > 0 {
-        (sum / count as f64) as f32
-    } else {
-        0.0
-    };
-    for g in &mut grey {
-        if !g.is_finite() {
-            *g = fill;
-        }
-    }
-    let mut sorted: Vec<f32> = grey.clone();
-    let floor = if sorted.is_empty() {
-        1e-6
-    } else {
-        let at = (sorted.len() - 1) * 99 / 100;
-        (0.02 * *sorted.select_nth_unstable_by(at, f32::total_cmp).1).max(1e-6)
-    };
-    let log: Vec<f32> = grey.iter().map(|&v| v.max(floor).ln()).collect();
-    let r = (w.max(h) / 32).max(2);
-    let smooth = box_blur(&log, w, h, r);
-    Texture {
-        width: w,
-        height: h,
-        scale,
-        data: log.iter().zip(&smooth).map(|(a, b)| a - b).collect(),
-    }
-}
-
-/// Mean over the clamped `(2r + 1)²` square (separable running sums).
-fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| -> Vec<f32> {
-        let mut out = vec![0.0f32; src.len()];
-        for k in 0..count {
-            let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
-            let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
-            for i in 0..len as isize {
-                out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
-                acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
-            }
-        }
-        out
-    };
-    let rows = pass(v, w, 1, h, w);
-    pass(&rows, h, w, w, 1)
-}
-
-/// Photos a sequence needs before its fixed pattern is removed: the median of fewer, overlapping texture images
-/// still holds their texture, and subtracting it puts a common component into every image (a false peak at zero
-/// shift; seen on a synthetic five-photo sequence).
-pub const FIXED_PATTERN_PHOTOS: usize = 15;
-
-/// Subtract the per-pixel median over the sequence (what stays in the frame), when it has at least
-/// [`FIXED_PATTERN_PHOTOS`] images of one size.
-pub fn remove_fixed_pattern(textures: &mut [Texture]) {
-    if textures.len() < FIXED_PATTERN_PHOTOS
-        || textures
-            .iter()
-            .any(|t| t.data.len() != textures[0].data.len())
-    {
-        return;
-    }
-    let n = textures[0].data.len();
-    let mut column = Vec::with_capacity(textures.len());
-    let median: Vec<f32> = (0..n)
-        .map(|i| {
-            column.clear();
-            column.extend(textures.iter().map(|t| t.data[i]));
-            let mid = column.len() / 2;
-            *column.select_nth_unstable_by(mid, f32::total_cmp).1
-        })
-        .collect();
-    for t in textures {
-        for (v, m) in t.data.iter_mut().zip(&median) {
-            *v -= m;
-        }
-    }
-}
-
-/// In-place radix-2 FFT of `re`/`im` (length a power of two); `inverse` without the `1/n` factor.
-fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
-    let n = re.len();
-    debug_assert!(n.is_power_of_two());
-    let mut j = 0;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let sign = if inverse { 1.0 } else { -1.0 };
-    let mut len = 2;
-    while len <= n {
-        let ang = sign * std::f64::consts::TAU / len as f64;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (wr, wi) = ((ang * k as f64).cos(), (ang * k as f64).sin());
-                let (a, b) = (start + k, start + k + len / 2);
-                let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
-                re[b] = re[a] - xr;
-                im[b] = im[a] - xi;
-                re[a] += xr;
-                im[a] += xi;
-            }
-        }
-        len <<= 1;
-    }
-}
-
-/// 2-D FFT of a row-major `w`×`h` complex image (both powers of two).
-fn fft2(re: &mut [f64], im: &mut [f64], w: usize, h: usize, inverse: bool) {
-    for y in 0..h {
-        fft(
-            &mut re[y * w..(y + 1) * w],
-            &mut im[y * w..(y + 1) * w],
-            inverse,
-        );
-    }
-    let (mut cr, mut ci) = (vec![0.0; h], vec![0.0; h]);
-    for x in 0..w {
-        for y in 0..h {
-            cr[y] = re[y * w + x];
-            ci[y] = im[y * w + x];
-        }
-        fft(&mut cr, &mut ci, inverse);
-        for y in 0..h {
-            re[y * w + x] = cr[y];
-            im[y * w + x] = ci[y];
-        }
-    }
-}
-
-/// Spectrum of a texture image, Hann-windowed and zero-padded to `(pw, ph)`.
-fn spectrum(t: &Texture, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>) {
-    let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
-    let mean = t.data.iter().map(|&v| v as f64).sum::<f64>() / t.data.len().max(1) as f64;
-    let hann = |i: usize, n: usize| {
-        0.5 - 0.5 * (std::f64::consts::TAU * (i as f64 + 0.5) / n as f64).cos()
-    };
-    for y in 0..t.height {
-        for x in 0..t.width {
-            re[y * pw + x] =
-                (t.data[y * t.width + x] as f64 - mean) * hann(x, t.width) * hann(y, t.height);
-        }
-    }
-    fft2(&mut re, &mut im, pw, ph, false);
-    let _ = &mut im;
-    (re, im)
-}
-
-/// Normalised cross-correlation of `a` and `b` over their overlap when `b` is `a` shifted by `(dx, dy)` texture
-/// pixels (`b(x + dx, y + dy) ≈ a(x, y)`), and the overlap's share of the area.
-pub fn overlap_ncc(a: &Texture, b: &Texture, dx: isize, dy: isize) -> (f64, f64) {
-    let (w, h) = (a.width as isize, a.height as isize);
-    let (x0, x1) = (0.max(-dx), w.min(w - dx));
-    let (y0, y1) = (0.max(-dy), h.min(h - dy));
-    if x1 <= x0 || y1 <= y0 {
-        return (0.0, 0.0);
-    }
-    let (mut sa, mut sb, mut saa, mut sbb, mut sab, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0f64);
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let va = a.data[(y * w + x) as usize] as f64;
-            let vb = b.data[((y + dy) * w + x + dx) as usize] as f64;
-            sa += va;
-            sb += vb;
-            saa += va * va;
-            sbb += vb * vb;
-            sab += va * vb;
-            n += 1.0;
-        }
-    }
-    let cov = sab - sa * sb / n;
-    let va = (saa - sa * sa / n).max(0.0);
-    let vb = (sbb - sb * sb / n).max(0.0);
-    let ncc = if va > 0.0 && vb > 0.0 {
-        cov / (va * vb).sqrt()
-    } else {
-        0.0
-    };
-    (ncc, n / (w * h) as f64)
-}
-
-/// Match texture image `b` against `a` (same size) by phase correlation; see [`Match`].
-pub fn match_pair(a: &Texture, b: &Texture) -> Match {
-    assert_eq!(
-        (a.width, a.height),
-        (b.width, b.height),
-        "texture sizes differ"
-    );
-    let (pw, ph) = (a.width.next_power_of_two(), a.height.next_power_of_two());
-    let (ar, ai) = spectrum(a, pw, ph);
-    let (br, bi) = spectrum(b, pw, ph);
-    // conj(A)·B / |A·B|: its inverse peaks at the shift of b against a.
-    let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
-    for i in 0..pw * ph {
-        let (r, m) = (ar[i] * br[i] + ai[i] * bi[i], ar[i] * bi[i] - ai[i] * br[i]);
-        let mag = (r * r + m * m).sqrt();
-        if mag > 1e-20 {
-            re[i] = r / mag;
-            im[i] = m / mag;
-        }
-    }
-    fft2(&mut re, &mut im, pw, ph, true);
-    let best = (0..pw * ph)
-        .max_by(|&i, &j| re[i].total_cmp(&re[j]))
-        .unwrap_or(0);
-    let (px, py) = (best % pw, best / pw);
-    let at = |x: isize, y: isize| {
-        re[(y.rem_euclid(ph as isize) as usize) * pw + x.rem_euclid(pw as isize) as usize]
-    };
-    let refine = |l: f64, c: f64, r: f64| {
-        let d = l - 2.0 * c + r;
-        if d < 0.0 {
-            (0.5 * (l - r) / d).clamp(-0.5, 0.5)
-        } else {
-            0.0
-        }
-    };
-    let (xi, yi) = (px as isize, py as isize);
-    let fx = refine(at(xi - 1, yi), at(xi, yi), at(xi + 1, yi));
-    let fy = refine(at(xi, yi - 1), at(xi, yi), at(xi, yi + 1));
-    let wrap = |p: isize, n: usize| {
-        if p > n as isize / 2 {
-            p - n as isize
-        } else {
-            p
-        }
-    };
-    let (dx, dy) = (wrap(xi, pw), wrap(yi, ph));
-    let (ncc, overlap) = overlap_ncc(a, b, dx, dy);
-    let s = a.scale as f64;
-    Match {
-        shift: ((dx as f64 + fx) * s, (dy as f64 + fy) * s),
-        ncc,
-        overlap,
-        accepted: overlap >= MIN_OVERLAP && ncc >= MIN_NCC,
-    }
-}
 
 /// What [`register_rasters`] and [`register_folder`] found: one placement per photo (translations, in full-resolution pixels) and the match of
 /// each photo against the previous one (`None` for the first).
@@ -452,6 +149,7 @@ fn chain(names: &[String], textures: &[Texture], height: f64) -> Registration {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::method::matching::*;
 
     /// Deterministic pseudo-random texture: smooth blobs of several sizes (sums of hashed lattice values).
     fn terrain(seed: u64, x: f64, y: f64) -> f64 {

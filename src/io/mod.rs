@@ -223,8 +223,8 @@ pub fn majority_size(photos: &[Entry], sample: usize) -> Option<(usize, usize)> 
 /// [`decode`], after checking the header against the size the mission's photos have (`expected`, when known):
 /// a photo of another size is a mismatch error before it is decoded.
 pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result<Photo> {
-    if let Some((w, h)) = expected {
-        let got = header_size(path)?;
+    // A header that cannot be read: `decode` names what is wrong with the file.
+    if let (Some((w, h)), Ok(got)) = (expected, header_size(path)) {
         if got != (w, h) {
             return Err(Error::Mismatch {
                 path: path.to_owned(),

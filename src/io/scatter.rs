@@ -40,29 +40,8 @@ impl Scatter {
 mod tests {
     use super::*;
     use crate::io::{write_atomic, EncodeSettings};
-    use crate::method::raster::{Layout, Photo, Samples};
-
-    fn frame(seed: u64, w: usize, h: usize) -> Photo {
-        let mut s = seed | 1;
-        Photo {
-            layout: Layout {
-                width: w,
-                height: h,
-                channels: 3,
-            },
-            samples: Samples::U8(
-                (0..w * h * 3)
-                    .map(|_| {
-                        s ^= s << 13;
-                        s ^= s >> 7;
-                        s ^= s << 17;
-                        (s >> 40) as u8
-                    })
-                    .collect(),
-            ),
-            alpha: None,
-        }
-    }
+    use crate::method::raster::Photo;
+    use crate::method::scatter::tests::frame;
 
     fn write_frames(dir: &Path, photos: &[Photo]) -> Vec<Entry> {
         photos

@@ -21,6 +21,7 @@ pub mod correct;
 pub mod engine;
 pub mod factor;
 pub mod mask;
+pub mod matching;
 pub mod median;
 pub mod monitor;
 pub mod params;

@@ -561,7 +561,7 @@ pub struct Monitor {
     scratch: Scratch,
     sorted_changes: Vec<f32>,
     /// Texture image of the previous photo's block medians, for its motion (see [`Health::motion`]).
-    previous_texture: Option<crate::eval::register::Texture>,
+    previous_texture: Option<crate::method::matching::Texture>,
     /// Recent (motion, correlation) of consecutive photos, at most [`STILL_PHOTOS`].
     recent_motion: std::collections::VecDeque<(f32, f32)>,
     /// The window `n` (0: not told; [`STILL_DEFAULT_WINDOW`] is assumed).
@@ -670,13 +670,13 @@ impl Monitor {
         let mut h = self.observe(f, fit.contamination);
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
-        let texture = crate::eval::register::texture(own, 1);
+        let texture = crate::method::matching::texture(own, 1);
         if let Some(prev) = &self.previous_texture {
             if (prev.width, prev.height) == (texture.width, texture.height)
                 && texture.width >= MIN_ROUGHNESS_SIZE.0
                 && texture.height >= MIN_ROUGHNESS_SIZE.1
             {
-                let m = crate::eval::register::match_pair(prev, &texture);
+                let m = crate::method::matching::match_pair(prev, &texture);
                 h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
                 h.motion_ncc = Some(m.ncc as f32);
                 if self.recent_motion.len() == STILL_PHOTOS {

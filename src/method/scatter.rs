@@ -283,11 +283,12 @@ pub fn estimate_banded<E: Sync>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::method::median::reference;
 
-    fn frame(seed: u64, w: usize, h: usize) -> Photo {
+    /// A water-column frame of random 8-bit RGB samples (xorshift from `seed`).
+    pub(crate) fn frame(seed: u64, w: usize, h: usize) -> Photo {
         let mut s = seed | 1;
         Photo {
             layout: Layout {

@@ -120,7 +120,8 @@ pub struct Options {
     /// linear light. Default: linear.
     pub transfer: Transfer,
     /// Mask image, the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of every
-    /// median and copied unchanged to the output. Default: none.
+    /// median; `F` beneath them is interpolated from the seafloor around them and they are corrected with it.
+    /// Default: none.
     pub mask: Option<PathBuf>,
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.

@@ -6,7 +6,10 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::io::paths::{check_no_links_below, check_outputs};
-use crate::io::{self, decode, find_photos, find_photos_excluding, Entry, Found, WORK_DIR};
+use crate::io::{
+    self, decode_expecting, find_photos, find_photos_excluding, majority_size, Entry, Found,
+    WORK_DIR,
+};
 use crate::method::baseline::Method;
 use crate::method::window::WindowChoice;
 use crate::run::options::Options;
@@ -30,6 +33,9 @@ pub struct Plan {
     pub window: WindowChoice,
     /// The survey photos found (empty when streaming).
     pub found: Found,
+    /// The mission's photo size (width, height): the most common among the headers of the first photos, so that
+    /// one odd file (a thumbnail sorting first) is the only one skipped. `None` when streaming.
+    pub photo_size: Option<(usize, usize)>,
     /// The photos to read, in order, with what to do with each.
     pub items: Vec<Item>,
     /// The photos (indices into `found.photos`) this run writes.
@@ -100,12 +106,13 @@ impl Plan {
             warnings.push(m);
         }
         let total = found.photos.len();
+        let photo_size = majority_size(&found.photos, 15);
         let mut chunk = opts.shard.map_or(0..total, |s| s.range(total));
         if let Some(limit) = opts.limit {
             chunk.end = chunk.end.min(chunk.start + limit);
         }
         let first = if chunk.start > 0 {
-            halo_start(&found.photos, chunk.start, window.n)
+            halo_start(&found.photos, chunk.start, window.n, photo_size)
         } else {
             0
         };
@@ -139,6 +146,7 @@ impl Plan {
             streaming,
             window,
             found,
+            photo_size,
             items,
             chunk,
             first,
@@ -343,13 +351,18 @@ pub fn output_path(out: &Path, entry: &Entry) -> PathBuf {
 
 /// Index of the first photo this shard must read: far enough back that `n − 1` usable photos precede its chunk
 /// (a window reaches at most that far), or the start of the survey.
-fn halo_start(entries: &[Entry], chunk_start: usize, n: usize) -> usize {
+fn halo_start(
+    entries: &[Entry],
+    chunk_start: usize,
+    n: usize,
+    size: Option<(usize, usize)>,
+) -> usize {
     let mut usable = 0;
     let mut layout = None;
     let mut i = chunk_start;
     while i > 0 && usable + 1 < n {
         i -= 1;
-        if let Ok(p) = decode(&entries[i].path) {
+        if let Ok(p) = decode_expecting(&entries[i].path, size) {
             if *layout.get_or_insert(p.layout) == p.layout {
                 usable += 1;
             }

@@ -9,7 +9,7 @@ use std::time::Instant;
 use std::io::Write;
 
 use crate::error::{Error, Result};
-use crate::io::{decode, EncodeSettings, Entry};
+use crate::io::{decode_expecting, EncodeSettings, Entry};
 use crate::method::raster::Photo;
 
 /// What to do with a survey photo the stream reads.
@@ -60,6 +60,12 @@ impl FileList {
 
     /// `decoders` decoder threads (at least one).
     pub fn parallel(items: Vec<Item>, decoders: usize) -> Self {
+        Self::expecting(items, decoders, None)
+    }
+
+    /// `decoders` decoder threads; photos whose header says another size than `expected` (width, height) are
+    /// refused as mismatches before they are decoded.
+    pub fn expecting(items: Vec<Item>, decoders: usize, expected: Option<(usize, usize)>) -> Self {
         let w = decoders.max(1);
         let total = items.len();
         let items = std::sync::Arc::new(items);
@@ -70,7 +76,7 @@ impl FileList {
                 std::thread::spawn(move || {
                     for item in items.iter().skip(j).step_by(w) {
                         let t = Instant::now();
-                        let photo = decode(&item.entry.path);
+                        let photo = decode_expecting(&item.entry.path, expected);
                         let ms = t.elapsed().as_secs_f64() * 1000.0;
                         // The reader stopped (end of a shard, an error): stop decoding.
                         if tx.send((item.clone(), photo, ms)).is_err() {

@@ -72,8 +72,38 @@ struct WriteJob {
     _live: Option<Live>,
 }
 
-/// `F·C` of flagged photos kept for the contact sheet (a few KB each).
-const FLAGGED_KEPT: usize = 200;
+/// Most `F·C` images of flagged photos kept for the contact sheet (2 MB each at 12 MP), spread over the mission.
+const FLAGGED_KEPT: usize = 24;
+
+/// Keeps `F·C` of at most [`FLAGGED_KEPT`] flagged photos, spread evenly over all flagged so far: when full, every
+/// second one is dropped and from then on only every second flagged photo is taken (memory stays bounded
+/// whatever the mission's length).
+#[derive(Default)]
+struct FlaggedSample {
+    kept: Vec<(usize, Raster)>,
+    seen: usize,
+    stride: usize,
+}
+
+impl FlaggedSample {
+    fn offer(&mut self, index: usize, lit: &Raster) {
+        let stride = self.stride.max(1);
+        if self.seen % stride == 0 {
+            if self.kept.len() == FLAGGED_KEPT {
+                let mut i = 0;
+                self.kept.retain(|_| {
+                    i += 1;
+                    i % 2 == 1
+                });
+                self.stride = stride * 2;
+            }
+            if self.seen % self.stride.max(1) == 0 {
+                self.kept.push((index, lit.clone()));
+            }
+        }
+        self.seen += 1;
+    }
+}
 
 /// What the survey stream did.
 #[derive(Default)]
@@ -121,9 +151,10 @@ fn source(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Box<dyn Sourc
         ))
     } else {
         // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
-        Box::new(FileList::parallel(
+        Box::new(FileList::expecting(
             plan.items.clone(),
             threads(opts).clamp(1, 4),
+            plan.photo_size,
         ))
     }
 }
@@ -145,6 +176,7 @@ struct Feed<'a> {
     pending: usize,
     outcome: Outcome,
     resumed: Vec<FrameReport>,
+    flagged: FlaggedSample,
 }
 
 impl Feed<'_> {
@@ -205,8 +237,8 @@ impl Feed<'_> {
         for c in out {
             self.pending -= 1;
             let entry = &c.tag.item.entry;
-            if !c.health.flags.is_empty() && self.outcome.flagged_lit.len() < FLAGGED_KEPT {
-                self.outcome.flagged_lit.push((c.index, c.lit.clone()));
+            if !c.health.flags.is_empty() {
+                self.flagged.offer(c.index, &c.lit);
             }
             let frame = FrameReport {
                 output: self.plan.output_path(entry),
@@ -320,6 +352,7 @@ pub fn stream(
             pending: 0,
             outcome: Outcome::default(),
             resumed: Vec::new(),
+            flagged: FlaggedSample::default(),
         };
         let mut reached_end = true;
         for (item, photo, decode_ms) in dec_rx {
@@ -353,6 +386,7 @@ pub fn stream(
         feed.outcome.layout = engine.layout();
         let mut outcome = feed.outcome;
         outcome.frames = feed.resumed;
+        outcome.flagged_lit = feed.flagged.kept;
         Ok(outcome)
     });
     progress.finish();
@@ -405,4 +439,34 @@ fn write_all(
 /// A mutex's contents, also after a writer thread panicked while holding it.
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flagged_sample_stays_bounded_and_spread() {
+        let lit = Raster::filled(2, 2, 1, 0.5);
+        for n in [1usize, 10, 24, 25, 100, 1000] {
+            let mut f = FlaggedSample::default();
+            for i in 0..n {
+                f.offer(i, &lit);
+            }
+            let idx: Vec<usize> = f.kept.iter().map(|(i, _)| *i).collect();
+            assert!(idx.len() <= FLAGGED_KEPT, "{n}: {}", idx.len());
+            assert!(idx.len() >= n.min(FLAGGED_KEPT / 2), "{n}: {idx:?}");
+            assert_eq!(idx[0], 0);
+            // Evenly spread: one stride between neighbours, the last within a stride of the end.
+            let stride = idx.get(1).map_or(1, |b| b - idx[0]);
+            assert!(
+                idx.windows(2).all(|w| w[1] - w[0] == stride),
+                "{n}: {idx:?}"
+            );
+            assert!(
+                n - 1 - idx[idx.len() - 1] < stride.max(1) * 2,
+                "{n}: {idx:?}"
+            );
+        }
+    }
 }
