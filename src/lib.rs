@@ -44,6 +44,8 @@
 //! # Ok::<(), abysslight::Error>(())
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod error;
 pub mod eval;
 pub mod io;

@@ -35,16 +35,22 @@ use crate::run::source::Sink;
 /// What to benchmark.
 #[derive(Debug, Clone)]
 pub struct BenchOptions {
+    /// Photo width in pixels (default 4000).
     pub width: usize,
+    /// Photo height in pixels (default 3000).
     pub height: usize,
     /// Survey photos of the short mission; the long one has `long_factor` times as many.
     pub photos: usize,
+    /// How many times more photos the long mission has than the short one (default 10).
     pub long_factor: usize,
     /// Distinct synthetic photos generated (the mission cycles through them as hard links, so generating does not
     /// dominate the run).
     pub distinct: usize,
+    /// Water-column photos generated for the estimate of `S` (default 5).
     pub water_column: usize,
+    /// Worker threads of `correct` and of the codec floor (default 2).
     pub threads: usize,
+    /// Sliding-window length `n` in photos passed to `correct` (default 7).
     pub window: usize,
     /// JPEG output quality; `None`: each input's (the default of `correct`).
     pub jpeg_quality: Option<u8>,
@@ -75,24 +81,38 @@ impl Default for BenchOptions {
 /// What one child `correct` run measured.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct ChildResult {
+    /// Survey photos the run corrected (its report's `corrected`).
     pub photos: usize,
+    /// Wall-clock seconds of the whole run.
     pub seconds: f64,
+    /// Peak resident memory (VmHWM) of the child process, in KiB.
     pub peak_kib: u64,
 }
 
 /// The whole benchmark's result.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchResult {
+    /// CPU model name of the machine.
     pub machine: String,
+    /// Logical cores available.
     pub cores: usize,
+    /// `rustc --version` output.
     pub rustc: String,
+    /// Photo width in pixels.
     pub width: usize,
+    /// Photo height in pixels.
     pub height: usize,
+    /// Worker threads used.
     pub threads: usize,
+    /// Seconds spent generating the synthetic mission.
     pub generate_s: f64,
+    /// The short mission's `correct` run.
     pub short: ChildResult,
+    /// The long mission's `correct` run (its rate is the headline figure).
     pub long: ChildResult,
+    /// Photos decoded and re-encoded for the codec floor (the long mission's inputs).
     pub floor_photos: usize,
+    /// Seconds of the codec floor: decode + encode of `floor_photos` with the same threads and writer.
     pub floor_s: f64,
     /// Seconds of decode + encode of `correct`'s own outputs (same threads and settings): what the codec alone
     /// costs on corrected content, which encodes larger (flattened light, brightened corners) than the input.
@@ -101,18 +121,22 @@ pub struct BenchResult {
     pub codec: String,
     /// Bytes of the long mission's inputs and of `correct`'s outputs of them.
     pub input_bytes: u64,
+    /// Bytes of `correct`'s outputs of the long mission.
     pub output_bytes: u64,
     /// Seconds of libjpeg-turbo decode + encode in memory of the long mission (`turbojpeg` feature only).
     pub turbo_floor_s: Option<f64>,
 }
 
 impl BenchResult {
+    /// Photos per second of `correct` over the long mission.
     pub fn correct_rate(&self) -> f64 {
         self.long.photos as f64 / self.long.seconds
     }
+    /// Photos per second of the codec floor (decode + encode of the inputs).
     pub fn floor_rate(&self) -> f64 {
         self.floor_photos as f64 / self.floor_s
     }
+    /// Photos per second of decode + encode of `correct`'s own outputs.
     pub fn outputs_floor_rate(&self) -> f64 {
         self.long.photos as f64 / self.outputs_floor_s
     }

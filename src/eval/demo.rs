@@ -22,10 +22,15 @@ use crate::run::report::Progress;
 /// What the demo did.
 #[derive(Debug, Clone)]
 pub struct DemoReport {
+    /// Scores of every method against the simulated truth.
     pub evaluation: Evaluation,
+    /// The contact sheet written (`out/contact-sheet.png`).
     pub sheet: PathBuf,
+    /// The scores as JSON (`out/scores.json`).
     pub scores_json: PathBuf,
+    /// The scores as a Markdown table (`out/scores.md`).
     pub scores_md: PathBuf,
+    /// Wall-clock seconds of the whole demo.
     pub seconds: f64,
 }
 

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::eval::simulate::{apply_h, invert3, load_truth};
+use crate::eval::simulate::{apply_h, invert3, load_truth, Truth};
 use crate::io::decode;
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
@@ -31,6 +31,7 @@ use crate::method::transfer::Transfer;
 /// Placement of one photo in the mosaic.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Placement {
+    /// File name of the photo (as listed in the placement file).
     pub name: String,
     /// Photo pixel → mosaic, row-major.
     pub h: [f64; 9],
@@ -351,11 +352,17 @@ impl Default for EvalSettings {
 /// Scores of one set of photos.
 #[derive(Debug, Clone, Serialize)]
 pub struct Scores {
+    /// Name of the set in the table (e.g. the method).
     pub label: String,
+    /// Folder the photos were read from.
     pub folder: PathBuf,
+    /// Photos scored.
     pub photos: usize,
+    /// `Σ|g − s_c·t| / Σ s_c·t` against the true albedo (see [`albedo_error`]); `None` without truth.
     pub albedo_error: Option<f64>,
+    /// Robust spread of per-cell `g / (s_c·t)` medians: lighting left in the photos; `None` without truth.
     pub residual_pattern: Option<f64>,
+    /// RMS difference over overlaps divided by the standard deviation of all pixels; `None` without placements.
     pub consistency: Option<f64>,
     /// RMS difference over overlaps divided by the mean of all pixels (see [`consistency_parts`]).
     pub overlap_difference: Option<f64>,
@@ -396,12 +403,17 @@ impl RegistrationSummary {
 /// What `abysslight evaluate` writes as JSON.
 #[derive(Debug, Clone, Serialize)]
 pub struct Evaluation {
+    /// The truth file (`truth/dive.json`) scored against, if any.
     pub truth: Option<PathBuf>,
+    /// The placement file given with `--placements`, or the one `--save-placements` wrote, if any.
     pub placements: Option<PathBuf>,
     /// With `--register`: how many consecutive pairs were matched.
     pub registration: Option<RegistrationSummary>,
+    /// Transfer curve assumed between photo values and linear light.
     pub transfer: Transfer,
+    /// The settings of the run.
     pub settings: EvalSettings,
+    /// Scores per set of photos, in the order given.
     pub sets: Vec<Scores>,
 }
 
@@ -463,23 +475,16 @@ fn scale_h(h: &[f64; 9], k: usize) -> [f64; 9] {
     ]
 }
 
-/// Score each `(label, folder)` of photos. `truth` is a simulated dive folder (or its `truth/dive.json`);
-/// `placements` a placement file (default with a truth: the simulator's poses).
-pub fn evaluate(
-    sets: &[(String, PathBuf)],
-    truth: Option<&Path>,
+/// The placements to score consistency with: `--register`ed from the raw photos (also saved with
+/// `--save-placements`), read from `--placements`, or the simulator's from the truth; with the registration's
+/// summary when registered.
+fn resolve_placements(
     placements: Option<&Path>,
     settings: &EvalSettings,
-) -> Result<Evaluation> {
-    if sets.is_empty() {
-        return Err(Error::Usage(
-            "give at least one folder of photos to evaluate".into(),
-        ));
-    }
-    let truth_path = truth.map(truth_file);
-    let truth = truth_path.as_deref().map(load_truth).transpose()?;
+    truth: Option<&Truth>,
+) -> Result<(Option<Vec<Placement>>, Option<RegistrationSummary>)> {
     let mut registration = None;
-    let placed: Option<Vec<Placement>> = match (placements, &settings.register) {
+    let placed = match (placements, &settings.register) {
         (Some(_), Some(_)) => {
             return Err(Error::Usage(
                 "give either --placements or --register, not both".into(),
@@ -502,7 +507,7 @@ pub fn evaluate(
             let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
             Some(parse_placements(&text, p)?)
         }
-        (None, None) => truth.as_ref().map(|t| {
+        (None, None) => truth.map(|t| {
             t.poses
                 .iter()
                 .map(|p| Placement {
@@ -512,6 +517,84 @@ pub fn evaluate(
                 .collect()
         }),
     };
+    Ok((placed, registration))
+}
+
+/// What every set of photos is scored against.
+struct ScoreSet<'a> {
+    /// File names of the photos, in order (each set holds the same names).
+    names: &'a [String],
+    /// True albedo of each photo, if scored against a simulated truth.
+    albedo: Option<&'a [Raster]>,
+    /// Placements for the consistency metric, if any.
+    placed: Option<&'a [Placement]>,
+    /// Curve from photo values to linear light.
+    transfer: Transfer,
+}
+
+impl ScoreSet<'_> {
+    /// Load the set's photos from `folder` and score them.
+    fn score(&self, label: &str, folder: &Path, settings: &EvalSettings) -> Result<Scores> {
+        let (names, albedo, placed, transfer) =
+            (self.names, self.albedo, self.placed, self.transfer);
+        let k = if albedo.is_some() {
+            1
+        } else {
+            settings.downsample.max(1)
+        };
+        let photos: Vec<Raster> = names
+            .par_iter()
+            .map(|n| load_linear(&folder.join(n), transfer).map(|r| reduce(&r, k)))
+            .collect::<Result<_>>()?;
+        if let Some(a) = &albedo {
+            for (p, (t, n)) in photos.iter().zip(a.iter().zip(names)) {
+                if p.layout() != t.layout() {
+                    return Err(Error::Mismatch {
+                        path: folder.join(n),
+                        reason: format!(
+                            "photo is {}, its true albedo is {}",
+                            p.layout(),
+                            t.layout()
+                        ),
+                    });
+                }
+            }
+        }
+        let parts = placed.as_ref().and_then(|pl| {
+            let hs: Vec<[f64; 9]> = names
+                .iter()
+                .map(|n| pl.iter().find(|p| &p.name == n).map(|p| scale_h(&p.h, k)))
+                .collect::<Option<_>>()?;
+            consistency_parts(&photos, &hs, settings.cell)
+        });
+        Ok(Scores {
+            label: label.to_string(),
+            folder: folder.to_owned(),
+            photos: photos.len(),
+            albedo_error: albedo.map(|a| albedo_error(&photos, a)),
+            residual_pattern: albedo.map(|a| residual_pattern(&photos, a, settings.grid)),
+            consistency: parts.map(|p| p.0),
+            overlap_difference: parts.map(|p| p.1),
+        })
+    }
+}
+
+/// Score each `(label, folder)` of photos. `truth` is a simulated dive folder (or its `truth/dive.json`);
+/// `placements` a placement file (default with a truth: the simulator's poses).
+pub fn evaluate(
+    sets: &[(String, PathBuf)],
+    truth: Option<&Path>,
+    placements: Option<&Path>,
+    settings: &EvalSettings,
+) -> Result<Evaluation> {
+    if sets.is_empty() {
+        return Err(Error::Usage(
+            "give at least one folder of photos to evaluate".into(),
+        ));
+    }
+    let truth_path = truth.map(truth_file);
+    let truth = truth_path.as_deref().map(load_truth).transpose()?;
+    let (placed, registration) = resolve_placements(placements, settings, truth.as_ref())?;
     if truth.is_none() && placed.is_none() {
         return Err(Error::Usage(
             "nothing to score against: give --truth (a simulated dive), --placements FILE or --register RAW_DIR"
@@ -539,49 +622,15 @@ pub fn evaluate(
         }
         _ => None,
     };
+    let set = ScoreSet {
+        names: &names,
+        albedo: albedo.as_deref(),
+        placed: placed.as_deref(),
+        transfer,
+    };
     let mut scores = Vec::new();
     for (label, folder) in sets {
-        let k = if albedo.is_some() {
-            1
-        } else {
-            settings.downsample.max(1)
-        };
-        let photos: Vec<Raster> = names
-            .par_iter()
-            .map(|n| load_linear(&folder.join(n), transfer).map(|r| reduce(&r, k)))
-            .collect::<Result<_>>()?;
-        if let Some(a) = &albedo {
-            for (p, (t, n)) in photos.iter().zip(a.iter().zip(&names)) {
-                if p.layout() != t.layout() {
-                    return Err(Error::Mismatch {
-                        path: folder.join(n),
-                        reason: format!(
-                            "photo is {}, its true albedo is {}",
-                            p.layout(),
-                            t.layout()
-                        ),
-                    });
-                }
-            }
-        }
-        let parts = placed.as_ref().and_then(|pl| {
-            let hs: Vec<[f64; 9]> = names
-                .iter()
-                .map(|n| pl.iter().find(|p| &p.name == n).map(|p| scale_h(&p.h, k)))
-                .collect::<Option<_>>()?;
-            consistency_parts(&photos, &hs, settings.cell)
-        });
-        scores.push(Scores {
-            label: label.clone(),
-            folder: folder.clone(),
-            photos: photos.len(),
-            albedo_error: albedo.as_ref().map(|a| albedo_error(&photos, a)),
-            residual_pattern: albedo
-                .as_ref()
-                .map(|a| residual_pattern(&photos, a, settings.grid)),
-            consistency: parts.map(|p| p.0),
-            overlap_difference: parts.map(|p| p.1),
-        });
+        scores.push(set.score(label, folder, settings)?);
     }
     Ok(Evaluation {
         truth: truth_path,

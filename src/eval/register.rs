@@ -2,14 +2,14 @@
 //! (`abysslight evaluate --register RAW_DIR`).
 //!
 //! Model: a translation between consecutive photos (a downward camera over flat ground at a steady altitude).
-//! Each photo is reduced to a texture image at about [`TARGET_SIDE`] pixels on its long side: the log of its grey
+//! Each photo is reduced to a texture image at about [`TARGET_SIDE`](crate::method::matching::TARGET_SIDE) pixels on its long side: the log of its grey
 //! level, box-averaged down, minus a local box average (the lights' smooth pattern goes, the texture stays). The
 //! per-pixel median of those images over the sequence, the part that stays in the frame (vignetting residue,
 //! overlays, laser dots), is subtracted when the sequence has at least 15 photos, so it cannot pull the match
 //! to zero shift. Consecutive texture images are matched by phase correlation (FFT of a Hann-windowed copy,
 //! normalised cross-power spectrum, peak refined to sub-pixel by a parabola through its neighbours). A match is
-//! accepted only when the photos overlap over at least [`MIN_OVERLAP`] of their area and the texture images
-//! correlate there (normalised cross-correlation at least [`MIN_NCC`]); unrelated photos fail that test. The
+//! accepted only when the photos overlap over at least [`MIN_OVERLAP`](crate::method::matching::MIN_OVERLAP) of their area and the texture images
+//! correlate there (normalised cross-correlation at least [`MIN_NCC`](crate::method::matching::MIN_NCC)); unrelated photos fail that test. The
 //! placements are chained along the sequence; after a rejected pair a new chain starts far away, so photos of
 //! different chains never share a mosaic cell.
 //!
@@ -30,11 +30,13 @@ use crate::method::raster::Raster;
 /// Vertical distance, in photo heights, between chains of placements that could not be joined.
 const CHAIN_GAP: f64 = 100.0;
 
-/// What [`register`] found: one placement per photo (translations, in full-resolution pixels) and the match of
+/// What [`register_rasters`] and [`register_folder`] found: one placement per photo (translations, in full-resolution pixels) and the match of
 /// each photo against the previous one (`None` for the first).
 #[derive(Debug, Clone)]
 pub struct Registration {
+    /// One placement per photo, in input order.
     pub placements: Vec<Placement>,
+    /// Match of each photo against the previous one; `None` for the first.
     pub matches: Vec<Option<Match>>,
 }
 

@@ -115,8 +115,11 @@ pub struct Simulation {
     pub frames: usize,
     /// Water-column frames. Default: 15.
     pub water_column: usize,
+    /// Photo width in pixels. Default: 320.
     pub width: usize,
+    /// Photo height in pixels. Default: 240.
     pub height: usize,
+    /// Seed of every random choice (floor, poses, particles, noise); same seed, same dive. Default: 1.
     pub seed: u64,
     /// Share of the seafloor covered by dark nodules. Default: 0.2.
     pub contamination: f64,
@@ -124,6 +127,7 @@ pub struct Simulation {
     pub bit_depth: u32,
     /// Curve applied before quantisation: `linear` or `srgb` (any [`Transfer`]). Default: linear.
     pub encode: Transfer,
+    /// Layout of the lights around the camera. Default: [`Rig::Three`].
     pub rig: Rig,
     /// Mean altitude above the floor, metres. Default: 3.
     pub altitude: f32,
@@ -155,8 +159,10 @@ pub struct Simulation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Exposure {
+    /// Sediment at the image centre of a level camera reads 0.7 in green (default).
     #[default]
     Centre,
+    /// The brightest sediment anywhere in the frame, any channel after white balance, reads 0.8.
     Brightest,
 }
 
@@ -278,11 +284,17 @@ impl Default for Simulation {
 /// Pinhole camera model (pixel centres at integer + 0.5 are pixel `(x, y)`; `u = fx·X/Z + cx`).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct Camera {
+    /// Image width in pixels.
     pub width: usize,
+    /// Image height in pixels.
     pub height: usize,
+    /// Horizontal focal length in pixels.
     pub fx: f64,
+    /// Vertical focal length in pixels (equal to `fx`: square pixels).
     pub fy: f64,
+    /// Principal point, x in pixels (the image centre).
     pub cx: f64,
+    /// Principal point, y in pixels (the image centre).
     pub cy: f64,
 }
 
@@ -293,8 +305,11 @@ pub struct Pose {
     pub file: String,
     /// Camera centre in world metres (`z` = altitude above the floor).
     pub position: [f64; 3],
+    /// Roll about the track (world y), degrees.
     pub roll_deg: f64,
+    /// Pitch about world x, degrees.
     pub pitch_deg: f64,
+    /// Yaw about the vertical (world z), degrees.
     pub yaw_deg: f64,
     /// Camera-to-world rotation, row-major (columns: camera x right, y down in the image, z optical axis).
     pub rotation: [f64; 9],
@@ -305,14 +320,19 @@ pub struct Pose {
 /// `truth/dive.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Truth {
+    /// What wrote the dive (`abysslight VERSION simulate`).
     pub tool: String,
+    /// The settings the dive was rendered with.
     pub settings: Simulation,
+    /// The camera model of every photo.
     pub camera: Camera,
     /// Mosaic pixels per metre on the floor (the placements' unit).
     pub mosaic_pixels_per_metre: f64,
     /// Per-channel attenuation coefficient η (1/m).
     pub attenuation: [f32; 3],
+    /// The rig's lights in the camera frame, as JSON.
     pub lights: serde_json::Value,
+    /// Pose of each survey photo, in order.
     pub poses: Vec<Pose>,
     /// Water-column file names in `water/`.
     pub water: Vec<String>,
@@ -834,8 +854,11 @@ fn finish(img: &Raster, seed: u64, noise: f32, bits: u32, encode: Transfer, wb: 
 
 /// The rendered dive, in memory.
 pub struct Dive {
+    /// Everything `truth/dive.json` records: settings, camera, poses, file names.
     pub truth: Truth,
+    /// The survey photos, as the camera encoded them.
     pub survey: Vec<Photo>,
+    /// The water-column photos (open water, no floor in view).
     pub water: Vec<Photo>,
     /// True albedo of each survey photo (linear).
     pub albedo: Vec<Raster>,
@@ -843,10 +866,12 @@ pub struct Dive {
     /// would read, white balance included) and true backscatter `S` (linear, white balance included), so that an
     /// oracle correction `(I − S)/F` can be scored. Empty otherwise.
     pub factor: Vec<Raster>,
+    /// True backscatter `S` of each survey photo with [`Simulation::render_with_lighting`]; empty otherwise.
     pub backscatter: Vec<Raster>,
 }
 
 impl Simulation {
+    /// Refuse settings the renderer cannot use (size under 16×16, no frames, field of view outside 20–150°).
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Usage(m));
         if self.width < 16 || self.height < 16 {
@@ -906,6 +931,7 @@ impl Simulation {
         Ok(())
     }
 
+    /// The pinhole camera of these settings: `width`×`height`, horizontal field of view `fov_deg`, centred.
     pub fn camera(&self) -> Camera {
         let f = (self.width as f64 / 2.0) / (self.fov_deg as f64 / 2.0).to_radians().tan();
         Camera {
@@ -929,19 +955,17 @@ impl Simulation {
         self.render_inner(true)
     }
 
-    fn render_inner(&self, lighting: bool) -> Result<Dive> {
-        self.validate()?;
-        let cam = self.camera();
-        let floor = Floor::new(self.seed, self.contamination);
-        let lights = self.rig.lights(self.beam_deg);
+    /// Pose of each survey photo along the track (slow random swings of altitude, roll, pitch, yaw and a side
+    /// drift), with homographies into a mosaic whose origin is the top-left of all footprints.
+    fn poses(&self, cam: &Camera) -> Vec<Pose> {
         let alt = self.altitude as f64;
+        let ppm = cam.fy / alt;
         let footprint = alt * self.height as f64 / cam.fy;
         let step = footprint * (1.0 - self.overlap as f64);
         let mut rng = Rng(mix(self.seed ^ 0xD1E));
         let phase: Vec<f64> = (0..6)
             .map(|_| rng.f32() as f64 * std::f64::consts::TAU)
             .collect();
-        let ppm = cam.fy / alt;
         let pose = |i: usize| {
             let t = i as f64;
             let z = match self.altitude_swing {
@@ -957,7 +981,7 @@ impl Simulation {
             let x = 0.15 * alt * (0.11 * t + phase[4]).sin();
             let y = step * t;
             let r = rotation(roll, pitch, yaw);
-            let to_floor = pixel_to_floor(&cam, &r, [x, y, z]);
+            let to_floor = pixel_to_floor(cam, &r, [x, y, z]);
             let to_mosaic = [ppm, 0.0, 0.0, 0.0, -ppm, 0.0, 0.0, 0.0, 1.0];
             Pose {
                 file: format!("{:04}.png", i + 1),
@@ -988,37 +1012,15 @@ impl Simulation {
             let shift = [1.0, 0.0, -mx.floor(), 0.0, 1.0, -my.floor(), 0.0, 0.0, 1.0];
             p.homography = mat_mul(&shift, &p.homography);
         }
-        let view = |p: &Pose, with_floor: bool| View {
-            cam,
-            r: p.rotation,
-            c: [
-                p.position[0] as f32,
-                p.position[1] as f32,
-                p.position[2] as f32,
-            ],
-            lights: world_lights(
-                &lights,
-                &p.rotation,
-                [
-                    p.position[0] as f32,
-                    p.position[1] as f32,
-                    p.position[2] as f32,
-                ],
-                self.water.attenuation,
-            ),
-            floor: if with_floor { Some(&floor) } else { None },
-            water: self.water,
-        };
-        // Exposure: sediment at the image centre of a level camera at the mean altitude reads ~0.55 in green.
-        let level = Pose {
-            rotation: rotation(0.0, 0.0, 0.0),
-            position: [0.0, 0.0, alt],
-            ..poses[0].clone()
-        };
-        let probe = view(&level, true);
+        poses
+    }
+
+    /// Exposure gain of the dive from the view of a level camera at the mean altitude (see [`Exposure`]).
+    fn exposure_gain(&self, probe: &View, floor: &Floor) -> f32 {
+        let cam = probe.cam;
         let eta = self.water.attenuation;
         let wb = self.white_balance;
-        let exposure = if self.exposure == Exposure::Brightest {
+        if self.exposure == Exposure::Brightest {
             // The brightest sediment of the frame, any channel, after white balance, reads 0.8.
             let mut brightest = 0.0f32;
             for gy in 0..=16 {
@@ -1060,7 +1062,70 @@ impl Simulation {
                 })
                 .sum();
             0.7 / (floor.sediment[1] * e / std::f32::consts::PI * (-eta[1] * t).exp())
+        }
+    }
+
+    /// The water-column photos: `base` (the rig's backscatter in open water) with fresh particles and noise each.
+    fn water_column(&self, base: &Raster, particles: usize) -> (Vec<Photo>, Vec<String>) {
+        let wb = self.white_balance;
+        let mut water = Vec::new();
+        let mut names = Vec::new();
+        for i in 0..self.water_column {
+            let mut img = base.clone();
+            let mut prng = Rng(mix(self.seed ^ 0x3A7E ^ ((i as u64) << 24)));
+            add_particles(&mut img, &mut prng, particles * 2);
+            water.push(finish(
+                &img,
+                mix(self.seed ^ 0xBEEF ^ i as u64),
+                self.noise,
+                self.bit_depth,
+                self.encode,
+                wb,
+            ));
+            names.push(format!("{:04}.png", i + 1));
+        }
+        (water, names)
+    }
+
+    fn render_inner(&self, lighting: bool) -> Result<Dive> {
+        self.validate()?;
+        let cam = self.camera();
+        let floor = Floor::new(self.seed, self.contamination);
+        let lights = self.rig.lights(self.beam_deg);
+        let alt = self.altitude as f64;
+        let ppm = cam.fy / alt;
+        let poses = self.poses(&cam);
+        let view = |p: &Pose, with_floor: bool| View {
+            cam,
+            r: p.rotation,
+            c: [
+                p.position[0] as f32,
+                p.position[1] as f32,
+                p.position[2] as f32,
+            ],
+            lights: world_lights(
+                &lights,
+                &p.rotation,
+                [
+                    p.position[0] as f32,
+                    p.position[1] as f32,
+                    p.position[2] as f32,
+                ],
+                self.water.attenuation,
+            ),
+            floor: if with_floor { Some(&floor) } else { None },
+            water: self.water,
         };
+        // Exposure: from the view of a level camera at the mean altitude (see [`Exposure`]).
+        let level = Pose {
+            rotation: rotation(0.0, 0.0, 0.0),
+            position: [0.0, 0.0, alt],
+            ..poses[0].clone()
+        };
+        let probe = view(&level, true);
+        let eta = self.water.attenuation;
+        let wb = self.white_balance;
+        let exposure = self.exposure_gain(&probe, &floor);
         let bits = self.bit_depth;
         let mut survey = Vec::with_capacity(self.frames);
         let mut albedo = Vec::with_capacity(self.frames);
@@ -1096,25 +1161,12 @@ impl Simulation {
             }
         }
         // Water column: the same rig and camera on the way down, open water in view.
-        let mut water = Vec::new();
-        let mut names = Vec::new();
-        if self.water_column > 0 {
+        let (water, names) = if self.water_column > 0 {
             let base = render(&view(&level, false), exposure, false).img;
-            for i in 0..self.water_column {
-                let mut img = base.clone();
-                let mut prng = Rng(mix(self.seed ^ 0x3A7E ^ ((i as u64) << 24)));
-                add_particles(&mut img, &mut prng, particles * 2);
-                water.push(finish(
-                    &img,
-                    mix(self.seed ^ 0xBEEF ^ i as u64),
-                    self.noise,
-                    bits,
-                    self.encode,
-                    wb,
-                ));
-                names.push(format!("{:04}.png", i + 1));
-            }
-        }
+            self.water_column(&base, particles)
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let truth = Truth {
             tool: format!("abysslight {} simulate", env!("CARGO_PKG_VERSION")),
             settings: self.clone(),

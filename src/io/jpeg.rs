@@ -63,6 +63,7 @@ impl Subsampling {
         }
     }
 
+    /// The same subsampling as the `jpeg-encoder` crate names it.
     pub fn jpeg_encoder(self) -> jpeg_encoder::SamplingFactor {
         use jpeg_encoder::SamplingFactor as F;
         match self {

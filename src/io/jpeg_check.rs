@@ -203,6 +203,66 @@ fn next_marker(d: &[u8], mut pos: usize) -> Option<usize> {
     None
 }
 
+/// Width, height and components of a start-of-frame segment.
+fn frame_header(seg: &[u8]) -> Result<(usize, usize, Vec<Component>), Why> {
+    if seg.len() < 6 {
+        return Err("bad frame header".into());
+    }
+    let height = u16::from_be_bytes([seg[1], seg[2]]) as usize;
+    let width = u16::from_be_bytes([seg[3], seg[4]]) as usize;
+    let nc = seg[5] as usize;
+    if seg.len() < 6 + 3 * nc || nc == 0 || width == 0 || height == 0 {
+        return Err("bad frame header".into());
+    }
+    let comps: Vec<Component> = (0..nc)
+        .map(|i| Component {
+            id: seg[6 + 3 * i],
+            h: (seg[7 + 3 * i] >> 4) as usize,
+            v: (seg[7 + 3 * i] & 15) as usize,
+        })
+        .collect();
+    if comps
+        .iter()
+        .any(|c| !(1..=4).contains(&c.h) || !(1..=4).contains(&c.v))
+    {
+        return Err("bad sampling factors in the frame header".into());
+    }
+    Ok((width, height, comps))
+}
+
+/// Store the Huffman tables of a define-Huffman-table segment in `dc` and `ac` by their slot.
+fn huffman_tables(
+    seg: &[u8],
+    dc: &mut [Option<Huffman>; 4],
+    ac: &mut [Option<Huffman>; 4],
+) -> Result<(), Why> {
+    let mut p = 0;
+    while p < seg.len() {
+        let tc = seg[p] >> 4;
+        let th = (seg[p] & 15) as usize;
+        let counts: [u8; 16] = seg
+            .get(p + 1..p + 17)
+            .and_then(|c| c.try_into().ok())
+            .ok_or("bad Huffman table segment")?;
+        let total: usize = counts.iter().map(|&c| c as usize).sum();
+        let values = seg
+            .get(p + 17..p + 17 + total)
+            .ok_or("bad Huffman table segment")?
+            .to_vec();
+        if th > 3 || tc > 1 {
+            return Err("bad Huffman table segment".into());
+        }
+        let t = Huffman::new(&counts, values)?;
+        if tc == 0 {
+            dc[th] = Some(t);
+        } else {
+            ac[th] = Some(t);
+        }
+        p += 17 + total;
+    }
+    Ok(())
+}
+
 /// `Ok` when the JPEG in `data` holds all its compressed data and ends with an end-of-image marker; `Err` says
 /// what is missing. See the module documentation.
 pub fn check(data: &[u8]) -> Result<(), Why> {
@@ -254,56 +314,9 @@ pub fn check(data: &[u8]) -> Result<(), Why> {
         match m {
             0xC0..=0xCF if m != 0xC4 && m != 0xC8 && m != 0xCC => {
                 baseline = m == 0xC0 || m == 0xC1;
-                if seg.len() < 6 {
-                    return Err("bad frame header".into());
-                }
-                let height = u16::from_be_bytes([seg[1], seg[2]]) as usize;
-                let width = u16::from_be_bytes([seg[3], seg[4]]) as usize;
-                let nc = seg[5] as usize;
-                if seg.len() < 6 + 3 * nc || nc == 0 || width == 0 || height == 0 {
-                    return Err("bad frame header".into());
-                }
-                let comps: Vec<Component> = (0..nc)
-                    .map(|i| Component {
-                        id: seg[6 + 3 * i],
-                        h: (seg[7 + 3 * i] >> 4) as usize,
-                        v: (seg[7 + 3 * i] & 15) as usize,
-                    })
-                    .collect();
-                if comps
-                    .iter()
-                    .any(|c| !(1..=4).contains(&c.h) || !(1..=4).contains(&c.v))
-                {
-                    return Err("bad sampling factors in the frame header".into());
-                }
-                frame = Some((width, height, comps));
+                frame = Some(frame_header(seg)?);
             }
-            0xC4 => {
-                let mut p = 0;
-                while p < seg.len() {
-                    let tc = seg[p] >> 4;
-                    let th = (seg[p] & 15) as usize;
-                    let counts: [u8; 16] = seg
-                        .get(p + 1..p + 17)
-                        .and_then(|c| c.try_into().ok())
-                        .ok_or("bad Huffman table segment")?;
-                    let total: usize = counts.iter().map(|&c| c as usize).sum();
-                    let values = seg
-                        .get(p + 17..p + 17 + total)
-                        .ok_or("bad Huffman table segment")?
-                        .to_vec();
-                    if th > 3 || tc > 1 {
-                        return Err("bad Huffman table segment".into());
-                    }
-                    let t = Huffman::new(&counts, values)?;
-                    if tc == 0 {
-                        dc[th] = Some(t);
-                    } else {
-                        ac[th] = Some(t);
-                    }
-                    p += 17 + total;
-                }
-            }
+            0xC4 => huffman_tables(seg, &mut dc, &mut ac)?,
             0xDD => restart = be16(data, pos + 2)?,
             0xDA => {
                 scans += 1;

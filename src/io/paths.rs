@@ -50,6 +50,7 @@ pub fn resolve(p: &Path) -> PathBuf {
 /// How `a` relates to `b` once both are resolved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Overlap {
+    /// `a` and `b` are the same folder.
     Same,
     /// `a` lies inside `b`.
     Inside,

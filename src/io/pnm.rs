@@ -18,6 +18,7 @@ use crate::method::raster::{Layout, Photo, Samples};
 pub enum FrameFormat {
     /// Binary PGM/PPM (`P5`/`P6`).
     Pnm,
+    /// PNG.
     Png,
 }
 
@@ -35,6 +36,7 @@ impl FrameFormat {
 /// One frame cut from the stream, not decoded yet.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RawFrame {
+    /// Which container the frame's bytes are in.
     pub format: FrameFormat,
     /// The frame's bytes, exactly as on the stream.
     pub bytes: Vec<u8>,
@@ -70,6 +72,7 @@ pub struct FrameSplitter<R> {
 }
 
 impl<R: BufRead> FrameSplitter<R> {
+    /// A splitter reading frames from `r`.
     pub fn new(r: R) -> Self {
         FrameSplitter {
             r,

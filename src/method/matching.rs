@@ -23,10 +23,13 @@ pub const MIN_NCC: f64 = 0.25;
 /// A texture image prepared for matching.
 #[derive(Debug, Clone)]
 pub struct Texture {
+    /// Width in texture pixels.
     pub width: usize,
+    /// Height in texture pixels.
     pub height: usize,
     /// Pixels of the reduced photo per pixel of the texture image.
     pub scale: usize,
+    /// Row-major log grey level minus its local box mean (local contrast), `width × height` values.
     pub data: Vec<f32>,
 }
 

@@ -548,6 +548,7 @@ fn box_average_into(
 /// Follows the mission photo by photo and flags photos whose estimate is likely broken.
 #[derive(Debug, Default)]
 pub struct Monitor {
+    /// The limits above which a photo is flagged.
     pub thresholds: Thresholds,
     previous: Option<Raster>,
     changes: Vec<f32>,
@@ -639,6 +640,7 @@ fn overall_level(f: &Raster) -> f64 {
 }
 
 impl Monitor {
+    /// A monitor with these thresholds and no photo seen yet.
     pub fn new(thresholds: Thresholds) -> Self {
         Monitor {
             thresholds,
@@ -821,18 +823,26 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
 /// Count of flagged photos per kind of reason, for the end-of-run summary.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Summary {
+    /// Photos with at least one flag (a photo with several flags counts once here).
     pub flagged: usize,
+    /// Photos flagged [`Flag::Contamination`].
     pub contamination: usize,
+    /// Photos flagged [`Flag::FactorChange`].
     pub factor_change: usize,
+    /// Photos flagged [`Flag::ColourShift`].
     pub colour_shift: usize,
     /// Photos flagged [`Flag::SceneInFactor`] (the name is kept for existing report readers).
     pub roughness: usize,
+    /// Photos flagged [`Flag::ExposureJump`].
     pub exposure_jump: usize,
+    /// Photos flagged [`Flag::CameraStill`].
     pub camera_still: usize,
+    /// Photos flagged [`Flag::ShortMission`].
     pub short_mission: usize,
 }
 
 impl Summary {
+    /// Count one photo with these flags (nothing if it has none).
     pub fn add(&mut self, flags: &[Flag]) {
         if flags.is_empty() {
             return;

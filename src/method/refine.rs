@@ -4,8 +4,9 @@
 //!   window's `M` — absorbs altitude bounce and exposure jumps that the window's median averages away;
 //! - [`soft_floor`]: a floor relative to the photo's lit level (a high percentile of `F` per channel) with a smooth
 //!   hand-over instead of a hard clamp, applied to `F` at block resolution (so the correction kernel is unchanged);
-//! - [`backscatter_scale`]: a scale on the water-column `S`, estimated from the mission itself (survey rays end at
-//!   the floor, water-column rays do not, so the water-column `S` over-estimates the survey's backscatter).
+//! - not built yet: a scale on the water-column `S`, estimated from the mission itself (survey rays end at the
+//!   floor, water-column rays do not, so the water-column `S` over-estimates the survey's backscatter; see
+//!   docs/evaluation.md).
 //!
 //! All work on block-resolution rasters in linear light.
 

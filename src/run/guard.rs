@@ -84,6 +84,7 @@ pub struct RunLock {
 }
 
 impl RunLock {
+    /// The lock file held.
     pub fn path(&self) -> &Path {
         &self.path
     }

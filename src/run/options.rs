@@ -20,6 +20,7 @@ pub const DEFAULT_WINDOW: usize = 7;
 pub struct Shard {
     /// 1-based.
     pub index: usize,
+    /// Number of shards the survey is cut into (`N`, at least 1).
     pub count: usize,
 }
 

@@ -19,10 +19,9 @@ struct Series<'a> {
     threshold: f32,
 }
 
-/// Draw the mission overview: contamination, change of F, colour shift and roughness of F, texture kept and level
-/// (exposure), per photo; flagged photos in red.
-pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
-    let series = [
+/// The series of the overview, one panel each, with their flag thresholds.
+fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 6] {
+    [
         Series {
             title: "contamination (share of blocks off the seafloor colour)",
             values: frames.iter().map(|f| f.health.contamination).collect(),
@@ -56,7 +55,13 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
                 .collect(),
             threshold: t.exposure_jump,
         },
-    ];
+    ]
+}
+
+/// Draw the mission overview: contamination, change of F, colour shift and roughness of F, texture kept and level
+/// (exposure), per photo; flagged photos in red.
+pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
+    let series = overview_series(frames, t);
     let n = frames.len().max(1);
     let (left, right, panel_h, title_h, gap) = (70i64, 20i64, 130i64, 22i64, 14i64);
     let plot_w = (n as i64 * 3).clamp(600, 1600);

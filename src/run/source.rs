@@ -28,7 +28,9 @@ pub enum Role {
 pub struct Item {
     /// Position in the stream (0-based, counting failed photos too).
     pub index: usize,
+    /// The photo's input: full path and path relative to the input folder.
     pub entry: Entry,
+    /// Whether to write it or only read it for its neighbours' windows.
     pub role: Role,
 }
 
@@ -108,7 +110,10 @@ impl Source for FileList {
 pub enum Sink {
     /// Files, written atomically at the output path of each photo, carrying the metadata of their input file if
     /// `carry_metadata` (inputs from a stream have no file to carry it from).
-    Folder { carry_metadata: bool },
+    Folder {
+        /// Copy each input file's metadata into its output.
+        carry_metadata: bool,
+    },
     /// Frames back to back on stdout (`--out -`), each in the format its output path names (`.ppm`, `.pgm`:
     /// binary PNM; `.png`). The caller writes them in stream order.
     Stdout,

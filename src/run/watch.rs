@@ -60,6 +60,8 @@ pub struct WatchFolder {
 }
 
 impl WatchFolder {
+    /// Watch `dir`, scanning every `poll`; end after `idle` without a new or changed file (never if `None`) or
+    /// once `stop` is raised.
     pub fn new(dir: &Path, poll: Duration, idle: Option<Duration>, stop: Arc<AtomicBool>) -> Self {
         WatchFolder {
             dir: dir.to_owned(),

@@ -56,7 +56,9 @@ use crate::method::raster::Photo;
 /// A text entry: a PNG text chunk, or a JPEG comment (keyword `Comment`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Text {
+    /// The chunk's keyword (`Comment` for a JPEG comment).
     pub keyword: String,
+    /// The text itself.
     pub text: String,
 }
 

@@ -140,48 +140,64 @@ pub(super) fn read(mut r: impl Read + Seek, meta: &mut Metadata) {
                 .push(format!("PNG: {name} chunk fails its CRC check; left out"));
             continue;
         }
-        match &kind {
-            b"iCCP" => {
-                let profile = split_nul(&data)
-                    .and_then(|(_, rest)| rest.split_first())
-                    .ok_or_else(|| "cut off".to_string())
-                    .and_then(|(&method, z)| match method {
-                        0 => inflate(z),
-                        m => Err(format!("unknown compression method {m}")),
-                    });
-                match profile {
-                    Ok(p) => meta.icc = Some(p),
-                    Err(e) => meta
-                        .problems
-                        .push(format!("PNG: iCCP chunk {e}; ICC profile left out")),
-                }
-            }
-            b"eXIf" => {
-                let exif = data.strip_prefix(b"Exif\0\0").unwrap_or(&data);
-                meta.exif = Some(exif.to_vec());
-            }
-            b"tEXt" | b"zTXt" | b"iTXt" => match text_chunk(&kind, &data) {
-                Ok((keyword, text, _)) if keyword == XMP_KEYWORD => meta.xmp = Some(text),
-                Ok((keyword, text, utf8)) => {
-                    let text = if utf8 {
-                        String::from_utf8_lossy(&text).into_owned()
-                    } else {
-                        latin1(&text)
-                    };
-                    if let Some(kind) = keyword.strip_prefix("Raw profile type ") {
-                        raw_profiles.push((kind.to_ascii_lowercase(), text.clone()));
-                    }
-                    meta.text.push(Text { keyword, text });
-                }
+        take_chunk(kind, data, meta, &mut raw_profiles);
+    }
+    use_raw_profiles(raw_profiles, meta);
+}
+
+/// Store one wanted, CRC-checked chunk in `meta`; ImageMagick raw-profile texts are also noted in `raw_profiles`
+/// as (profile kind in lower case, text).
+fn take_chunk(
+    kind: [u8; 4],
+    data: Vec<u8>,
+    meta: &mut Metadata,
+    raw_profiles: &mut Vec<(String, String)>,
+) {
+    let name = latin1(&kind);
+    match &kind {
+        b"iCCP" => {
+            let profile = split_nul(&data)
+                .and_then(|(_, rest)| rest.split_first())
+                .ok_or_else(|| "cut off".to_string())
+                .and_then(|(&method, z)| match method {
+                    0 => inflate(z),
+                    m => Err(format!("unknown compression method {m}")),
+                });
+            match profile {
+                Ok(p) => meta.icc = Some(p),
                 Err(e) => meta
                     .problems
-                    .push(format!("PNG: {name} chunk: {e}; left out")),
-            },
-            _ => meta.png_chunks.push((kind, data)),
+                    .push(format!("PNG: iCCP chunk {e}; ICC profile left out")),
+            }
         }
+        b"eXIf" => {
+            let exif = data.strip_prefix(b"Exif\0\0").unwrap_or(&data);
+            meta.exif = Some(exif.to_vec());
+        }
+        b"tEXt" | b"zTXt" | b"iTXt" => match text_chunk(&kind, &data) {
+            Ok((keyword, text, _)) if keyword == XMP_KEYWORD => meta.xmp = Some(text),
+            Ok((keyword, text, utf8)) => {
+                let text = if utf8 {
+                    String::from_utf8_lossy(&text).into_owned()
+                } else {
+                    latin1(&text)
+                };
+                if let Some(kind) = keyword.strip_prefix("Raw profile type ") {
+                    raw_profiles.push((kind.to_ascii_lowercase(), text.clone()));
+                }
+                meta.text.push(Text { keyword, text });
+            }
+            Err(e) => meta
+                .problems
+                .push(format!("PNG: {name} chunk: {e}; left out")),
+        },
+        _ => meta.png_chunks.push((kind, data)),
     }
-    // ImageMagick stores profiles as hex text. Use them where the proper chunk is missing; drop the text copies of
-    // profiles that are carried properly, so the output does not hold them twice.
+}
+
+/// ImageMagick stores profiles as hex text. Use them where the proper chunk is missing; drop the text copies of
+/// profiles that are carried properly, so the output does not hold them twice.
+fn use_raw_profiles(raw_profiles: Vec<(String, String)>, meta: &mut Metadata) {
     for (kind, text) in raw_profiles {
         let slot = match kind.as_str() {
             "exif" | "app1" => &mut meta.exif,
