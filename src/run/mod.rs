@@ -2,7 +2,7 @@
 //! short recipe over the modules here:
 //!
 //! 1. [`plan`]: check the options and list the inputs, before anything is written;
-//! 2. [`prepare`]: `S`, the mask and the mission mean, into an [`Engine`](crate::method::engine::Engine);
+//! 2. [`prepare`](mod@prepare): `S`, the mask and the mission mean, into an [`Engine`](crate::method::engine::Engine);
 //! 3. [`threads`]: stream the survey once, in order, through the engine, decoding and writing on threads;
 //! 4. [`report`] and [`pictures`]: the run report and the pictures to check it by.
 //!
