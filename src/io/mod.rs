@@ -80,6 +80,22 @@ pub fn find_photos(dir: &Path) -> Result<Found> {
     find_photos_excluding(dir, &[])
 }
 
+/// Record a folder-walk entry as skipped (with `reason`), and do not descend into it if it is a folder.
+fn skip_entry(
+    found: &mut Found,
+    walker: &mut walkdir::FilterEntry<walkdir::IntoIter, impl FnMut(&walkdir::DirEntry) -> bool>,
+    item: &walkdir::DirEntry,
+    reason: &str,
+) {
+    found.skipped.push(Skipped {
+        path: lossy(item.path()),
+        reason: reason.into(),
+    });
+    if item.file_type().is_dir() {
+        walker.skip_current_dir();
+    }
+}
+
 /// [`find_photos`], and entries reached through symbolic links that lead into one of `exclude` (the output
 /// folder: a survey link pointing at `--out` must not read old outputs back as photos) are skipped entries.
 pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
@@ -129,14 +145,12 @@ pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
                 .iter()
                 .any(|x| crate::io::paths::is_within(item.path(), x))
         {
-            found.skipped.push(Skipped {
-                path: lossy(item.path()),
-                reason: "a symbolic link into the output folder: outputs are never read back as inputs;                          skipped"
-                    .into(),
-            });
-            if item.file_type().is_dir() {
-                walker.skip_current_dir();
-            }
+            skip_entry(
+                &mut found,
+                &mut walker,
+                &item,
+                "a symbolic link into the output folder: outputs are never read back as inputs; skipped",
+            );
             continue;
         }
         if item.depth() > 0
@@ -147,14 +161,12 @@ pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
                 .and_then(|r| r.to_str())
                 .is_none()
         {
-            found.skipped.push(Skipped {
-                path: lossy(item.path()),
-                reason: "name is not valid UTF-8 (cannot be named in the report or mirrored reliably);                          rename it; skipped"
-                    .into(),
-            });
-            if item.file_type().is_dir() {
-                walker.skip_current_dir();
-            }
+            skip_entry(
+                &mut found,
+                &mut walker,
+                &item,
+                "name is not valid UTF-8 (cannot be named in the report or mirrored reliably); rename it; skipped",
+            );
             continue;
         }
         if !item.file_type().is_file() {
