@@ -208,7 +208,7 @@ fn check_size(width: usize, height: usize) -> std::result::Result<(), String> {
     }
     if (width as u64).saturating_mul(height as u64) > MAX_PIXELS {
         return Err(format!(
-            "header declares {width}x{height} pixels, more than the {MAX_PIXELS} abysslight decodes (damaged              or not a survey photo)"
+            "header declares {width}x{height} pixels, more than the {MAX_PIXELS} abysslight decodes (damaged or not a survey photo)"
         ));
     }
     Ok(())

@@ -194,7 +194,7 @@ impl<R: BufRead> FrameSplitter<R> {
                 .map_err(|e| format!("cannot read the stream: {e}"))?;
             self.resync = skipped == data;
             return Err(format!(
-                "PNM header declares {width}x{height} pixels, more than the {} abysslight decodes; frame                  skipped{}",
+                "PNM header declares {width}x{height} pixels, more than the {} abysslight decodes; frame skipped{}",
                 crate::io::MAX_PIXELS,
                 if self.resync {
                     ""
