@@ -19,8 +19,8 @@ use crate::run::options::Options;
 /// Suffix of abysslight's temp files (see [`crate::io::write_with`]).
 pub const TEMP_SUFFIX: &str = ".abysslight-tmp";
 
-/// The options that decide the output pixels, as a JSON object (paths resolved). Threads, shard, resume, watch
-/// timing, report path and what else is saved do not change a corrected photo and are left out.
+/// The options that decide the output pixels, as a JSON object (paths resolved). Threads, shard, resume, limit,
+/// watch timing, report path and what else is saved do not change a corrected photo and are left out.
 pub fn fingerprint(opts: &Options) -> serde_json::Value {
     let resolve = |p: &Option<PathBuf>| {
         p.as_deref().map(|p| {
@@ -44,6 +44,8 @@ pub fn fingerprint(opts: &Options) -> serde_json::Value {
         idle_timeout: None,
         poll_interval: Options::default().poll_interval,
         report: None,
+        // --limit N writes the first N photos exactly as a whole run would: a later run may finish the rest.
+        limit: None,
         save_scatter: false,
         save_factors: false,
         scatter_memory_mib: Options::default().scatter_memory_mib,
@@ -318,6 +320,7 @@ mod tests {
         let more_threads = Options {
             threads: Some(3),
             resume: true,
+            limit: Some(2),
             ..o.clone()
         };
         drop(acquire(&more_threads, &work).unwrap());
