@@ -317,23 +317,12 @@ pub fn read_head(path: &Path) -> std::io::Result<Option<Vec<u8>>> {
         let n = usize::from(u16::from_be_bytes(len)).saturating_sub(2);
         let at = head.len();
         head.resize(at + n, 0);
-        let got = read_up_to(&mut r, &mut head[at..])?;
+        let got = crate::io::read_full(&mut r, &mut head[at..])?;
         head.truncate(at + got);
         if got < n || marker == 0xda {
             return Ok(Some(head));
         }
     }
-}
-
-fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match r.read(&mut buf[n..])? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
 }
 
 /// `abysslight --version`: the version and the JPEG codec built in.

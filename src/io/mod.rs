@@ -250,6 +250,20 @@ pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result
     decode(path)
 }
 
+/// Read into `buf` until it is full or the reader ends (retrying interrupted reads); returns the bytes read.
+pub(crate) fn read_full(r: &mut impl std::io::Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut got = 0;
+    while got < buf.len() {
+        match r.read(&mut buf[got..]) {
+            Ok(0) => break,
+            Ok(k) => got += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(got)
+}
+
 /// Image format of a path, from its extension.
 pub fn format_of(path: &Path) -> Option<ImageFormat> {
     ImageFormat::from_path(path).ok()

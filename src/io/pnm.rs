@@ -8,9 +8,9 @@
 //! After a frame that cannot be delimited (bad magic, bad header) the stream cannot be resynchronised and
 //! reading stops there.
 
-use std::io::{BufRead, ErrorKind, Read, Write};
+use std::io::{BufRead, Read, Write};
 
-use crate::io::photo_from_dynamic;
+use crate::io::{photo_from_dynamic, read_full};
 use crate::method::raster::{Layout, Photo, Samples};
 
 /// Container of a frame on the stream.
@@ -48,19 +48,6 @@ pub fn frame_name(index: usize) -> String {
 }
 
 /// Read bytes until `buf` is full; returns how many were read (less only at the end of the stream).
-fn read_full(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut got = 0;
-    while got < buf.len() {
-        match r.read(&mut buf[got..]) {
-            Ok(0) => break,
-            Ok(k) => got += k,
-            Err(e) if e.kind() == ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(got)
-}
-
 /// Cuts frames off a byte stream.
 pub struct FrameSplitter<R> {
     r: R,

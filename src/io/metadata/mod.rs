@@ -44,7 +44,7 @@ mod round_trip;
 mod tiff;
 
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{BufReader, Seek, SeekFrom};
 use std::path::Path;
 
 use image::ImageFormat;
@@ -111,7 +111,7 @@ impl Metadata {
     pub fn read(path: &Path) -> Result<Metadata> {
         let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
         let mut head = [0u8; 8];
-        let n = read_up_to(&mut file, &mut head).map_err(|e| Error::io(path, e))?;
+        let n = crate::io::read_full(&mut file, &mut head).map_err(|e| Error::io(path, e))?;
         let format = sniff(&head[..n]).ok_or_else(|| Error::Decode {
             path: path.to_owned(),
             reason: "not a JPEG, PNG or TIFF file (reading metadata)".into(),
@@ -210,17 +210,6 @@ pub fn icc_colour_space(icc: &[u8]) -> Option<[u8; 4]> {
         return None;
     }
     icc[16..20].try_into().ok()
-}
-
-fn read_up_to(r: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match r.read(&mut buf[n..])? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
 }
 
 /// The EXIF block as it goes into a JPEG or PNG output: without the thumbnail (IFD1), which shows the uncorrected
