@@ -11,15 +11,15 @@
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on).
 //!
-//! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency over overlapping
-//! photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
+//! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
+//! difference over overlapping photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
 //! printed.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use abysslight::eval::evaluate::{albedo_error, consistency, residual_pattern};
+use abysslight::eval::evaluate::{albedo_error, consistency_parts, residual_pattern};
 use abysslight::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
 use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
@@ -130,6 +130,7 @@ struct Score {
     albedo: f64,
     pattern: f64,
     consistency: f64,
+    overlap: f64,
 }
 
 fn linear(p: &abysslight::Photo, t: Transfer) -> Raster {
@@ -144,10 +145,13 @@ fn linear(p: &abysslight::Photo, t: Transfer) -> Raster {
 
 fn score(photos: &[Raster], dive: &Dive) -> Score {
     let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
+    let (consistency, overlap) =
+        consistency_parts(photos, &hs, 8.0).unwrap_or((f64::NAN, f64::NAN));
     Score {
         albedo: albedo_error(photos, &dive.albedo),
         pattern: residual_pattern(photos, &dive.albedo, (8, 6)),
-        consistency: consistency(photos, &hs, 8.0).unwrap_or(f64::NAN),
+        consistency,
+        overlap,
     }
 }
 
@@ -177,6 +181,32 @@ fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
             r
         })
         .collect()
+}
+
+/// The survey's true backscatter over the water-column median, per channel (ratio of the means over all pixels).
+fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
+    let frames: Vec<Raster> = dive.water.iter().map(|p| linear(p, t)).collect();
+    let (Some(first), Some(s0)) = (frames.first(), dive.backscatter.first()) else {
+        return Vec::new();
+    };
+    let c = first.channels;
+    let mut wc = vec![0.0f64; c];
+    let mut col = vec![0.0f32; frames.len()];
+    for i in 0..first.data.len() {
+        for (v, f) in col.iter_mut().zip(&frames) {
+            *v = f.data[i];
+        }
+        col.sort_by(f32::total_cmp);
+        wc[i % c] += col[col.len() / 2] as f64;
+    }
+    let mut sv = vec![0.0f64; c];
+    for s in &dive.backscatter {
+        for (i, v) in s.data.iter().enumerate() {
+            sv[i % c] += *v as f64 / dive.backscatter.len() as f64;
+        }
+    }
+    let _ = s0;
+    (0..c).map(|ch| sv[ch] / wc[ch]).collect()
 }
 
 fn main() {
@@ -329,7 +359,27 @@ fn main() {
                 transfer: t_enc,
                 ..Options::default()
             });
-            correct_mission(&o, &Silent).unwrap_or_else(|e| panic!("{} {label}: {e}", spec.name));
+            let report = correct_mission(&o, &Silent)
+                .unwrap_or_else(|e| panic!("{} {label}: {e}", spec.name));
+            if label == "abyss-scale-auto" {
+                // The backscatter scale the default estimated (median over photos, per channel).
+                let k: Vec<String> = (0..3)
+                    .map(|c| {
+                        let mut v: Vec<f32> = report
+                            .frames
+                            .iter()
+                            .filter_map(|f| f.backscatter_scale.get(c).copied())
+                            .collect();
+                        v.sort_by(f32::total_cmp);
+                        v.get(v.len() / 2).map_or("-".into(), |x| format!("{x:.3}"))
+                    })
+                    .collect();
+                eprintln!(
+                    "dive_matrix: {} --backscatter-scale auto estimated {}",
+                    spec.name,
+                    k.join(", ")
+                );
+            }
             scores.push((
                 label.clone(),
                 score(&load_set(&dir.join(label), &names, t_enc), &dive),
@@ -356,9 +406,10 @@ fn main() {
             }
         }
         eprintln!(
-            "dive_matrix: {} done in {:.1} s",
+            "dive_matrix: {} done in {:.1} s; true backscatter scale {:.3?}",
             spec.name,
-            t.elapsed().as_secs_f64()
+            t.elapsed().as_secs_f64(),
+            true_scale(&dive, t_enc)
         );
         let desc = format!(
             "{} | {:?}{} | {} | {}±{} m | {:.2} | {}-bit {} {}",
@@ -402,6 +453,7 @@ fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {
         ("albedo error", (|x: &Score| x.albedo) as fn(&Score) -> f64),
         ("residual pattern", |x: &Score| x.pattern),
         ("consistency", |x: &Score| x.consistency),
+        ("overlap difference", |x: &Score| x.overlap),
     ] {
         s.push_str(&format!(
             "\n**{metric}** (lower is better)\n\n| dive | rig | water | altitude | c | format | {} | default/paper | default/oracle |\n|---|---|---|---|---:|---|{}---:|---:|\n",
@@ -447,6 +499,22 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
         ("abyss-floor-0.1", |o| Options {
             method: Method::Abyss,
             relative_floor: 0.1,
+            ..o
+        }),
+        ("abyss-no-denoise", |o| Options {
+            method: Method::Abyss,
+            denoise: false,
+            ..o
+        }),
+        ("abyss-scale-auto", |o| Options {
+            method: Method::Abyss,
+            backscatter_scale: None,
+            ..o
+        }),
+        ("abyss-before", |o| Options {
+            method: Method::Abyss,
+            backscatter_scale: Some(1.0),
+            denoise: false,
             ..o
         }),
     ]

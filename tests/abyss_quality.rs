@@ -134,9 +134,81 @@ fn default_is_abyss_and_beats_the_paper_on_the_residual_pattern_of_an_abyssal_di
             abyss.0 < 0.8 * raw.0 && abyss.1 < 0.2 * raw.1,
             "abyss {abyss:?} raw {raw:?}"
         );
-        // Albedo error: at most 20 % above the paper (the paper wins only where its clamp hides red noise;
-        // docs/evaluation.md).
-        assert!(abyss.0 < 1.2 * paper.0, "abyss {abyss:?} paper {paper:?}");
+        // Albedo error: at least 10 % below the paper's (the noise-aware blend of dim regions, where the paper's
+        // clamp leaves them dark and a plain division amplifies red noise; docs/evaluation.md).
+        assert!(abyss.0 < 0.9 * paper.0, "abyss {abyss:?} paper {paper:?}");
+    }
+}
+
+#[test]
+fn the_noise_aware_blend_lowers_the_albedo_error_and_keeps_nodules_dark() {
+    // The same abyssal dive corrected with and without --no-denoise: the blend must lower the albedo error by at
+    // least a fifth, and dark nodules must stay dark in red too (the red-starved channel takes its detail from the
+    // well-lit ones instead of being lifted towards the sediment's level).
+    let sim = abyssal(24);
+    let d = tempfile::tempdir().unwrap();
+    let dive = d.path().join("dive");
+    sim.write(&dive).unwrap();
+    let mut sets = Vec::new();
+    for (label, denoise) in [("blend", true), ("plain", false)] {
+        let out = d.path().join(label);
+        correct_mission(
+            &Options {
+                water_column: Some(dive.join("water")),
+                survey: Some(dive.join("survey")),
+                out: Some(out.clone()),
+                contamination: Some(sim.contamination),
+                transfer: sim.encode,
+                denoise,
+                ..Options::default()
+            },
+            &Silent,
+        )
+        .unwrap();
+        sets.push((label.to_string(), out));
+    }
+    let ev = evaluate(&sets, Some(&dive), None, &EvalSettings::default()).unwrap();
+    eprintln!("{}", ev.table());
+    let err = |l: &str| {
+        ev.sets
+            .iter()
+            .find(|s| s.label == l)
+            .unwrap()
+            .albedo_error
+            .unwrap()
+    };
+    assert!(
+        err("blend") < 0.8 * err("plain"),
+        "{} vs {}",
+        err("blend"),
+        err("plain")
+    );
+    // Nodule pixels (true albedo below 0.1 in every channel) against sediment pixels (above 0.3), per channel, in
+    // the blended photos: the median nodule stays below half the median sediment in red as in green.
+    let truth = abysslight::io::decode(&dive.join("truth/albedo/0008.png")).unwrap();
+    let got = abysslight::io::decode(&d.path().join("blend/0008.png")).unwrap();
+    let (t, g) = (Raster::from_photo(&truth), Raster::from_photo(&got));
+    for ch in [0usize, 1] {
+        let pick = |dark: bool| {
+            let mut v: Vec<f32> = (0..t.data.len() / 3)
+                .filter(|&p| {
+                    let a = &t.data[p * 3..p * 3 + 3];
+                    if dark {
+                        a.iter().all(|&x| x < 0.1)
+                    } else {
+                        a.iter().all(|&x| x > 0.3)
+                    }
+                })
+                .map(|p| g.data[p * 3 + ch])
+                .collect();
+            v.sort_by(f32::total_cmp);
+            v[v.len() / 2]
+        };
+        let (nodule, sediment) = (pick(true), pick(false));
+        assert!(
+            nodule < 0.5 * sediment,
+            "channel {ch}: nodules {nodule}, sediment {sediment}"
+        );
     }
 }
 
@@ -157,10 +229,11 @@ fn default_stays_well_below_raw_on_an_srgb_jpeg_like_dive() {
         abyss.0 < 0.8 * raw.0 && abyss.1 < 0.3 * raw.1,
         "abyss {abyss:?} raw {raw:?}"
     );
-    // Here (two lights beside the camera, no large dim region) the paper's clamp costs little: the default is
-    // level with it — pattern within 10 %, albedo error at most 20 % above (docs/evaluation.md, dive a03).
+    // Here (two lights beside the camera, no large dim region, 35 % nodules) the paper's clamp costs little: the
+    // default has the lower albedo error (at least 10 % lower) but not the lower pattern — within 30 % of the
+    // paper's (docs/evaluation.md, dive a03: the blend lifts nodules in dim regions towards the sediment).
     assert!(
-        abyss.1 < 1.1 * paper.1 && abyss.0 < 1.2 * paper.0,
+        abyss.1 < 1.3 * paper.1 && abyss.0 < 0.9 * paper.0,
         "abyss {abyss:?} paper {paper:?}"
     );
 }

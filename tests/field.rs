@@ -131,7 +131,11 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
                                 assert!(a[px + 1] >= 240, "{name}: text at ({x},{y}) lost")
                             }
                             Some([0, 0, 0]) => {
-                                assert!(a[px + 1] <= 10, "{name}: box at ({x},{y}) lost")
+                                assert!(
+                                    a[px + 1] <= 10,
+                                    "{name}: box at ({x},{y}) lost: {}",
+                                    a[px + 1]
+                                )
                             }
                             _ => {}
                         }

@@ -310,7 +310,7 @@ struct DemoArgs {
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
     /// Curve the simulated camera applies: linear or srgb (the correction is told the same).
-    #[arg(long, value_name = "CURVE", default_value = "linear")]
+    #[arg(long, value_name = "CURVE", default_value = "srgb")]
     encode: Transfer,
 }
 
@@ -405,8 +405,10 @@ struct CorrectArgs {
 
     /// How the lighting is estimated: abyss, paper, mean or polynomial [default: abyss].
     ///
-    /// abyss is the paper's sliding-window F with a per-photo gain against its window and a floor relative to
-    /// the photo's lit level with a smooth hand-over (docs/evaluation.md); paper is Köser et al. as published
+    /// abyss is the paper's sliding-window F with a per-photo gain against its window, the water-column S scaled
+    /// to the survey's backscatter, a floor relative to the photo's lit level with a smooth hand-over, and dim
+    /// regions blended towards their local level by their measured signal-to-noise ratio (docs/evaluation.md);
+    /// paper is Köser et al. as published
     /// (absolute --factor-floor); the baselines are mean (divide by the mission's mean image) and polynomial
     /// (per-photo robust polynomial fit of log intensity).
     #[arg(long, value_name = "METHOD", help_heading = H_METHOD)]
@@ -421,6 +423,24 @@ struct CorrectArgs {
     /// --method abyss: no per-photo gain against the window (on by default).
     #[arg(long, help_heading = H_METHOD)]
     no_photo_gain: bool,
+
+    /// --method abyss: scale of the water-column S for the survey photos, or auto [default: 1].
+    ///
+    /// Water-column frames look into open water, survey photos end at the floor, so S measured on the way down
+    /// can over-estimate the survey's backscatter. auto estimates the scale per window from how the seafloor's
+    /// contrast follows the light (clamped to 0.2..1, kept at 1 where the fit is unsure); on simulated dives it
+    /// reads red about 4 % low, which tints dark objects red, so it is not the default. report.json gives the
+    /// scale per photo.
+    #[arg(long, value_name = "K|auto", value_parser = parse_scale, help_heading = H_METHOD)]
+    backscatter_scale: Option<ScaleArg>,
+
+    /// --method abyss: do not blend dim regions towards their local level (on by default).
+    ///
+    /// By default, where the lights leave little signal, a pixel's correction is blended with its block's level by
+    /// the signal-to-noise ratio measured on each photo (a Wiener estimate), so unlit corners show the local
+    /// seafloor instead of amplified noise; with this flag they are divided by F like the rest.
+    #[arg(long, help_heading = H_METHOD)]
+    no_denoise: bool,
 
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     ///
@@ -591,6 +611,12 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if args.no_photo_gain {
         o.photo_gain = false;
+    }
+    if let Some(ScaleArg(k)) = args.backscatter_scale {
+        o.backscatter_scale = k;
+    }
+    if args.no_denoise {
+        o.denoise = false;
     }
     o.mask_auto |= args.mask_auto;
     if args.water_column.is_some() {
@@ -1049,4 +1075,19 @@ pub fn run() -> ExitCode {
             ExitCode::from(EXIT_USAGE)
         }
     }
+}
+
+/// `--backscatter-scale`: a number, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct ScaleArg(Option<f32>);
+
+/// `--backscatter-scale`: `auto` or a number.
+fn parse_scale(s: &str) -> Result<ScaleArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(ScaleArg(None));
+    }
+    s.trim()
+        .parse::<f32>()
+        .map(|v| ScaleArg(Some(v)))
+        .map_err(|_| format!("expected a number such as 0.8, or auto, got {s:?}"))
 }

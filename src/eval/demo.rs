@@ -9,7 +9,7 @@ use image::{Rgb, RgbImage};
 
 use crate::error::{Error, Result};
 use crate::eval::evaluate::{evaluate, EvalSettings, Evaluation};
-use crate::eval::simulate::Simulation;
+use crate::eval::simulate::{Exposure, Rig, Simulation, Water};
 use crate::io::decode;
 use crate::method::baseline::Method;
 use crate::method::raster::Raster;
@@ -41,7 +41,8 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
 
 - **method**: `raw` is the uncorrected photos; `mean` divides by the mission's mean image; `polynomial` fits a
   robust polynomial of log intensity per photo; `paper` is Köser et al. as published; `abyss` (abysslight's
-  default) is the paper's window plus a per-photo gain and a floor relative to the photo's lit level.
+  default) is the paper's window plus a per-photo gain, the water-column backscatter scaled to the survey's, a
+  floor relative to the photo's lit level and a noise-aware blend of dim regions.
 - **photos**: photos scored.
 - **albedo error**: sum of |corrected - s*true albedo| / sum of s*true albedo over every sample of every photo,
   with s the least-squares scale per channel (so a white balance is not counted as error). 0 is perfect.
@@ -55,9 +56,28 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
   standard deviation (so a correction that flattens the photos is not rewarded or punished through the divisor).
 ";
 
-/// The dive the demo renders: 30 photos of 320×240 with 20 % nodules.
+/// The dive the demo renders: an abyssal dive of the kind abysslight is for (dive a05 of the dive matrix,
+/// docs/evaluation.md): 30 photos of 320×240, three lights with 25° beams, clear ocean water (red attenuated
+/// ~0.4/m), 5 m ± 0.4 m, 15 % nodules, ×6 red white balance, exposure from the brightest sediment, 8-bit sRGB.
+/// (`Simulation::default()` is the older bright 3 m dive.)
 pub fn demo_simulation() -> Simulation {
-    Simulation::default()
+    let water = Water::preset("oceanic-i").expect("a known preset");
+    let path = 2.0 * 5.0;
+    let eta = water.attenuation;
+    let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
+    Simulation {
+        contamination: 0.15,
+        encode: Transfer::Srgb,
+        rig: Rig::Three,
+        altitude: 5.0,
+        fov_deg: 80.0,
+        beam_deg: 25.0,
+        water,
+        altitude_swing: Some(0.4),
+        white_balance: [gain(0), 1.0, gain(2)],
+        exposure: Exposure::Brightest,
+        ..Simulation::default()
+    }
 }
 
 /// Run the demo into `out` (`out/dive/` the simulated dive, `out/<method>/` the corrected photos,

@@ -6,6 +6,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::factor::{lerp_rows, taps, Tap};
+use crate::method::noise::{blend_pixel, Blended};
 use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
 use crate::method::transfer::Curve;
@@ -44,6 +45,32 @@ pub fn correct_in_place<T: Sample>(
     floor: f32,
     curve: &Curve,
 ) -> CorrectStats {
+    correct_with_offset(samples, layout, scatter, factor_low, None, k, floor, curve)
+}
+
+/// What `--method abyss` adds to the correction: `S` scaled per channel, and the noise-aware blend of dim regions.
+#[derive(Debug, Clone, Copy)]
+pub struct Blend<'a> {
+    /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`crate::method::noise::Blended`]);
+    /// `None`: no blend, `A = (I − k·S)/F`.
+    pub fields: Option<&'a Blended>,
+    /// `k`: the scale of `S`, one per channel ([`crate::method::refine::backscatter_scale`]).
+    pub scatter_scale: &'a [f32],
+}
+
+/// [`correct_in_place`] with a [`Blend`]: `S` scaled by `k`, and per pixel the blend of
+/// [`crate::method::noise::blend_pixel`]. With `blend: None` this is [`correct_in_place`], bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn correct_with_offset<T: Sample>(
+    samples: &mut [T],
+    layout: Layout,
+    scatter: Option<&Prepared>,
+    factor_low: &Raster,
+    blend: Option<Blend>,
+    k: usize,
+    floor: f32,
+    curve: &Curve,
+) -> CorrectStats {
     let Layout {
         width,
         height,
@@ -51,6 +78,25 @@ pub fn correct_in_place<T: Sample>(
     } = layout;
     assert_eq!(samples.len(), width * height * c);
     assert_eq!(factor_low.channels, c);
+    if let Some(b) = blend {
+        if let Some(f) = b.fields {
+            assert_eq!(
+                f.level.layout(),
+                factor_low.layout(),
+                "blend and factor differ in size"
+            );
+            assert_eq!(
+                f.weight.layout(),
+                factor_low.layout(),
+                "blend and factor differ in size"
+            );
+        }
+        assert_eq!(b.scatter_scale.len(), c, "one scale of S per channel");
+        assert!(
+            c <= 4,
+            "the blend handles up to 4 channels, the photo has {c}"
+        );
+    }
     if let Some(s) = scatter {
         assert_eq!(
             s.layout, layout,
@@ -73,8 +119,16 @@ pub fn correct_in_place<T: Sample>(
         .par_chunks_mut(row_len)
         .enumerate()
         .map_init(
-            || (vec![0.0f32; factor_low.width * c], vec![0.0f32; row_len]),
-            |(frow, fx), (y, row)| {
+            || {
+                let extra = if blend.is_some() { row_len } else { 0 };
+                (
+                    vec![0.0f32; factor_low.width * c],
+                    vec![0.0f32; row_len],
+                    vec![0.0f32; extra],
+                    vec![0.0f32; extra],
+                )
+            },
+            |(frow, fx, lx, wx), (y, row)| {
                 let t = ty[y];
                 lerp_rows(
                     factor_low.row(t.i0 as usize),
@@ -83,7 +137,27 @@ pub fn correct_in_place<T: Sample>(
                     frow,
                 );
                 let srow = scatter.map(|s| s.row(y));
-                correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
+                match blend {
+                    None => {
+                        correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
+                    }
+                    Some(b) => {
+                        let floored_pixels = expand_f_dyn(frow, fx, &tx, c, floor);
+                        if let Some(fields) = b.fields {
+                            for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)]
+                            {
+                                lerp_rows(r.row(t.i0 as usize), r.row(t.i1 as usize), t.t, frow);
+                                expand_f_dyn(frow, out, &tx, c, f32::NEG_INFINITY);
+                            }
+                        }
+                        CorrectStats {
+                            floored_pixels,
+                            clipped_samples: correct_row_blend(
+                                row, fx, lx, wx, b, c, srow, s_linear, curve,
+                            ),
+                        }
+                    }
+                }
             },
         )
         .reduce(CorrectStats::default, |mut a, b| {
@@ -311,6 +385,80 @@ fn correct_row<T: Sample>(
     clipped as u64
 }
 
+/// [`correct_row`] with `S` scaled per channel and, with [`Blend::fields`], the noise-aware blend
+/// ([`blend_pixel`]) before the result is coded. `lx` and `wx` hold the blend's level and weight upsampled to the
+/// row.
+#[allow(clippy::too_many_arguments)]
+fn correct_row_blend<T: Sample>(
+    row: &mut [T],
+    f: &[f32],
+    lx: &[f32],
+    wx: &[f32],
+    blend: Blend,
+    c: usize,
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> u64 {
+    let scale = blend.scatter_scale;
+    let identity = curve.is_identity();
+    let max = curve.max();
+    let mut clipped = 0u32;
+    let mut ahat = [0.0f32; 4];
+    let mut out = [0.0f32; 4];
+    let mut valid = [true; 4];
+    let top = if identity {
+        max as u16
+    } else {
+        (curve.max()) as u16
+    };
+    for (x, px) in row.chunks_exact_mut(c).enumerate() {
+        let i0 = x * c;
+        for ch in 0..c.min(4) {
+            let i = i0 + ch;
+            let (lin, s) = if identity {
+                (
+                    px[ch].to_u16() as f32 / max,
+                    q.map_or(0.0, |q| q[i] as f32 / 65535.0),
+                )
+            } else {
+                (
+                    curve.linear(px[ch].to_u16()),
+                    q.map_or(0.0, |q| s_linear[q[i] as usize]),
+                )
+            };
+            ahat[ch] = (lin - scale[ch] * s) / f[i];
+            let code = px[ch].to_u16();
+            valid[ch] = code > 0 && code < top;
+        }
+        match blend.fields {
+            Some(b) if c <= 4 => blend_pixel(
+                &ahat[..c],
+                &f[i0..i0 + c],
+                &lx[i0..i0 + c],
+                &wx[i0..i0 + c],
+                &b.noise_var,
+                &valid[..c],
+                b.prior_precision,
+                &mut out[..c],
+            ),
+            _ => out[..c.min(4)].copy_from_slice(&ahat[..c.min(4)]),
+        }
+        for ch in 0..c.min(4) {
+            let a = out[ch];
+            #[allow(clippy::manual_range_contains)]
+            let o = (a < 0.0) | (a > 1.0);
+            clipped += o as u32;
+            px[ch] = if identity {
+                T::from_code(code_of(a * max + 0.5, max))
+            } else {
+                T::from_code(curve.code(a))
+            };
+        }
+    }
+    clipped as u64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -459,6 +607,135 @@ mod tests {
                 stats.floored_pixels > 0,
                 "the low-res F has values under the floor"
             );
+        }
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)] // per-channel formulas, written as in the docs
+    fn blend_correction_matches_unfused_reference() {
+        // A = w·Â + (1 − w)·A_low·r per pixel (noise::blend_pixel), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
+        let layout = Layout {
+            width: 29,
+            height: 17,
+            channels: 3,
+        };
+        let k = 4;
+        let low = Raster::from_fn(8, 5, 3, |x, y, c| {
+            0.03 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
+        });
+        let fields = Blended {
+            level: Raster::from_fn(8, 5, 3, |x, y, c| 0.2 + 0.05 * ((x + 2 * y + c) % 7) as f32),
+            weight: Raster::from_fn(8, 5, 3, |x, y, c| ((x * 5 + y + c) % 11) as f32 / 10.0),
+            noise_var: vec![0.001, 0.0002, 0.0],
+            prior_precision: 12.0,
+        };
+        let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
+        let up = |r: &Raster| upsample(r, k, 29, 17);
+        let (f, lv, wt) = (up(&low), up(&fields.level), up(&fields.weight));
+        let kscale = [0.7f32, 0.9, 1.0];
+        let blend = Blend {
+            fields: Some(&fields),
+            scatter_scale: &kscale,
+        };
+        for t in [Transfer::Linear, Transfer::Srgb] {
+            let prepared = Prepared::from_raster(&scatter, t);
+            let levels = if t == Transfer::Linear { 65536 } else { 256 };
+            let curve = Curve::new(t, levels);
+            let samples: Vec<u16> = (0..29 * 17 * 3)
+                .map(|i| ((i * 7919) % levels) as u16)
+                .collect();
+            let s_lin = |i: usize| match prepared.linear_table() {
+                Some(table) => table[prepared.q[i] as usize] as f64,
+                None => prepared.q[i] as f64 / 65535.0,
+            };
+            let mut expect = vec![0.0f64; samples.len()];
+            for px in 0..29 * 17 {
+                let ahat: Vec<f64> = (0..3)
+                    .map(|c| {
+                        let i = px * 3 + c;
+                        (curve.linear(samples[i]) as f64 - kscale[c] as f64 * s_lin(i))
+                            / (f.data[i] as f64).max(0.05)
+                    })
+                    .collect();
+                let (mut num, mut den) = (12.0f64, 12.0f64);
+                for c in 0..3 {
+                    let i = px * 3 + c;
+                    let l = (lv.data[i] as f64).max(1e-3);
+                    let clipped = samples[i] == 0 || samples[i] as usize == levels - 1;
+                    let p = if clipped {
+                        0.0
+                    } else if fields.noise_var[c] > 0.0 {
+                        (((f.data[i] as f64).max(0.05) * l).powi(2) / fields.noise_var[c] as f64)
+                            .min(1e12)
+                    } else {
+                        1e12
+                    };
+                    num += p * ahat[c] / l;
+                    den += p;
+                }
+                for c in 0..3 {
+                    let i = px * 3 + c;
+                    let w = wt.data[i] as f64;
+                    expect[i] = w * ahat[c] + (1.0 - w) * (lv.data[i] as f64).max(1e-3) * num / den;
+                }
+            }
+            let mut got = samples.clone();
+            if t == Transfer::Linear {
+                correct_with_offset(
+                    &mut got,
+                    layout,
+                    Some(&prepared),
+                    &low,
+                    Some(blend),
+                    k,
+                    0.05,
+                    &curve,
+                );
+            } else {
+                let mut g8: Vec<u8> = got.iter().map(|&v| v as u8).collect();
+                correct_with_offset(
+                    &mut g8,
+                    layout,
+                    Some(&prepared),
+                    &low,
+                    Some(blend),
+                    k,
+                    0.05,
+                    &curve,
+                );
+                got = g8.into_iter().map(u16::from).collect();
+            }
+            for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
+                let want = curve.code(e.clamp(0.0, 1.0) as f32);
+                assert!(
+                    (*g as i32 - want as i32).abs() <= 1,
+                    "{t:?} sample {i}: {g} vs {want}"
+                );
+            }
+            // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
+            let plain = Blend {
+                fields: None,
+                scatter_scale: &[1.0; 3],
+            };
+            let (mut a, mut c) = (samples.clone(), samples.clone());
+            if t == Transfer::Linear {
+                correct_with_offset(
+                    &mut a,
+                    layout,
+                    Some(&prepared),
+                    &low,
+                    Some(plain),
+                    k,
+                    0.05,
+                    &curve,
+                );
+                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
+                assert!(a
+                    .iter()
+                    .zip(&c)
+                    .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
+            }
         }
     }
 

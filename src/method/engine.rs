@@ -26,14 +26,15 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::method::baseline::{polynomial_m, Method};
-use crate::method::correct::{correct_in_place, CorrectStats};
+use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
 use crate::method::factor::{factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median};
 use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
+use crate::method::noise::{block_stats, Blended, NoiseModel};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Samples};
-use crate::method::refine::refine_factor;
+use crate::method::refine::{backscatter_scale, refine_factor, scaled};
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::transfer::Curve;
 use crate::method::window::window_range;
@@ -73,6 +74,11 @@ pub struct Corrected<T> {
     pub estimate_ms: f64,
     /// Milliseconds spent correcting it.
     pub correct_ms: f64,
+    /// [`Method::Abyss`]: the scale applied to the water-column `S` per channel (empty for the other methods or
+    /// without `S`).
+    pub backscatter_scale: Vec<f32>,
+    /// [`Method::Abyss`] with `denoise`: the noise and texture measured on the photo.
+    pub noise: Option<NoiseModel>,
 }
 
 struct Waiting<T> {
@@ -95,6 +101,8 @@ pub struct Engine<T> {
     /// `S` at block resolution, linear light.
     scatter_low: Option<Raster>,
     mask: Option<Mask>,
+    /// One flag per block: the block holds a masked pixel (no noise-aware blend there).
+    masked_blocks: Option<Vec<bool>>,
     /// `M` of [`Method::Mean`] (block resolution, linear light).
     mission_mean: Option<Raster>,
     /// Transfer tables for 8- and 16-bit photos.
@@ -157,6 +165,7 @@ impl<T> Engine<T> {
             params,
             scatter: prepared,
             scatter_low,
+            masked_blocks: mask.as_ref().map(|m| masked_blocks(m, k)),
             mask,
             mission_mean: None,
             curves: (Curve::new(transfer, 256), Curve::new(transfer, 65536)),
@@ -369,17 +378,55 @@ impl<T> Engine<T> {
         // --method abyss: per-photo gain and a floor relative to the lit level, softly (method/refine.rs); the
         // monitor above saw the window's F. The kernel's floor then only guards against 0.
         let mut floor = self.params.factor_floor;
+        let mut blended: Option<Blended> = None;
+        let mut use_blend = false;
+        let mut scale = Vec::new();
+        let mut noise = None;
         if self.params.method == Method::Abyss {
-            refine_factor(&mut f, own, &m, self.scatter_low.as_ref(), &self.params);
+            let c = f.channels;
+            scale = match (self.params.backscatter_scale, &self.scatter_low) {
+                (Some(v), Some(_)) => vec![v; c],
+                (None, Some(s)) => backscatter_scale(&stack, &m, s),
+                _ => vec![1.0; c],
+            };
+            let s_k = self.scatter_low.as_ref().map(|s| scaled(s, &scale));
+            if scale.iter().any(|&v| v != 1.0) {
+                f = factor(&m, s_k.as_ref(), &self.colour);
+                if self.mask.is_some() {
+                    fill_missing(&mut f);
+                }
+            }
+            refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params);
             floor = 1e-6;
+            let k = self.params.downsample;
+            let blocks = match (&photo, self.params.denoise) {
+                (Some(p), true) => block_stats(p, k, 2, (&self.curves.0, &self.curves.1)),
+                _ => Vec::new(),
+            };
+            let model = NoiseModel::fit(&blocks, &f);
+            blended = model.as_ref().map(|model| {
+                let keep = self.masked_blocks.as_deref();
+                model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
+            });
+            use_blend = blended.is_some() || scale.iter().any(|&v| v != 1.0);
+            noise = model;
         }
         if let Some(p) = &mut photo {
             let (l, k) = (p.layout, self.params.downsample);
             let s = self.scatter.as_ref();
+            let blend = use_blend.then_some(Blend {
+                fields: blended.as_ref(),
+                scatter_scale: &scale,
+            });
             stats = match &mut p.samples {
-                Samples::U8(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.0),
-                Samples::U16(v) => correct_in_place(v, l, s, &f, k, floor, &self.curves.1),
+                Samples::U8(v) => correct_with_offset(v, l, s, &f, blend, k, floor, &self.curves.0),
+                Samples::U16(v) => {
+                    correct_with_offset(v, l, s, &f, blend, k, floor, &self.curves.1)
+                }
             };
+        }
+        if self.scatter_low.is_none() {
+            scale.clear();
         }
         Corrected {
             tag: w.tag,
@@ -392,6 +439,28 @@ impl<T> Engine<T> {
             stats,
             estimate_ms,
             correct_ms: ms(t),
+            backscatter_scale: scale,
+            noise,
         }
     }
+}
+
+/// One flag per `k`×`k` block: does the block, or one of its 8 neighbours, hold a masked pixel? (The margin
+/// keeps the noise-aware blend off overlay pixels an automatic mask missed at its edge.)
+fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
+    let (bw, bh) = (m.width.div_ceil(k), m.height.div_ceil(k));
+    let mut hit = vec![false; bw * bh];
+    for (i, &ignored) in m.ignore.iter().enumerate() {
+        if ignored {
+            hit[(i / m.width / k) * bw + (i % m.width) / k] = true;
+        }
+    }
+    let mut out = vec![false; bw * bh];
+    for by in 0..bh {
+        for bx in 0..bw {
+            out[by * bw + bx] = (by.saturating_sub(1)..(by + 2).min(bh))
+                .any(|y| (bx.saturating_sub(1)..(bx + 2).min(bw)).any(|x| hit[y * bw + x]));
+        }
+    }
+    out
 }

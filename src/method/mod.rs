@@ -24,6 +24,7 @@ pub mod mask;
 pub mod matching;
 pub mod median;
 pub mod monitor;
+pub mod noise;
 pub mod params;
 pub mod raster;
 pub mod refine;

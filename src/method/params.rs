@@ -129,6 +129,13 @@ pub struct Params {
     pub relative_floor: f32,
     /// [`Method::Abyss`]: one robust gain per photo and channel against its window's `M`. Default: true.
     pub photo_gain: bool,
+    /// [`Method::Abyss`]: the scale of the water-column `S` for the survey photos; `None` estimates it per window
+    /// ([`crate::method::refine::backscatter_scale`]). Default: `Some(1.0)` (`S` as measured: the estimate is
+    /// biased low on red-starved channels, docs/evaluation.md).
+    pub backscatter_scale: Option<f32>,
+    /// [`Method::Abyss`]: blend dim regions towards their local level by their signal-to-noise ratio instead of
+    /// amplifying noise ([`crate::method::noise`]). Default: true.
+    pub denoise: bool,
 }
 
 impl Default for Params {
@@ -143,6 +150,8 @@ impl Default for Params {
             degree: 4,
             relative_floor: 0.01,
             photo_gain: true,
+            backscatter_scale: Some(1.0),
+            denoise: true,
         }
     }
 }

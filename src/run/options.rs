@@ -153,6 +153,17 @@ pub struct Options {
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
     #[serde(default = "default_true")]
     pub photo_gain: bool,
+    /// `method = abyss`: scale of the water-column `S` for the survey photos (the water column is deeper than the
+    /// camera's altitude, so its backscatter can be stronger than the survey's); `None` (`auto`) estimates it per
+    /// window from how the seafloor's contrast follows the light ([`crate::method::refine::backscatter_scale`]).
+    /// Default: 1, `S` as measured (the estimate is biased low on red-starved channels, which tints dark objects
+    /// red; docs/evaluation.md).
+    #[serde(default = "default_scale")]
+    pub backscatter_scale: Option<f32>,
+    /// `method = abyss`: blend dim regions towards their local level by their signal-to-noise ratio (measured on
+    /// each photo) instead of amplifying noise ([`crate::method::noise`]). Default: true.
+    #[serde(default = "default_true")]
+    pub denoise: bool,
 }
 
 fn default_relative_floor() -> f32 {
@@ -161,6 +172,10 @@ fn default_relative_floor() -> f32 {
 
 fn default_true() -> bool {
     true
+}
+
+fn default_scale() -> Option<f32> {
+    Some(1.0)
 }
 
 impl Default for Options {
@@ -197,6 +212,8 @@ impl Default for Options {
             report: None,
             relative_floor: default_relative_floor(),
             photo_gain: true,
+            backscatter_scale: default_scale(),
+            denoise: true,
         }
     }
 }
@@ -266,6 +283,13 @@ impl Options {
         }
         if self.limit == Some(0) {
             return usage("--limit must be at least 1 photo".into());
+        }
+        if let Some(k) = self.backscatter_scale {
+            if !(k > 0.0 && k <= 2.0) {
+                return usage(format!(
+                    "--backscatter-scale must be above 0 and at most 2 (or auto), got {k}"
+                ));
+            }
         }
         if !(self.relative_floor > 0.0 && self.relative_floor < 1.0) {
             return usage(format!(

@@ -69,6 +69,8 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         degree: opts.degree,
         relative_floor: opts.relative_floor,
         photo_gain: opts.photo_gain,
+        backscatter_scale: opts.backscatter_scale,
+        denoise: opts.denoise,
     };
     let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
     drop(scatter);

@@ -88,6 +88,15 @@ pub struct FrameReport {
     pub resumed: bool,
     /// Contamination, change of F, and flags when the estimate is likely broken.
     pub health: crate::method::monitor::Health,
+    /// `--method abyss`: the scale applied to the water-column `S` per channel (estimated per window unless
+    /// `--backscatter-scale` fixed it); empty otherwise.
+    pub backscatter_scale: Vec<f32>,
+    /// `--method abyss`: the sensor noise measured on the photo, standard deviation per channel in linear light
+    /// (`[0, 1]` = black to white); empty without `denoise`.
+    pub noise_sigma: Vec<f32>,
+    /// `--method abyss`: the seafloor texture measured on the photo, standard deviation of the albedo within a
+    /// block per channel, in the units of the seafloor colour; empty without `denoise`.
+    pub texture_sigma: Vec<f32>,
 }
 
 /// Where `S` came from.

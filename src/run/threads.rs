@@ -253,6 +253,13 @@ impl Feed<'_> {
                 clipped_samples: c.stats.clipped_samples,
                 resumed: c.photo.is_none(),
                 health: c.health,
+                backscatter_scale: c.backscatter_scale,
+                noise_sigma: c.noise.as_ref().map_or(Vec::new(), |n| {
+                    n.noise_var.iter().map(|v| v.sqrt()).collect()
+                }),
+                texture_sigma: c.noise.as_ref().map_or(Vec::new(), |n| {
+                    n.texture_var.iter().map(|v| v.sqrt()).collect()
+                }),
             };
             let Some(photo) = c.photo else {
                 self.progress.photo_done(&entry.path, true);

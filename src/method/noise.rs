@@ -1,0 +1,488 @@
+//! Noise-aware correction of dim regions (`--method abyss`): where a photo has little light, `(I − S)/F` mostly
+//! amplifies sensor noise (a red channel boosted ×6 by the white balance, unlit corners). There the best estimate of
+//! the albedo is not the amplified sample but a blend of it with the local level, weighted by how much of the
+//! sample is signal — the Wiener estimate
+//!
+//! ```text
+//! A = A_low + w·((I − S)/F − A_low),   w = τ²F² / (τ²F² + σ²)
+//! ```
+//!
+//! with `σ²` the sensor noise variance (linear light), `τ²` the variance of the albedo within a block around its
+//! level, and `A_low` the block's own level `(median(I) − S)/F` (itself blended towards the seafloor colour `C`
+//! where even a block median is mostly noise). `w ≈ 1` wherever the lights reach (the correction is the paper's
+//! there), `w → 0` in unlit corners (they show the local level instead of noise).
+//!
+//! Both variances are measured on each photo, per channel ([`NoiseModel::fit`]): the variance of the samples within
+//! a block is `τ²F² + σ²`; the dimmest blocks give `σ²`, the brightest `τ²`. Nothing is assumed about the camera.
+//!
+//! The blend is handed to the correction kernel as `F/w` and an offset `(1 − w)·A_low`, both at block resolution.
+
+use rayon::prelude::*;
+
+use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
+use crate::method::refine::quantile;
+use crate::method::transfer::Curve;
+
+/// Sensor noise and albedo texture of one photo, per channel, in linear light.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseModel {
+    /// `σ²`: variance of the sensor noise (and quantisation), as measured in the photo's dimmest blocks.
+    pub noise_var: Vec<f32>,
+    /// `τ²`: variance of the albedo within a block (output units: the seafloor colour `C` is the level).
+    pub texture_var: Vec<f32>,
+}
+
+/// Statistics of one sampled block, per channel, in linear light: the variance of its samples (`var`: texture,
+/// noise and the light's gradient across the block) and the noise-only estimate `diag`, the mean of `d²` over its
+/// 2×2 cells with `d = (a − b − c + e)/2` (`a b` over `c e`), which is `σ²` for white noise and 0 for any plane:
+/// a light-cone edge across the block does not count as noise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockStats {
+    /// Index of the block in the low-resolution raster (`by · blocks_x + bx`).
+    pub index: usize,
+    /// Variance of the block's samples, per channel.
+    pub var: Vec<f32>,
+    /// Mean squared diagonal difference, per channel.
+    pub diag: Vec<f32>,
+}
+
+/// [`BlockStats`] of every `stride`-th block in both directions (`k`×`k` blocks, `k` even; blocks cut by the
+/// photo's edge are skipped), in block-row order. Block rows run in parallel.
+pub fn block_stats(
+    photo: &Photo,
+    k: usize,
+    stride: usize,
+    curves: (&Curve, &Curve),
+) -> Vec<BlockStats> {
+    match &photo.samples {
+        Samples::U8(v) => stats(v, photo.layout, k, stride, curves.0),
+        Samples::U16(v) => stats(v, photo.layout, k, stride, curves.1),
+    }
+}
+
+fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) -> Vec<BlockStats> {
+    let c = l.channels;
+    let bw = l.width.div_ceil(k);
+    let stride = stride.max(1);
+    let n = (k * k) as f64;
+    let cells = ((k / 2) * (k / 2)) as f64;
+    let at =
+        |x: usize, y: usize, ch: usize| curve.linear(v[(y * l.width + x) * c + ch].to_u16()) as f64;
+    if k < 2 {
+        return Vec::new();
+    }
+    let rows: Vec<usize> = (0..l.height / k).step_by(stride).collect();
+    rows.par_iter()
+        .flat_map_iter(|&by| {
+            // Offset odd block rows by half a stride so the sampled blocks do not line up in columns.
+            let x0 = if (by / stride) % 2 == 1 {
+                stride / 2
+            } else {
+                0
+            };
+            (x0..l.width / k).step_by(stride).map(move |bx| {
+                let (px, py) = (bx * k, by * k);
+                let mut var = Vec::with_capacity(c);
+                let mut diag = Vec::with_capacity(c);
+                for ch in 0..c {
+                    let (mut sum, mut sq, mut dd) = (0.0f64, 0.0f64, 0.0f64);
+                    for y in (py..py + k).step_by(2) {
+                        for x in (px..px + k).step_by(2) {
+                            let (a, b, cc, e) = (
+                                at(x, y, ch),
+                                at(x + 1, y, ch),
+                                at(x, y + 1, ch),
+                                at(x + 1, y + 1, ch),
+                            );
+                            sum += a + b + cc + e;
+                            sq += a * a + b * b + cc * cc + e * e;
+                            let d = (a - b - cc + e) / 2.0;
+                            dd += d * d;
+                        }
+                    }
+                    let m = sum / n;
+                    var.push(((sq / n - m * m).max(0.0) * n / (n - 1.0)) as f32);
+                    diag.push((dd / cells) as f32);
+                }
+                BlockStats {
+                    index: by * bw + bx,
+                    var,
+                    diag,
+                }
+            })
+        })
+        .collect()
+}
+
+impl NoiseModel {
+    /// Fit the model per channel to block statistics (from [`block_stats`]) and `F` at block resolution: `σ²` is
+    /// the median of `diag − τ_d²F²` over the dimmest 10 % of the blocks, where `τ_d²` (the fine texture seen by
+    /// `diag`) is the median of `(diag − σ²)/F²` over the brightest 25 % (two rounds from `τ_d² = 0`); then `τ²` is
+    /// the median of `(var − σ²)/F²` over the brightest 25 %. A noise-free dim photo gets a small `σ²` and is left as
+    /// the paper corrects it. `None` with fewer than 50 blocks (too small a photo to tell noise from texture).
+    pub fn fit(blocks: &[BlockStats], f: &Raster) -> Option<NoiseModel> {
+        let c = f.channels;
+        if blocks.len() < 50 {
+            return None;
+        }
+        let mut noise_var = vec![0.0f32; c];
+        let mut texture_var = vec![0.0f32; c];
+        for ch in 0..c {
+            let mut pts: Vec<(f32, f32, f32)> = blocks
+                .iter()
+                .map(|b| (f.data[b.index * c + ch], b.var[ch], b.diag[ch]))
+                .filter(|(f, v, d)| f.is_finite() && v.is_finite() && d.is_finite())
+                .collect();
+            if pts.len() < 20 {
+                return None;
+            }
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let n = pts.len();
+            let dim = &pts[..(n / 10).max(5)];
+            let bright: Vec<(f32, f32, f32)> = pts[n - (n / 4).max(5)..]
+                .iter()
+                .copied()
+                .filter(|p| p.0 > 0.0)
+                .collect();
+            let median_of = |mut v: Vec<f32>| {
+                if v.is_empty() {
+                    0.0
+                } else {
+                    quantile(&mut v, 0.5).max(0.0)
+                }
+            };
+            let (mut sigma2, mut tau_d2) = (0.0f32, 0.0f32);
+            for _ in 0..2 {
+                sigma2 = median_of(
+                    dim.iter()
+                        .map(|&(f, _, d)| d - tau_d2 * f.max(0.0).powi(2))
+                        .collect(),
+                );
+                tau_d2 = median_of(
+                    bright
+                        .iter()
+                        .map(|&(f, _, d)| (d - sigma2) / (f * f))
+                        .collect(),
+                );
+            }
+            noise_var[ch] = sigma2;
+            texture_var[ch] = median_of(
+                bright
+                    .iter()
+                    .map(|&(f, v, _)| (v - sigma2) / (f * f))
+                    .collect(),
+            );
+        }
+        Some(NoiseModel {
+            noise_var,
+            texture_var,
+        })
+    }
+
+    /// The blend for one photo, at block resolution: from `F` (refined), the photo's block medians `own` and the
+    /// backscatter `s` (both linear) and the seafloor colour `C`, the block's level `A_low = (own − S)/F` (blended
+    /// towards `C` with the weight of a block median, noise variance `σ²·π/(2K²)` for `K`×`K` blocks) and the
+    /// Wiener weight `w = τ²F²/(τ²F² + σ²)`, per channel. Blocks flagged in `keep` (one flag per block: overlays,
+    /// vehicle parts) get `w = 1`, no blend. Blending towards block means instead of medians was worse on every
+    /// score of the dive matrix.
+    pub fn blend(
+        &self,
+        f: &Raster,
+        own: &Raster,
+        s: Option<&Raster>,
+        colour: &[f32],
+        k: usize,
+        keep: Option<&[bool]>,
+    ) -> Blended {
+        let c = f.channels;
+        let mut level = f.clone();
+        let mut weight = f.clone();
+        let median_var = std::f32::consts::FRAC_PI_2 / (k * k) as f32;
+        for (i, (lv, wt)) in level.data.iter_mut().zip(&mut weight.data).enumerate() {
+            let ch = i % c;
+            let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
+            let fv = f.data[i];
+            let signal = t2 * fv * fv;
+            let w = if signal + s2 > 0.0 {
+                signal / (signal + s2)
+            } else {
+                1.0
+            };
+            let w_low = if signal + s2 * median_var > 0.0 {
+                signal / (signal + s2 * median_var)
+            } else {
+                1.0
+            };
+            let a_low = (own.data[i] - s.map_or(0.0, |s| s.data[i])) / fv;
+            let a_low = if a_low.is_finite() {
+                colour[ch] + w_low * (a_low - colour[ch])
+            } else {
+                colour[ch]
+            };
+            *lv = a_low.max(LEVEL_MIN);
+            *wt = if keep.is_some_and(|m| m[i / c]) {
+                1.0
+            } else {
+                w.clamp(0.0, 1.0)
+            };
+        }
+        // Prior on the relative detail ρ = A/A_low (1 ± τ/C): its precision, from the channels' texture.
+        let rel: f32 = (0..c)
+            .map(|ch| self.texture_var[ch] / (colour[ch] * colour[ch]))
+            .sum::<f32>()
+            / c as f32;
+        Blended {
+            level,
+            weight,
+            // A channel without measured texture (black or clipped throughout) cannot guide the others.
+            noise_var: (0..c)
+                .map(|ch| {
+                    if self.texture_var[ch] > 0.0 {
+                        self.noise_var[ch]
+                    } else {
+                        f32::INFINITY
+                    }
+                })
+                .collect(),
+            prior_precision: if rel > 0.0 { 1.0 / rel } else { 1e6 },
+        }
+    }
+}
+
+/// Smallest block level `A_low` the blend divides by.
+pub const LEVEL_MIN: f32 = 1e-3;
+
+/// What the correction kernel needs for the noise-aware blend of one photo (from [`NoiseModel::blend`]).
+///
+/// Per pixel, with `Â_c = (I − S)/F` per channel and `A_low`, `w` upsampled like `F`: the relative detail
+/// `ρ_c = Â_c/A_low_c` is estimated once for all channels, as the precision-weighted mean
+/// `r = (Σ p_c ρ_c + p₀)/(Σ p_c + p₀)` with `p_c = (F_c·A_low_c)²/σ_c²` and the prior `ρ = 1` of precision `p₀`;
+/// then `A_c = w_c·Â_c + (1 − w_c)·A_low_c·r`. A channel starved of light (red, ×6 white balance) takes its detail
+/// from the well-lit ones instead of from its own noise, so dark nodules stay dark in every channel rather than
+/// turning red.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Blended {
+    /// `A_low` per block and channel (linear, at least [`LEVEL_MIN`]).
+    pub level: Raster,
+    /// `w` per block and channel.
+    pub weight: Raster,
+    /// `σ²` per channel (infinite for a channel that cannot guide the others: no texture measured in it).
+    pub noise_var: Vec<f32>,
+    /// `p₀`.
+    pub prior_precision: f32,
+}
+
+/// The blended albedo of one pixel (see [`Blended`]): `ahat`, `f`, `level` and `weight` per channel, in linear
+/// light, and `valid` (the sample was neither black nor clipped white: a clipped sample does not guide the other
+/// channels); writes the result into `out`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn blend_pixel(
+    ahat: &[f32],
+    f: &[f32],
+    level: &[f32],
+    weight: &[f32],
+    noise_var: &[f32],
+    valid: &[bool],
+    prior: f32,
+    out: &mut [f32],
+) {
+    let (mut num, mut den) = (prior, prior);
+    for ch in 0..ahat.len() {
+        let lv = level[ch].max(LEVEL_MIN);
+        let fl = f[ch] * lv;
+        let p = if !valid[ch] || !ahat[ch].is_finite() {
+            0.0
+        } else if noise_var[ch] > 0.0 {
+            (fl * fl / noise_var[ch]).min(1e12)
+        } else {
+            1e12
+        };
+        num += p * ahat[ch] / lv;
+        den += p;
+    }
+    let r = num / den;
+    for ch in 0..ahat.len() {
+        let w = weight[ch];
+        out[ch] = w * ahat[ch] + (1.0 - w) * level[ch].max(LEVEL_MIN) * r;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::method::transfer::Transfer;
+
+    /// A 16-bit grey photo `A·F + S + noise` with a known texture and noise, F falling off to the right.
+    fn photo(w: usize, h: usize, sigma: f32, tau: f32) -> (Photo, Raster) {
+        let mut r = 0x2545_F491u32;
+        let mut gauss = move || {
+            // Irwin–Hall: sum of 12 uniforms minus 6, unit variance.
+            (0..12)
+                .map(|_| {
+                    r ^= r << 13;
+                    r ^= r >> 17;
+                    r ^= r << 5;
+                    r as f32 / u32::MAX as f32
+                })
+                .sum::<f32>()
+                - 6.0
+        };
+        let k = 8;
+        let f = Raster::from_fn(w / k, h / k, 1, |x, _, _| 1.0 - x as f32 / (w / k) as f32);
+        let mut v = vec![0u16; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let fv = f.get(x / k, y / k, 0);
+                let a = 0.4 + tau * gauss();
+                let i = a * fv + 0.05 + sigma * gauss();
+                v[y * w + x] = (i.clamp(0.0, 1.0) * 65535.0).round() as u16;
+            }
+        }
+        let layout = Layout {
+            width: w,
+            height: h,
+            channels: 1,
+        };
+        (
+            Photo {
+                layout,
+                samples: Samples::U16(v),
+                alpha: None,
+            },
+            f,
+        )
+    }
+
+    #[test]
+    fn variances_against_a_direct_computation() {
+        let (p, _) = photo(64, 48, 0.02, 0.1);
+        let curves = (
+            Curve::new(Transfer::Linear, 256),
+            Curve::new(Transfer::Linear, 65536),
+        );
+        let got = block_stats(&p, 8, 2, (&curves.0, &curves.1));
+        let Samples::U16(v) = &p.samples else {
+            unreachable!()
+        };
+        assert!(!got.is_empty());
+        for b in &got {
+            let (i, var) = (b.index, &b.var);
+            let (bx, by) = (i % 8, i / 8);
+            let xs: Vec<f64> = (0..64)
+                .map(|j| v[(by * 8 + j / 8) * 64 + bx * 8 + j % 8] as f64 / 65535.0)
+                .collect();
+            let m = xs.iter().sum::<f64>() / 64.0;
+            let s = xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / 63.0;
+            assert!(
+                (var[0] as f64 - s).abs() < 1e-6 * s.max(1e-6),
+                "{i}: {} vs {s}",
+                var[0]
+            );
+            let px = |j: usize| v[(by * 8 + j / 8) * 64 + bx * 8 + j % 8] as f64 / 65535.0;
+            let mut dd = 0.0;
+            for cy in (0..8).step_by(2) {
+                for cx in (0..8).step_by(2) {
+                    let d = (px(cy * 8 + cx) - px(cy * 8 + cx + 1) - px(cy * 8 + cx + 8)
+                        + px(cy * 8 + cx + 9))
+                        / 2.0;
+                    dd += d * d / 16.0;
+                }
+            }
+            assert!(
+                (b.diag[0] as f64 - dd).abs() < 1e-6 * dd.max(1e-6),
+                "{i}: {} vs {dd}",
+                b.diag[0]
+            );
+        }
+    }
+
+    #[test]
+    fn fit_recovers_noise_and_texture() {
+        let (sigma, tau) = (0.03f32, 0.08f32);
+        let (p, f) = photo(640, 320, sigma, tau);
+        let curves = (
+            Curve::new(Transfer::Linear, 256),
+            Curve::new(Transfer::Linear, 65536),
+        );
+        let blocks = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let m = NoiseModel::fit(&blocks, &f).expect("enough blocks");
+        let (s2, t2) = (m.noise_var[0], m.texture_var[0]);
+        assert!((s2.sqrt() / sigma - 1.0).abs() < 0.15, "σ {}", s2.sqrt());
+        assert!((t2.sqrt() / tau - 1.0).abs() < 0.15, "τ {}", t2.sqrt());
+    }
+
+    #[test]
+    fn blend_is_the_wiener_weight() {
+        let m = NoiseModel {
+            noise_var: vec![0.01],
+            texture_var: vec![0.04],
+        };
+        let f = Raster::from_fn(4, 1, 1, |x, _, _| [1.0, 0.5, 0.1, 0.0][x]);
+        let own = Raster::from_fn(4, 1, 1, |x, _, _| 0.05 + 0.4 * [1.0, 0.5, 0.1, 0.0][x]);
+        let s = Raster::filled(4, 1, 1, 0.05);
+        let b = m.blend(&f, &own, Some(&s), &[0.4], 8, None);
+        for x in 0..4 {
+            let fv = f.data[x];
+            let w = 0.04 * fv * fv / (0.04 * fv * fv + 0.01);
+            assert!((b.weight.data[x] - w).abs() < 1e-6, "{x}");
+            // The block's level is the seafloor colour here (or C itself where F = 0).
+            assert!(
+                (b.level.data[x] - 0.4).abs() < 1e-5,
+                "{x}: {}",
+                b.level.data[x]
+            );
+        }
+        // A masked block keeps w = 1.
+        let b = m.blend(
+            &f,
+            &own,
+            Some(&s),
+            &[0.4],
+            8,
+            Some(&[false, false, true, false]),
+        );
+        assert_eq!(b.weight.data[2], 1.0);
+        assert!((b.prior_precision - 0.16 / 0.04).abs() < 1e-3);
+    }
+
+    #[test]
+    fn blend_pixel_against_the_formula() {
+        // Three channels: green and blue well lit, red starved and noisy. A dark nodule (Â/A_low = 0.2 in green and
+        // blue): red takes the shared detail and stays dark too.
+        let ahat = [0.30f32, 0.08, 0.085];
+        let f = [0.05f32, 1.0, 0.9];
+        let level = [0.4f32, 0.4, 0.42];
+        let weight = [0.1f32, 0.95, 0.9];
+        let var = [0.0004f32, 0.0001, 0.0001];
+        let prior = 10.0;
+        let mut out = [0.0f32; 3];
+        blend_pixel(
+            &ahat, &f, &level, &weight, &var, &[true; 3], prior, &mut out,
+        );
+        // Independent computation in f64.
+        let (mut num, mut den) = (prior as f64, prior as f64);
+        for c in 0..3 {
+            let p = ((f[c] * level[c]) as f64).powi(2) / var[c] as f64;
+            num += p * ahat[c] as f64 / level[c] as f64;
+            den += p;
+        }
+        let r = num / den;
+        for c in 0..3 {
+            let want =
+                weight[c] as f64 * ahat[c] as f64 + (1.0 - weight[c] as f64) * level[c] as f64 * r;
+            assert!(
+                (out[c] as f64 - want).abs() < 1e-6,
+                "{c}: {} vs {want}",
+                out[c]
+            );
+        }
+        assert!(r < 0.25, "shared detail {r}");
+        assert!(out[0] < 0.15, "red stays dark: {}", out[0]);
+        // With w = 1 everywhere the pixel is the plain correction.
+        blend_pixel(
+            &ahat, &f, &level, &[1.0; 3], &var, &[true; 3], prior, &mut out,
+        );
+        assert_eq!(out, ahat);
+    }
+}
