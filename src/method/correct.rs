@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::factor::{lerp_rows, taps, Tap};
-use crate::method::noise::{blend_pixel, Blended};
+use crate::method::noise::{Blended, LEVEL_MIN};
 use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
 use crate::method::transfer::Curve;
@@ -141,22 +141,21 @@ pub fn correct_with_offset<T: Sample>(
                     None => {
                         correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
                     }
-                    Some(b) => {
-                        let floored_pixels = expand_f_dyn(frow, fx, &tx, c, floor);
-                        if let Some(fields) = b.fields {
-                            for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)]
-                            {
-                                lerp_rows(r.row(t.i0 as usize), r.row(t.i1 as usize), t.t, frow);
-                                expand_f_dyn(frow, out, &tx, c, f32::NEG_INFINITY);
-                            }
-                        }
-                        CorrectStats {
-                            floored_pixels,
-                            clipped_samples: correct_row_blend(
-                                row, fx, lx, wx, b, c, srow, s_linear, curve,
-                            ),
-                        }
-                    }
+                    Some(b) => blend_row_dispatch(
+                        row,
+                        frow,
+                        fx,
+                        lx,
+                        wx,
+                        &tx,
+                        (t.i0 as usize, t.i1 as usize, t.t),
+                        b,
+                        c,
+                        floor,
+                        srow,
+                        s_linear,
+                        curve,
+                    ),
                 }
             },
         )
@@ -300,6 +299,17 @@ fn expand_f<const C: usize, const N: usize>(
     floored_pixels
 }
 
+/// [`expand_f`] for 3 and 1 channels, [`expand_f_dyn`] otherwise (inlined, so that it is compiled for the
+/// caller's target features: a closure would not be).
+#[inline(always)]
+fn expand_any(frow: &[f32], out: &mut [f32], tx: &[Tap], c: usize, floor: f32) -> u64 {
+    match c {
+        3 => expand_f::<3, 24>(frow, out, tx, floor),
+        1 => expand_f::<1, 8>(frow, out, tx, floor),
+        _ => expand_f_dyn(frow, out, tx, c, floor),
+    }
+}
+
 /// [`expand_f`] for any channel count.
 fn expand_f_dyn(frow: &[f32], fx: &mut [f32], tx: &[Tap], c: usize, floor: f32) -> u64 {
     let mut floored_pixels = 0u64;
@@ -385,10 +395,99 @@ fn correct_row<T: Sample>(
     clipped as u64
 }
 
+/// One row with a [`Blend`]: `F` (floored), and the blend's level and weight, upsampled along the row into `fx`,
+/// `lx`, `wx` (`frow` holds `F` already interpolated between block rows; `rows` are the two block rows and the
+/// weight between them), then [`correct_row_blend`]. Runs the AVX2 build where the CPU has it (IEEE arithmetic, no
+/// fused operations: the same bits either way).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn blend_row_dispatch<T: Sample>(
+    row: &mut [T],
+    frow: &mut [f32],
+    fx: &mut [f32],
+    lx: &mut [f32],
+    wx: &mut [f32],
+    tx: &[Tap],
+    rows: (usize, usize, f32),
+    blend: Blend,
+    c: usize,
+    floor: f32,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> CorrectStats {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
+        return unsafe {
+            blend_row_avx2(
+                row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
+            )
+        };
+    }
+    blend_row_portable(
+        row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
+    )
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn blend_row_avx2<T: Sample>(
+    row: &mut [T],
+    frow: &mut [f32],
+    fx: &mut [f32],
+    lx: &mut [f32],
+    wx: &mut [f32],
+    tx: &[Tap],
+    rows: (usize, usize, f32),
+    blend: Blend,
+    c: usize,
+    floor: f32,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> CorrectStats {
+    blend_row_portable(
+        row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn blend_row_portable<T: Sample>(
+    row: &mut [T],
+    frow: &mut [f32],
+    fx: &mut [f32],
+    lx: &mut [f32],
+    wx: &mut [f32],
+    tx: &[Tap],
+    rows: (usize, usize, f32),
+    blend: Blend,
+    c: usize,
+    floor: f32,
+    srow: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> CorrectStats {
+    let floored_pixels = expand_any(frow, fx, tx, c, floor);
+    if let Some(fields) = blend.fields {
+        for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)] {
+            lerp_rows(r.row(rows.0), r.row(rows.1), rows.2, frow);
+            expand_any(frow, out, tx, c, f32::NEG_INFINITY);
+        }
+    }
+    CorrectStats {
+        floored_pixels,
+        clipped_samples: correct_row_blend(row, fx, lx, wx, blend, c, srow, s_linear, curve),
+    }
+}
+
 /// [`correct_row`] with `S` scaled per channel and, with [`Blend::fields`], the noise-aware blend
 /// ([`blend_pixel`]) before the result is coded. `lx` and `wx` hold the blend's level and weight upsampled to the
 /// row.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn correct_row_blend<T: Sample>(
     row: &mut [T],
     f: &[f32],
@@ -400,60 +499,132 @@ fn correct_row_blend<T: Sample>(
     s_linear: &[f32],
     curve: &Curve,
 ) -> u64 {
-    let scale = blend.scatter_scale;
-    let identity = curve.is_identity();
-    let max = curve.max();
-    let mut clipped = 0u32;
-    let mut ahat = [0.0f32; 4];
-    let mut out = [0.0f32; 4];
-    let mut valid = [true; 4];
-    let top = if identity {
-        max as u16
+    match (c, blend.fields) {
+        (3, Some(b)) => {
+            blend_row::<T, 3>(row, f, lx, wx, blend.scatter_scale, b, q, s_linear, curve)
+        }
+        (1, Some(b)) => {
+            blend_row::<T, 1>(row, f, lx, wx, blend.scatter_scale, b, q, s_linear, curve)
+        }
+        _ => scaled_row(row, f, blend.scatter_scale, c, q, s_linear, curve),
+    }
+}
+
+/// Linear light of a sample and of its `S`, for either kind of curve.
+#[inline(always)]
+fn sample_and_scatter<T: Sample>(
+    v: T,
+    i: usize,
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+    inv_max: f32,
+) -> (f32, f32) {
+    if curve.is_identity() {
+        (
+            v.to_u16() as f32 * inv_max,
+            q.map_or(0.0, |q| q[i] as f32 * (1.0 / 65535.0)),
+        )
     } else {
-        (curve.max()) as u16
+        (
+            curve.linear(v.to_u16()),
+            q.map_or(0.0, |q| s_linear[q[i] as usize]),
+        )
+    }
+}
+
+/// The code of linear light `a`, and whether it was clipped.
+#[inline(always)]
+fn code_and_clip<T: Sample>(a: f32, curve: &Curve) -> (T, bool) {
+    #[allow(clippy::manual_range_contains)]
+    let clipped = (a < 0.0) | (a > 1.0);
+    let code = if curve.is_identity() {
+        let max = curve.max();
+        code_of(a * max + 0.5, max)
+    } else {
+        curve.code(a)
     };
-    for (x, px) in row.chunks_exact_mut(c).enumerate() {
-        let i0 = x * c;
-        for ch in 0..c.min(4) {
+    (T::from_code(code), clipped)
+}
+
+/// `A = (I − k·S)/F` for any channel count (no blend).
+fn scaled_row<T: Sample>(
+    row: &mut [T],
+    f: &[f32],
+    scale: &[f32],
+    c: usize,
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> u64 {
+    let inv_max = 1.0 / curve.max();
+    let mut clipped = 0u32;
+    for (i, v) in row.iter_mut().enumerate() {
+        let (lin, s) = sample_and_scatter(*v, i, q, s_linear, curve, inv_max);
+        let (code, o) = code_and_clip((lin - scale[i % c] * s) / f[i], curve);
+        *v = code;
+        clipped += o as u32;
+    }
+    clipped as u64
+}
+
+/// The blend of [`blend_pixel`] over one row of `C`-channel pixels (the same formula, rearranged without the
+/// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn blend_row<T: Sample, const C: usize>(
+    row: &mut [T],
+    f: &[f32],
+    lx: &[f32],
+    wx: &[f32],
+    scale: &[f32],
+    b: &Blended,
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> u64 {
+    let inv_max = 1.0 / curve.max();
+    let top = curve.max() as u16;
+    let mut inv_var = [0.0f32; C];
+    let mut k = [1.0f32; C];
+    for ch in 0..C {
+        let v = b.noise_var[ch];
+        // A noise-free channel: a large precision (1e8: p stays finite in f32 for F·A_low up to 10³).
+        inv_var[ch] = if v > 0.0 { (1.0 / v).min(1e8) } else { 1e8 };
+        k[ch] = scale[ch];
+    }
+    let prior = b.prior_precision;
+    let mut clipped = 0u32;
+    for (x, px) in row.chunks_exact_mut(C).enumerate() {
+        let i0 = x * C;
+        let mut ahat = [0.0f32; C];
+        let (mut num, mut den) = (prior, prior);
+        for ch in 0..C {
             let i = i0 + ch;
-            let (lin, s) = if identity {
-                (
-                    px[ch].to_u16() as f32 / max,
-                    q.map_or(0.0, |q| q[i] as f32 / 65535.0),
-                )
-            } else {
-                (
-                    curve.linear(px[ch].to_u16()),
-                    q.map_or(0.0, |q| s_linear[q[i] as usize]),
-                )
-            };
-            ahat[ch] = (lin - scale[ch] * s) / f[i];
             let code = px[ch].to_u16();
-            valid[ch] = code > 0 && code < top;
-        }
-        match blend.fields {
-            Some(b) if c <= 4 => blend_pixel(
-                &ahat[..c],
-                &f[i0..i0 + c],
-                &lx[i0..i0 + c],
-                &wx[i0..i0 + c],
-                &b.noise_var,
-                &valid[..c],
-                b.prior_precision,
-                &mut out[..c],
-            ),
-            _ => out[..c.min(4)].copy_from_slice(&ahat[..c.min(4)]),
-        }
-        for ch in 0..c.min(4) {
-            let a = out[ch];
-            #[allow(clippy::manual_range_contains)]
-            let o = (a < 0.0) | (a > 1.0);
-            clipped += o as u32;
-            px[ch] = if identity {
-                T::from_code(code_of(a * max + 0.5, max))
+            let (lin, s) = sample_and_scatter(px[ch], i, q, s_linear, curve, inv_max);
+            let a = (lin - k[ch] * s) / f[i];
+            ahat[ch] = a;
+            let lv = lx[i].max(LEVEL_MIN);
+            // Weight 0 for a black or clipped sample (it says nothing of the detail) and for a non-finite Â.
+            let ok = (code > 0) & (code < top) & a.is_finite();
+            // p = (F·A_low)²/σ², and p·ρ = p·Â/A_low = F²·A_low·Â/σ² (no division).
+            let g = if ok {
+                f[i] * f[i] * lv * inv_var[ch]
             } else {
-                T::from_code(curve.code(a))
+                0.0
             };
+            num += g * a;
+            den += g * lv;
+        }
+        let r = num / den;
+        for ch in 0..C {
+            let i = i0 + ch;
+            let w = wx[i];
+            let a = w * ahat[ch] + (1.0 - w) * lx[i].max(LEVEL_MIN) * r;
+            let (code, o) = code_and_clip::<T>(a, curve);
+            px[ch] = code;
+            clipped += o as u32;
         }
     }
     clipped as u64
@@ -665,11 +836,13 @@ mod tests {
                     let clipped = samples[i] == 0 || samples[i] as usize == levels - 1;
                     let p = if clipped {
                         0.0
-                    } else if fields.noise_var[c] > 0.0 {
-                        (((f.data[i] as f64).max(0.05) * l).powi(2) / fields.noise_var[c] as f64)
-                            .min(1e12)
                     } else {
-                        1e12
+                        let inv_var = if fields.noise_var[c] > 0.0 {
+                            (1.0 / fields.noise_var[c] as f64).min(1e8)
+                        } else {
+                            1e8
+                        };
+                        ((f.data[i] as f64).max(0.05) * l).powi(2) * inv_var
                     };
                     num += p * ahat[c] / l;
                     den += p;

@@ -294,9 +294,9 @@ pub fn blend_pixel(
         let p = if !valid[ch] || !ahat[ch].is_finite() {
             0.0
         } else if noise_var[ch] > 0.0 {
-            (fl * fl / noise_var[ch]).min(1e12)
+            fl * fl * (1.0 / noise_var[ch]).min(1e8)
         } else {
-            1e12
+            fl * fl * 1e8
         };
         num += p * ahat[ch] / lv;
         den += p;
