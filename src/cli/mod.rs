@@ -451,7 +451,10 @@ struct CorrectArgs {
 
     /// Expected share of non-seafloor pixels (0 to 0.5); sets --window from it.
     ///
-    /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`).
+    /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`). With --method abyss
+    /// the contamination is taken to be darker than the seafloor (nodules, shadows, burrows): M is the window's
+    /// (1 + C)/2 quantile instead of its median, the seafloor's own median; bright clutter (fauna, shells) above
+    /// (1 - C)/2 of the window then breaks the estimate sooner than with the median.
     #[arg(long, value_name = "C", help_heading = H_METHOD)]
     contamination: Option<f64>,
 

@@ -395,6 +395,10 @@ fn correct_row<T: Sample>(
     clipped as u64
 }
 
+/// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
+/// most 0.1 % of a pixel's detail).
+pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
+
 /// One row with a [`Blend`]: `F` (floored), and the blend's level and weight, upsampled along the row into `fx`,
 /// `lx`, `wx` (`frow` holds `F` already interpolated between block rows; `rows` are the two block rows and the
 /// weight between them), then [`correct_row_blend`]. Runs the AVX2 build where the CPU has it (IEEE arithmetic, no
@@ -471,6 +475,20 @@ fn blend_row_portable<T: Sample>(
     curve: &Curve,
 ) -> CorrectStats {
     let floored_pixels = expand_any(frow, fx, tx, c, floor);
+    // Where the blend would change nothing (w ≥ 1 − NEGLIGIBLE_BLEND in both block rows: well-lit or noise-free
+    // photos, e.g. most camera JPEGs) and S is not scaled, the plain vectorised row.
+    let unscaled = blend.scatter_scale.iter().all(|&k| k == 1.0);
+    let negligible = blend.fields.is_none_or(|b| {
+        [rows.0, rows.1]
+            .iter()
+            .all(|&r| b.weight.row(r).iter().all(|&w| w >= 1.0 - NEGLIGIBLE_BLEND))
+    });
+    if unscaled && negligible {
+        return CorrectStats {
+            floored_pixels,
+            clipped_samples: correct_row(row, fx, srow, s_linear, curve),
+        };
+    }
     if let Some(fields) = blend.fields {
         for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)] {
             lerp_rows(r.row(rows.0), r.row(rows.1), rows.2, frow);
@@ -885,6 +903,30 @@ mod tests {
                     (*g as i32 - want as i32).abs() <= 1,
                     "{t:?} sample {i}: {g} vs {want}"
                 );
+            }
+            // Weights of 1 everywhere (nothing to blend) and k = 1: the plain correction, bit for bit.
+            let ones = Blended {
+                weight: Raster::filled(8, 5, 3, 1.0),
+                ..fields.clone()
+            };
+            let unblended = Blend {
+                fields: Some(&ones),
+                scatter_scale: &[1.0; 3],
+            };
+            let (mut a, mut c) = (samples.clone(), samples.clone());
+            if t == Transfer::Linear {
+                correct_with_offset(
+                    &mut a,
+                    layout,
+                    Some(&prepared),
+                    &low,
+                    Some(unblended),
+                    k,
+                    0.05,
+                    &curve,
+                );
+                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
+                assert_eq!(a, c);
             }
             // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
             let plain = Blend {

@@ -26,10 +26,10 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::method::baseline::{polynomial_m, Method};
-use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
+use crate::method::correct::{correct_with_offset, Blend, CorrectStats, NEGLIGIBLE_BLEND};
 use crate::method::factor::{factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
-use crate::method::median::{block_median, stack_median};
+use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, Blended, NoiseModel};
 pub use crate::method::params::Params;
@@ -355,6 +355,9 @@ impl<T> Engine<T> {
             (Method::Polynomial, _) => {
                 polynomial_m(own, self.scatter_low.as_ref(), self.params.degree)
             }
+            (Method::Abyss, _) if self.params.window_quantile != 0.5 => {
+                stack_quantile(&stack, self.params.window_quantile as f64)
+            }
             _ => stack_median(&stack),
         };
         let mut f = factor(&m, self.scatter_low.as_ref(), &self.colour);
@@ -400,14 +403,24 @@ impl<T> Engine<T> {
             floor = 1e-6;
             let k = self.params.downsample;
             let blocks = match (&photo, self.params.denoise) {
-                (Some(p), true) => block_stats(p, k, 2, (&self.curves.0, &self.curves.1)),
+                (Some(p), true) => {
+                    // Every second block in both directions, fewer on large photos (about 2000 blocks sampled:
+                    // plenty for two medians, and the pass stays a small share of a 12 MP photo's time).
+                    let blocks = p.layout.width.div_ceil(k) * p.layout.height.div_ceil(k);
+                    let stride = ((blocks as f64 / 2000.0).sqrt() as usize).max(2);
+                    block_stats(p, k, stride, (&self.curves.0, &self.curves.1))
+                }
                 _ => Vec::new(),
             };
             let model = NoiseModel::fit(&blocks, &f);
-            blended = model.as_ref().map(|model| {
-                let keep = self.masked_blocks.as_deref();
-                model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
-            });
+            blended = model
+                .as_ref()
+                .map(|model| {
+                    let keep = self.masked_blocks.as_deref();
+                    model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
+                })
+                // A photo whose blend changes nothing (no noise measured: most camera JPEGs) takes the plain path.
+                .filter(|b| b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND));
             use_blend = blended.is_some() || scale.iter().any(|&v| v != 1.0);
             noise = model;
         }

@@ -461,6 +461,36 @@ fn gather_blocks_dyn<'a, T: Sample>(
     }
 }
 
+/// Per-pixel quantile `q` (nearest rank: the sample at index `round((n − 1)·q)` of the sorted stack, NaN last) of a
+/// stack of equal-sized rasters; `q = 0.5` with an odd stack is [`stack_median`]'s value. Rows run in parallel.
+pub fn stack_quantile(frames: &[&Raster], q: f64) -> Raster {
+    assert!(!frames.is_empty(), "quantile of an empty stack");
+    let first = frames[0];
+    for f in frames {
+        assert_eq!(f.layout(), first.layout(), "stack of unequal rasters");
+    }
+    let n = frames.len();
+    let k = ((n - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    let mut out = Raster::filled(first.width, first.height, first.channels, 0.0);
+    let row_len = first.width * first.channels;
+    if row_len == 0 {
+        return out;
+    }
+    out.data
+        .par_chunks_mut(row_len)
+        .enumerate()
+        .for_each(|(y, out_row)| {
+            let mut scratch = vec![0.0f32; n];
+            for (i, o) in out_row.iter_mut().enumerate() {
+                for (s, f) in scratch.iter_mut().zip(frames) {
+                    *s = f.row(y)[i];
+                }
+                *o = *scratch.select_nth_unstable_by(k, f32::total_cmp).1;
+            }
+        });
+    out
+}
+
 /// Per-sample median over a stack of rasters of the same layout (the temporal median).
 ///
 /// A sorting network over the frames, applied to many samples at once (no per-sample sort call). NaN is treated
@@ -581,6 +611,35 @@ pub(crate) mod reference {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn stack_quantile_against_sorting() {
+        let mut r = 0x1357_9BDFu32;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            (r % 1000) as f32 / 999.0
+        };
+        for n in [1usize, 2, 5, 7, 13] {
+            let frames: Vec<Raster> = (0..n)
+                .map(|_| Raster::from_fn(7, 3, 3, |_, _, _| next()))
+                .collect();
+            let refs: Vec<&Raster> = frames.iter().collect();
+            for q in [0.0, 0.3, 0.5, 0.675, 1.0] {
+                let got = stack_quantile(&refs, q);
+                for i in 0..got.data.len() {
+                    let mut v: Vec<f32> = frames.iter().map(|f| f.data[i]).collect();
+                    v.sort_by(f32::total_cmp);
+                    let k = ((n - 1) as f64 * q).round() as usize;
+                    assert_eq!(got.data[i], v[k], "n {n} q {q} i {i}");
+                }
+            }
+            if n % 2 == 1 {
+                assert_eq!(stack_quantile(&refs, 0.5), stack_median(&refs));
+            }
+        }
+    }
 
     #[test]
     fn median_even_and_odd() {
