@@ -92,6 +92,23 @@ fn water_presets_and_coefficients_parse() {
     assert_eq!(d.exposure, Exposure::Centre);
 }
 
+/// Correct the simulated dive written at `dive` into `out` with `opts` (inputs, output, contamination and transfer
+/// filled in from the dive).
+fn correct_dive(sim: &Simulation, dive: &std::path::Path, out: &std::path::Path, opts: Options) {
+    correct_mission(
+        &Options {
+            water_column: Some(dive.join("water")),
+            survey: Some(dive.join("survey")),
+            out: Some(out.to_path_buf()),
+            contamination: Some(sim.contamination),
+            transfer: sim.encode,
+            ..opts
+        },
+        &Silent,
+    )
+    .unwrap();
+}
+
 /// (albedo error, residual pattern) of raw, paper as published and the default on `sim`.
 fn scores(sim: &Simulation) -> [(f64, f64); 3] {
     let d = tempfile::tempdir().unwrap();
@@ -100,19 +117,15 @@ fn scores(sim: &Simulation) -> [(f64, f64); 3] {
     let mut sets = vec![("raw".to_string(), dive.join("survey"))];
     for (label, method) in [("paper", Method::Paper), ("default", Method::default())] {
         let out = d.path().join(label);
-        correct_mission(
-            &Options {
-                water_column: Some(dive.join("water")),
-                survey: Some(dive.join("survey")),
-                out: Some(out.clone()),
-                contamination: Some(sim.contamination),
-                transfer: sim.encode,
+        correct_dive(
+            sim,
+            &dive,
+            &out,
+            Options {
                 method,
                 ..Options::default()
             },
-            &Silent,
-        )
-        .unwrap();
+        );
         sets.push((label.to_string(), out));
     }
     let ev = evaluate(&sets, Some(&dive), None, &EvalSettings::default()).unwrap();
@@ -152,19 +165,15 @@ fn the_noise_aware_blend_lowers_the_albedo_error_and_keeps_nodules_dark() {
     let mut sets = Vec::new();
     for (label, denoise) in [("blend", true), ("plain", false)] {
         let out = d.path().join(label);
-        correct_mission(
-            &Options {
-                water_column: Some(dive.join("water")),
-                survey: Some(dive.join("survey")),
-                out: Some(out.clone()),
-                contamination: Some(sim.contamination),
-                transfer: sim.encode,
+        correct_dive(
+            &sim,
+            &dive,
+            &out,
+            Options {
                 denoise,
                 ..Options::default()
             },
-            &Silent,
-        )
-        .unwrap();
+        );
         sets.push((label.to_string(), out));
     }
     let ev = evaluate(&sets, Some(&dive), None, &EvalSettings::default()).unwrap();

@@ -141,20 +141,19 @@ pub fn correct_with_offset<T: Sample>(
                     None => {
                         correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
                     }
-                    Some(b) => blend_row_dispatch(
+                    Some(blend) => blend_row_dispatch(
                         row,
-                        frow,
-                        fx,
-                        lx,
-                        wx,
-                        &tx,
-                        (t.i0 as usize, t.i1 as usize, t.t),
-                        b,
-                        c,
-                        floor,
-                        srow,
-                        s_linear,
-                        curve,
+                        RowScratch { frow, fx, lx, wx },
+                        &BlendRow {
+                            tx: &tx,
+                            rows: (t.i0 as usize, t.i1 as usize, t.t),
+                            blend,
+                            c,
+                            floor,
+                            srow,
+                            s_linear,
+                            curve,
+                        },
                     ),
                 }
             },
@@ -399,81 +398,60 @@ fn correct_row<T: Sample>(
 /// most 0.1 % of a pixel's detail).
 pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
 
-/// One row with a [`Blend`]: `F` (floored), and the blend's level and weight, upsampled along the row into `fx`,
-/// `lx`, `wx` (`frow` holds `F` already interpolated between block rows; `rows` are the two block rows and the
-/// weight between them), then [`correct_row_blend`]. Runs the AVX2 build where the CPU has it (IEEE arithmetic, no
-/// fused operations: the same bits either way).
-#[allow(clippy::too_many_arguments)]
-#[inline]
-fn blend_row_dispatch<T: Sample>(
-    row: &mut [T],
-    frow: &mut [f32],
-    fx: &mut [f32],
-    lx: &mut [f32],
-    wx: &mut [f32],
-    tx: &[Tap],
+/// What a row with a [`Blend`] reads: the taps along x, the two block rows and the weight between them, the blend,
+/// the channel count, the floor of `F`, the row of `S` and the curve.
+struct BlendRow<'a> {
+    tx: &'a [Tap],
     rows: (usize, usize, f32),
-    blend: Blend,
+    blend: Blend<'a>,
     c: usize,
     floor: f32,
-    srow: Option<&[u16]>,
-    s_linear: &[f32],
-    curve: &Curve,
-) -> CorrectStats {
+    srow: Option<&'a [u16]>,
+    s_linear: &'a [f32],
+    curve: &'a Curve,
+}
+
+/// A row's scratch: `frow` (`F` interpolated between block rows, on entry), and `fx`, `lx`, `wx` (`F`, the blend's
+/// level and weight upsampled along the row).
+struct RowScratch<'b> {
+    frow: &'b mut [f32],
+    fx: &'b mut [f32],
+    lx: &'b mut [f32],
+    wx: &'b mut [f32],
+}
+
+/// One row with a [`Blend`]: `F` (floored) and the blend's level and weight upsampled along the row, then
+/// [`correct_row_blend`]. Runs the AVX2 build where the CPU has it (IEEE arithmetic, no fused operations: the same
+/// bits either way).
+#[inline]
+fn blend_row_dispatch<T: Sample>(row: &mut [T], s: RowScratch, r: &BlendRow) -> CorrectStats {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
-        return unsafe {
-            blend_row_avx2(
-                row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
-            )
-        };
+        return unsafe { blend_row_avx2(row, s, r) };
     }
-    blend_row_portable(
-        row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
-    )
+    blend_row_portable(row, s, r)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn blend_row_avx2<T: Sample>(
-    row: &mut [T],
-    frow: &mut [f32],
-    fx: &mut [f32],
-    lx: &mut [f32],
-    wx: &mut [f32],
-    tx: &[Tap],
-    rows: (usize, usize, f32),
-    blend: Blend,
-    c: usize,
-    floor: f32,
-    srow: Option<&[u16]>,
-    s_linear: &[f32],
-    curve: &Curve,
-) -> CorrectStats {
-    blend_row_portable(
-        row, frow, fx, lx, wx, tx, rows, blend, c, floor, srow, s_linear, curve,
-    )
+unsafe fn blend_row_avx2<T: Sample>(row: &mut [T], s: RowScratch, r: &BlendRow) -> CorrectStats {
+    blend_row_portable(row, s, r)
 }
 
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn blend_row_portable<T: Sample>(
-    row: &mut [T],
-    frow: &mut [f32],
-    fx: &mut [f32],
-    lx: &mut [f32],
-    wx: &mut [f32],
-    tx: &[Tap],
-    rows: (usize, usize, f32),
-    blend: Blend,
-    c: usize,
-    floor: f32,
-    srow: Option<&[u16]>,
-    s_linear: &[f32],
-    curve: &Curve,
-) -> CorrectStats {
+fn blend_row_portable<T: Sample>(row: &mut [T], s: RowScratch, r: &BlendRow) -> CorrectStats {
+    let RowScratch { frow, fx, lx, wx } = s;
+    let BlendRow {
+        tx,
+        rows,
+        blend,
+        c,
+        floor,
+        srow,
+        s_linear,
+        curve,
+    } = *r;
     let floored_pixels = expand_any(frow, fx, tx, c, floor);
     // Where the blend would change nothing (w ≥ 1 − NEGLIGIBLE_BLEND in both block rows: well-lit or noise-free
     // photos, e.g. most camera JPEGs) and S is not scaled, the plain vectorised row.

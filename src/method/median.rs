@@ -472,10 +472,20 @@ pub fn stack_quantile(frames: &[&Raster], q: f64) -> Raster {
     let n = frames.len();
     let k = ((n - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
     let mut out = Raster::filled(first.width, first.height, first.channels, 0.0);
-    let row_len = first.width * first.channels;
+    per_sample(frames, &mut out, |v| {
+        *v.select_nth_unstable_by(k, f32::total_cmp).1
+    });
+    out
+}
+
+/// `out` = `of(samples)` at every position, `samples` being the stack's values there (in a scratch buffer the
+/// function may reorder). Rows run in parallel.
+fn per_sample(frames: &[&Raster], out: &mut Raster, of: impl Fn(&mut [f32]) -> f32 + Sync) {
+    let row_len = out.width * out.channels;
     if row_len == 0 {
-        return out;
+        return;
     }
+    let n = frames.len();
     out.data
         .par_chunks_mut(row_len)
         .enumerate()
@@ -485,10 +495,9 @@ pub fn stack_quantile(frames: &[&Raster], q: f64) -> Raster {
                 for (s, f) in scratch.iter_mut().zip(frames) {
                     *s = f.row(y)[i];
                 }
-                *o = *scratch.select_nth_unstable_by(k, f32::total_cmp).1;
+                *o = of(&mut scratch);
             }
         });
-    out
 }
 
 /// Per-sample median over a stack of rasters of the same layout (the temporal median).
@@ -510,18 +519,7 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
     // NaN and −0 order differently under `total_cmp` than under `<`: those (rare) stacks take the scalar path.
     let odd = |v: &f32| v.is_nan() || (*v == 0.0 && v.is_sign_negative());
     if n > NETWORK_MAX || frames.iter().any(|f| f.data.iter().any(odd)) {
-        out.data
-            .par_chunks_mut(row_len)
-            .enumerate()
-            .for_each(|(y, out_row)| {
-                let mut scratch = vec![0.0f32; n];
-                for (i, o) in out_row.iter_mut().enumerate() {
-                    for (s, f) in scratch.iter_mut().zip(frames) {
-                        *s = f.row(y)[i];
-                    }
-                    *o = median_of_f32(&mut scratch);
-                }
-            });
+        per_sample(frames, &mut out, median_of_f32);
         return out;
     }
     let net = prune_network(&sorting_network(n), &median_positions(n));
