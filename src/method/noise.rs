@@ -139,10 +139,14 @@ impl NoiseModel {
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             let n = pts.len();
             let dim = &pts[..(n / 10).max(5)];
-            let bright: Vec<(f32, f32, f32)> = pts[n - (n / 4).max(5)..]
+            let top = &pts[n - (n / 4).max(5)..];
+            // A channel that gets no light anywhere (its brightest quarter's median F under MIN_LIT_F) has no
+            // measurable texture: dividing by a near-zero F² would make one up.
+            let unlit = top[top.len() / 2].0 < MIN_LIT_F;
+            let bright: Vec<(f32, f32, f32)> = top
                 .iter()
                 .copied()
-                .filter(|p| p.0 > 0.0)
+                .filter(|p| p.0 > 0.0 && !unlit)
                 .collect();
             let median_of = |mut v: Vec<f32>| {
                 if v.is_empty() {
@@ -248,6 +252,11 @@ impl NoiseModel {
         }
     }
 }
+
+/// Smallest median `F` of a channel's brightest quarter of blocks for its texture `τ²` to be measured (a channel
+/// with no light at all, e.g. red over many metres of water, would otherwise divide its variance by a near-zero
+/// `F²`).
+pub const MIN_LIT_F: f32 = 1e-3;
 
 /// Smallest block level `A_low` the blend divides by.
 pub const LEVEL_MIN: f32 = 1e-3;
@@ -410,6 +419,10 @@ mod tests {
         let (s2, t2) = (m.noise_var[0], m.texture_var[0]);
         assert!((s2.sqrt() / sigma - 1.0).abs() < 0.15, "σ {}", s2.sqrt());
         assert!((t2.sqrt() / tau - 1.0).abs() < 0.15, "τ {}", t2.sqrt());
+        // The same blocks under a channel with no light (F ~ 1e-5): no texture is made up from dividing by F².
+        let dark = Raster::from_fn(f.width, f.height, 1, |x, _, _| 1e-5 * (1.0 + x as f32));
+        let m = NoiseModel::fit(&blocks, &dark).expect("enough blocks");
+        assert_eq!(m.texture_var[0], 0.0);
     }
 
     #[test]
