@@ -572,3 +572,116 @@ fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
     }
     out
 }
+
+#[test]
+fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
+    // The simulator's photos declare their curve (PNG sRGB chunk or gAMA 1.0). With no --transfer, correct takes
+    // it from the first survey photo, says so, records it, and writes the same bytes as when told the curve.
+    let d = tempfile::tempdir().unwrap();
+    for (encode, said) in [("srgb", "PNG sRGB chunk"), ("linear", "PNG gAMA 1.0")] {
+        let dive = d.path().join(format!("dive-{encode}"));
+        let dive_s = dive.to_str().unwrap();
+        let o = abysslight(
+            &[
+                "simulate",
+                "--out",
+                dive_s,
+                "--frames",
+                "8",
+                "--water-column",
+                "3",
+                "--size",
+                "96x64",
+                "--encode",
+                encode,
+            ],
+            d.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (water, survey) = (format!("{dive_s}/water"), format!("{dive_s}/survey"));
+        let auto = format!("{dive_s}-auto");
+        let told = format!("{dive_s}-told");
+        let o = abysslight(
+            &[
+                "correct",
+                "--water-column",
+                &water,
+                "--survey",
+                &survey,
+                "--out",
+                &auto,
+            ],
+            d.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            stderr(&o).contains(&format!("camera curve {encode}: {said}")),
+            "{}",
+            stderr(&o)
+        );
+        let report = std::fs::read_to_string(format!("{auto}/_abysslight/report.json")).unwrap();
+        assert!(report.contains(said), "{report}");
+        let o = abysslight(
+            &[
+                "correct",
+                "--water-column",
+                &water,
+                "--survey",
+                &survey,
+                "--out",
+                &told,
+                "--transfer",
+                encode,
+            ],
+            d.path(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        for i in 1..=8 {
+            let name = format!("{i:04}.png");
+            assert_eq!(
+                std::fs::read(format!("{auto}/{name}")).unwrap(),
+                std::fs::read(format!("{told}/{name}")).unwrap(),
+                "{encode} {name}"
+            );
+        }
+    }
+    // An explicit curve wins over what the files say, and auto can be asked for by name.
+    let dive_s = d.path().join("dive-srgb");
+    let survey = format!("{}/survey", dive_s.display());
+    let o = abysslight(
+        &[
+            "correct",
+            "--survey",
+            &survey,
+            "--out",
+            "lin",
+            "--transfer",
+            "linear",
+            "--dry-run",
+        ],
+        d.path(),
+    );
+    assert!(
+        o.status.success() && stdout(&o).contains("transfer linear"),
+        "{}",
+        stdout(&o)
+    );
+    let o = abysslight(
+        &[
+            "correct",
+            "--survey",
+            &survey,
+            "--out",
+            "a",
+            "--transfer",
+            "auto",
+            "--dry-run",
+        ],
+        d.path(),
+    );
+    assert!(
+        stdout(&o).contains("transfer auto, srgb: PNG sRGB chunk"),
+        "{}",
+        stdout(&o)
+    );
+}

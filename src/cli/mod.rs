@@ -358,12 +358,15 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_IN)]
     mask_auto: bool,
 
-    /// How stored values relate to light: srgb (most JPEGs), linear or gamma:G [default: linear].
+    /// How stored values relate to light: auto, srgb (most JPEGs), linear or gamma:G [default: auto].
     ///
-    /// srgb for most JPEG cameras, linear for machine-vision cameras and RAW conversions, gamma:G for a pure
-    /// power law. Estimation and correction run in linear light; the output is stored with the same curve.
-    #[arg(long, value_name = "CURVE", help_heading = H_IN)]
-    transfer: Option<Transfer>,
+    /// auto reads what the first survey photo's file declares (PNG cICP/sRGB/gAMA, an ICC profile, EXIF
+    /// ColorSpace); a JPEG that declares nothing is taken as srgb, any other file as linear. The run prints the
+    /// curve it took and why, and report.json records it. srgb for most JPEG cameras, linear for machine-vision
+    /// cameras and RAW conversions, gamma:G for a pure power law. Estimation and correction run in linear light;
+    /// the output is stored with the same curve.
+    #[arg(long, value_name = "CURVE", value_parser = parse_transfer, help_heading = H_IN)]
+    transfer: Option<TransferArg>,
 
     /// Options from a TOML file (keys as the long flags); flags override it.
     ///
@@ -583,6 +586,18 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         Some(p) => Options::from_toml_file(p)?,
         None => Options::default(),
     };
+    // A config file that names the curve (`transfer` or `transfer-auto`) keeps it; otherwise the command line's
+    // default, auto, applies.
+    let transfer_in_config = args.config.as_ref().is_some_and(|p| {
+        std::fs::read_to_string(p)
+            .ok()
+            .and_then(|t| t.parse::<toml::Table>().ok())
+            .is_some_and(|t| {
+                ["transfer", "transfer-auto", "transfer_auto"]
+                    .iter()
+                    .any(|k| t.contains_key(*k))
+            })
+    });
     macro_rules! set {
         ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
     }
@@ -600,8 +615,15 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     if let Some(v) = args.poll_interval {
         o.poll_interval = v;
     }
-    if let Some(t) = args.transfer {
-        o.transfer = t;
+    match args.transfer {
+        Some(TransferArg(Some(t))) => {
+            o.transfer = t;
+            o.transfer_auto = false;
+        }
+        // `auto`, or no --transfer and none in a --config file: read it from the photos.
+        Some(TransferArg(None)) => o.transfer_auto = true,
+        None if !transfer_in_config => o.transfer_auto = true,
+        None => {}
     }
     if let Some(m) = args.method {
         o.method = m;
@@ -1093,4 +1115,16 @@ fn parse_scale(s: &str) -> Result<ScaleArg, String> {
         .parse::<f32>()
         .map(|v| ScaleArg(Some(v)))
         .map_err(|_| format!("expected a number such as 0.8, or auto, got {s:?}"))
+}
+
+/// `--transfer`: a curve, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct TransferArg(Option<Transfer>);
+
+/// `--transfer`: `auto` or a curve (`srgb`, `linear`, `gamma:G`).
+fn parse_transfer(s: &str) -> Result<TransferArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(TransferArg(None));
+    }
+    s.parse::<Transfer>().map(|t| TransferArg(Some(t)))
 }

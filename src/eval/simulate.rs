@@ -1263,8 +1263,27 @@ impl Dive {
             let d = out.join(dir);
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
-        jobs.par_iter()
-            .try_for_each(|(path, photo)| write_atomic(photo, path, settings))?;
+        // The camera's photos declare their curve, as a camera's files do (PNG `sRGB` chunk, or `gAMA` 1.0 for a
+        // linear camera; a power law as its `gAMA`), so `correct --transfer auto` reads it; truth files are plain.
+        let declared = crate::io::metadata::Metadata {
+            png_chunks: vec![match self.truth.settings.encode {
+                Transfer::Srgb => (*b"sRGB", vec![0]),
+                Transfer::Linear => (*b"gAMA", 100_000u32.to_be_bytes().to_vec()),
+                Transfer::Gamma(g) => (
+                    *b"gAMA",
+                    ((100_000.0 / g).round() as u32).to_be_bytes().to_vec(),
+                ),
+            }],
+            ..Default::default()
+        };
+        let camera = [out.join("water"), out.join("survey")];
+        jobs.par_iter().try_for_each(|(path, photo)| {
+            if camera.iter().any(|d| path.starts_with(d)) {
+                crate::io::write_atomic_with_metadata(photo, path, settings, &declared).map(|_| ())
+            } else {
+                write_atomic(photo, path, settings)
+            }
+        })?;
         let json = out.join("truth").join("dive.json");
         crate::io::write_with(&json, |w| {
             serde_json::to_writer_pretty(w, &self.truth).map_err(|e| Error::Encode {

@@ -8,6 +8,7 @@ pub mod metadata;
 pub mod paths;
 pub mod pnm;
 pub mod scatter;
+pub mod transfer;
 
 use std::fs::File;
 use std::io::{BufWriter, Write};

@@ -51,6 +51,12 @@ pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report
 fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let started = Instant::now();
     let plan = Plan::new(opts, progress)?;
+    // --transfer auto: the curve the first survey photo declares, for the whole mission.
+    let (resolved, transfer_assumed) = resolve_transfer(opts, &plan)?;
+    let opts = &resolved;
+    if let Some(why) = &transfer_assumed {
+        progress.stage(&format!("camera curve {why}; --transfer sets it"));
+    }
     plan.create_work_dir()?;
     // One run per --out (per shard), the same options as earlier runs there, stale temp files removed
     // (src/run/guard.rs). Held until the report is written.
@@ -118,6 +124,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         tool: "abysslight".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         options: opts.clone(),
+        transfer_assumed,
         window: plan.window,
         layout: outcome.layout,
         scatter,
@@ -143,6 +150,30 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     };
     report.write(opts, plan.work_dir.as_deref())?;
     Ok(report)
+}
+
+/// `opts` with `--transfer auto` resolved from the first survey photo ([`crate::io::transfer::assume`]), and what
+/// was assumed and why; `opts` unchanged (and `None`) without it.
+fn resolve_transfer(opts: &Options, plan: &Plan) -> Result<(Options, Option<String>)> {
+    if !opts.transfer_auto {
+        return Ok((opts.clone(), None));
+    }
+    let assumed = match plan.found.photos.first() {
+        Some(first) => crate::io::transfer::assume(&first.path)?,
+        None => crate::io::transfer::Assumed {
+            transfer: crate::method::transfer::Transfer::Linear,
+            why: "no photo file to read before the run (standard input or an empty folder)".into(),
+        },
+    };
+    let why = format!("{}: {}", assumed.transfer, assumed.why);
+    Ok((
+        Options {
+            transfer: assumed.transfer,
+            transfer_auto: false,
+            ..opts.clone()
+        },
+        Some(why),
+    ))
 }
 
 /// `overview.png` (the health series over the mission) and `flagged.png` (a few flagged photos beside their

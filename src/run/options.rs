@@ -117,8 +117,14 @@ pub struct Options {
     /// The union of all shards' outputs equals a single run. Default: none (the whole survey).
     pub shard: Option<Shard>,
     /// How stored values relate to light: `srgb`, `linear` or `gamma:G`. Estimation and correction run in
-    /// linear light. Default: linear.
+    /// linear light. Default: linear (the command line's default is `auto`, see `transfer_auto`).
     pub transfer: Transfer,
+    /// Take the curve from what the first survey photo's file declares (PNG `cICP`/`sRGB`/`gAMA`, ICC profile,
+    /// EXIF `ColorSpace`; a JPEG without any is sRGB, anything else linear: [`crate::io::transfer`]) instead of
+    /// `transfer`; the run says what it assumed and why, and records the curve in its report. Default: false
+    /// (the command line's `--transfer auto`, its default, sets it).
+    #[serde(default)]
+    pub transfer_auto: bool,
     /// Mask image, the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of every
     /// median; `F` beneath them is interpolated from the seafloor around them and they are corrected with it.
     /// Default: none.
@@ -214,6 +220,7 @@ impl Default for Options {
             photo_gain: true,
             backscatter_scale: default_scale(),
             denoise: true,
+            transfer_auto: false,
         }
     }
 }

@@ -262,7 +262,16 @@ impl Plan {
             opts.downsample,
             opts.downsample,
             opts.seafloor_colour,
-            opts.transfer,
+            if opts.transfer_auto {
+                match self.found.photos.first() {
+                    Some(e) => crate::io::transfer::assume(&e.path).map_or("auto".into(), |a| {
+                        format!("auto, {}: {}", a.transfer, a.why)
+                    }),
+                    None => "auto".into(),
+                }
+            } else {
+                opts.transfer.to_string()
+            },
             opts.factor_floor
         ));
         s

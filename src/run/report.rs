@@ -121,8 +121,10 @@ pub struct Report {
     pub tool: String,
     /// Version of abysslight that made the report.
     pub version: String,
-    /// Every option of the run.
+    /// Every option of the run (with `--transfer auto` resolved to the curve taken).
     pub options: Options,
+    /// With `--transfer auto`: the curve taken and why (what the first survey photo's file declares).
+    pub transfer_assumed: Option<String>,
     /// The window `n` used.
     pub window: WindowChoice,
     /// Size of the mission's photos.

@@ -36,7 +36,7 @@
 //! Limits of the formats: a JPEG APP1 segment holds at most 65 533 bytes, so an EXIF block or XMP packet larger
 //! than that is not carried into a JPEG (reported by [`Metadata::embed`]).
 
-mod ifd;
+pub(crate) mod ifd;
 mod jpeg;
 mod png;
 #[cfg(test)]
