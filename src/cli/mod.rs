@@ -408,9 +408,9 @@ struct CorrectArgs {
 
     /// How the lighting is estimated: abyss, paper, mean or polynomial [default: abyss].
     ///
-    /// abyss is the paper's sliding-window F with a per-photo gain against its window, the water-column S scaled
-    /// to the survey's backscatter, a floor relative to the photo's lit level with a smooth hand-over, and dim
-    /// regions blended towards their local level by their measured signal-to-noise ratio (docs/evaluation.md);
+    /// abyss is the paper's sliding-window F (with --contamination C: the window's (1 + C)/2 quantile) with a
+    /// per-photo gain against its window, a floor relative to the photo's lit level with a smooth hand-over, and
+    /// dim regions blended towards their local level by their measured signal-to-noise ratio (docs/evaluation.md);
     /// paper is Köser et al. as published
     /// (absolute --factor-floor); the baselines are mean (divide by the mission's mean image) and polynomial
     /// (per-photo robust polynomial fit of log intensity).

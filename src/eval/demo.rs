@@ -41,8 +41,8 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
 
 - **method**: `raw` is the uncorrected photos; `mean` divides by the mission's mean image; `polynomial` fits a
   robust polynomial of log intensity per photo; `paper` is Köser et al. as published; `abyss` (abysslight's
-  default) is the paper's window plus a per-photo gain, the water-column backscatter scaled to the survey's, a
-  floor relative to the photo's lit level and a noise-aware blend of dim regions.
+  default) is the paper's window (its (1 + c)/2 quantile for a contamination c of dark nodules) plus a per-photo
+  gain, a floor relative to the photo's lit level and a noise-aware blend of dim regions.
 - **photos**: photos scored.
 - **albedo error**: sum of |corrected - s*true albedo| / sum of s*true albedo over every sample of every photo,
   with s the least-squares scale per channel (so a white balance is not counted as error). 0 is perfect.
