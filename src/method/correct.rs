@@ -184,7 +184,7 @@ fn correct_row_dispatch<T: Sample>(
         // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
         return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, s_linear, curve) };
     }
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve)
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, false)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -201,7 +201,7 @@ unsafe fn correct_row_avx2<T: Sample>(
     s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve)
+    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, true)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -216,6 +216,7 @@ fn correct_row_portable<T: Sample>(
     srow: Option<&[u16]>,
     s_linear: &[f32],
     curve: &Curve,
+    simd: bool,
 ) -> CorrectStats {
     // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
     // made a constant for RGB and grey so the per-pixel loop unrolls.
@@ -226,7 +227,7 @@ fn correct_row_portable<T: Sample>(
     };
     CorrectStats {
         floored_pixels,
-        clipped_samples: correct_row(row, fx, srow, s_linear, curve),
+        clipped_samples: correct_row(row, fx, srow, s_linear, curve, simd),
     }
 }
 
@@ -350,6 +351,7 @@ fn correct_row<T: Sample>(
     q: Option<&[u16]>,
     s_linear: &[f32],
     curve: &Curve,
+    simd: bool,
 ) -> u64 {
     // Counted in `u32` (a row has fewer than 2³² samples): a `u64` counter made the compiler vectorise the whole
     // loop 4 lanes wide (to match the 64-bit accumulator) instead of 8.
@@ -381,7 +383,19 @@ fn correct_row<T: Sample>(
             }
         }
     } else {
-        for (i, (v, &f)) in row.iter_mut().zip(f).enumerate() {
+        // Eight samples at a time with AVX2 gathers (the same bits: tested); the rest one by one.
+        #[cfg(target_arch = "x86_64")]
+        let done = if simd {
+            // SAFETY: `simd` is only true on the AVX2 path (the CPU was checked), and the curve is not linear.
+            let (n, c) = unsafe { curve_row_avx2(row, f, q, s_linear, curve) };
+            clipped += c;
+            n
+        } else {
+            0
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let done = 0;
+        for (i, (v, &f)) in row.iter_mut().zip(f).enumerate().skip(done) {
             let s = q.map_or(0.0, |q| s_linear[q[i] as usize]);
             let a = (curve.linear(v.to_u16()) - s) / f;
             #[allow(clippy::manual_range_contains)]
@@ -392,6 +406,57 @@ fn correct_row<T: Sample>(
         }
     }
     clipped as u64
+}
+
+/// The non-linear branch of [`correct_row`] for the first `8·⌊len/8⌋` samples, 8 at a time: `to_lin` and `S`
+/// gathered, `A = (I − S)/F`, codes by [`Curve::codes_avx2`]. Returns the samples done and the clipped count.
+///
+/// # Safety
+/// The CPU must have AVX2 and `curve` must not be linear.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn curve_row_avx2<T: Sample>(
+    row: &mut [T],
+    f: &[f32],
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> (usize, u32) {
+    use std::arch::x86_64::*;
+    let n = row.len() / 8 * 8;
+    let to_lin = curve.linear_table();
+    let mut clipped = 0u32;
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    for k in (0..n).step_by(8) {
+        let mut codes = [0i32; 8];
+        for (c, v) in codes.iter_mut().zip(&row[k..k + 8]) {
+            *c = v.to_u16() as i32;
+        }
+        let lin =
+            _mm256_i32gather_ps::<4>(to_lin.as_ptr(), _mm256_loadu_si256(codes.as_ptr().cast()));
+        let s = match q {
+            Some(q) => {
+                let mut qi = [0i32; 8];
+                for (d, &v) in qi.iter_mut().zip(&q[k..k + 8]) {
+                    *d = v as i32;
+                }
+                _mm256_i32gather_ps::<4>(s_linear.as_ptr(), _mm256_loadu_si256(qi.as_ptr().cast()))
+            }
+            None => zero,
+        };
+        let a = _mm256_div_ps(_mm256_sub_ps(lin, s), _mm256_loadu_ps(f[k..k + 8].as_ptr()));
+        let out = _mm256_or_ps(
+            _mm256_cmp_ps::<_CMP_LT_OQ>(a, zero),
+            _mm256_cmp_ps::<_CMP_GT_OQ>(a, one),
+        );
+        clipped += (_mm256_movemask_ps(out) as u32).count_ones();
+        let mut got = [0i32; 8];
+        _mm256_storeu_si256(got.as_mut_ptr().cast(), curve.codes_avx2(a));
+        for (v, &c) in row[k..k + 8].iter_mut().zip(&got) {
+            *v = T::from_code(c as u16);
+        }
+    }
+    (n, clipped)
 }
 
 /// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
@@ -464,7 +529,7 @@ fn blend_row_portable<T: Sample>(row: &mut [T], s: RowScratch, r: &BlendRow) -> 
     if unscaled && negligible {
         return CorrectStats {
             floored_pixels,
-            clipped_samples: correct_row(row, fx, srow, s_linear, curve),
+            clipped_samples: correct_row(row, fx, srow, s_linear, curve, false),
         };
     }
     if let Some(fields) = blend.fields {
@@ -951,10 +1016,31 @@ mod tests {
                 let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
                 let sa =
                     correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, table, &curve);
-                let sb =
-                    correct_row_portable(&mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve);
+                let sb = correct_row_portable(
+                    &mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve, false,
+                );
                 assert_eq!(a, b);
                 assert_eq!(sa, sb);
+            }
+        }
+        // 16-bit codes through the sRGB and a gamma curve (the AVX2 path gathers from 65536-entry tables).
+        let row16: Vec<u16> = (0..width * c)
+            .map(|i| ((i * 7919) % 65536) as u16)
+            .collect();
+        for t in [Transfer::Srgb, Transfer::Gamma(2.2)] {
+            let curve = Curve::new(t, 65536);
+            let prepared = Prepared::from_raster(&srow, t);
+            let table = prepared.linear_table().unwrap_or(&[]);
+            for s in [None, Some(prepared.row(0))] {
+                let (mut a, mut b) = (row16.clone(), row16.clone());
+                let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
+                let sa =
+                    correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, table, &curve);
+                let sb = correct_row_portable(
+                    &mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve, false,
+                );
+                assert_eq!(a, b, "{t:?}");
+                assert_eq!(sa, sb, "{t:?}");
             }
         }
     }

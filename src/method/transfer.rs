@@ -119,6 +119,10 @@ pub struct Curve {
     /// Bits dropped from a float's representation to get its bucket, and the bucket of `thresholds[0]`.
     shift: u32,
     base: u32,
+    /// `start` widened to `i32`, for the AVX2 gather of [`Curve::codes_avx2`].
+    start32: Vec<i32>,
+    /// Most steps up the threshold table any bucket needs (so the vector search can run a fixed number).
+    max_steps: usize,
 }
 
 impl Curve {
@@ -156,15 +160,62 @@ impl Curve {
             }
             _ => (0, Vec::new()),
         };
+        let max_steps = (0..start.len())
+            .map(|b| {
+                let next = start.get(b + 1).map_or(thresholds.len(), |&n| n as usize);
+                next - start[b] as usize
+            })
+            .max()
+            .unwrap_or(0);
         Curve {
             transfer,
             max,
             to_lin,
             thresholds,
+            start32: start.iter().map(|&v| v as i32).collect(),
             start,
             shift,
             base,
+            max_steps,
         }
+    }
+
+    /// [`Curve::code`] of 8 values at once, the same codes bit for bit (tested), for a non-linear curve. The
+    /// codes come back as `i32` lanes.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2, and the curve must not be linear (it has thresholds).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn codes_avx2(&self, l: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256i {
+        use std::arch::x86_64::*;
+        debug_assert!(!self.thresholds.is_empty());
+        let n = self.thresholds.len() as i32;
+        let nv = _mm256_set1_epi32(n);
+        // l ≥ thresholds[0] (false for NaN and everything below): otherwise the code is 0.
+        let valid = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GE_OQ>(
+            l,
+            _mm256_set1_ps(self.thresholds[0]),
+        ));
+        let b = _mm256_sub_epi32(
+            _mm256_srl_epi32(_mm256_castps_si256(l), _mm_cvtsi32_si128(self.shift as i32)),
+            _mm256_set1_epi32(self.base as i32),
+        );
+        // Buckets past the table: every threshold is below (the largest code).
+        let in_table = _mm256_cmpgt_epi32(_mm256_set1_epi32(self.start32.len() as i32), b);
+        let use_b = _mm256_and_si256(valid, in_table);
+        let bi = _mm256_and_si256(b, use_b);
+        let mut i = _mm256_i32gather_epi32::<4>(self.start32.as_ptr(), bi);
+        let last = _mm256_set1_epi32(n - 1);
+        for _ in 0..self.max_steps {
+            let idx = _mm256_min_epi32(i, last);
+            let t = _mm256_i32gather_ps::<4>(self.thresholds.as_ptr(), idx);
+            let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(t, l));
+            let step = _mm256_and_si256(below, _mm256_cmpgt_epi32(nv, i));
+            i = _mm256_sub_epi32(i, step);
+        }
+        let top = _mm256_blendv_epi8(nv, i, in_table);
+        _mm256_and_si256(top, valid)
     }
 
     /// The stored code nearest to `l` by binary search over the thresholds (the definition [`Curve::code`] must
@@ -191,6 +242,11 @@ impl Curve {
     /// The transfer this curve tabulates.
     pub fn transfer(&self) -> Transfer {
         self.transfer
+    }
+
+    /// Linear light of every stored code (empty for a linear curve).
+    pub fn linear_table(&self) -> &[f32] {
+        &self.to_lin
     }
 
     /// Linear light of a stored code.
@@ -240,6 +296,72 @@ impl Curve {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn vector_codes_equal_scalar_codes() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: vector codes not tested");
+            return;
+        }
+        use std::arch::x86_64::*;
+        let mut r = 0x2468_ACE1u32;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            r
+        };
+        for (t, levels) in [
+            (Transfer::Srgb, 256),
+            (Transfer::Srgb, 65536),
+            (Transfer::Gamma(2.2), 256),
+            (Transfer::Gamma(1.8), 65536),
+        ] {
+            let c = Curve::new(t, levels);
+            let mut vals: Vec<f32> = vec![
+                f32::NAN,
+                -f32::NAN,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                0.0,
+                -0.0,
+                -1.0,
+                1.0,
+                2.0,
+                1e-30,
+                f32::MIN_POSITIVE,
+                f32::MAX,
+            ];
+            for k in 0..c.thresholds.len() {
+                let th = c.thresholds[k];
+                vals.extend([
+                    th,
+                    f32::from_bits(th.to_bits() + 1),
+                    f32::from_bits(th.to_bits() - 1),
+                ]);
+            }
+            for _ in 0..20_000 {
+                vals.push((next() % 1_000_001) as f32 / 1_000_000.0 * 1.2 - 0.1);
+                vals.push(f32::from_bits(next()));
+            }
+            for chunk in vals.chunks_exact(8) {
+                let got: [i32; 8] = unsafe {
+                    let v = c.codes_avx2(_mm256_loadu_ps(chunk.as_ptr()));
+                    std::mem::transmute(v)
+                };
+                for (x, g) in chunk.iter().zip(got) {
+                    assert_eq!(
+                        g as u16,
+                        c.code(*x),
+                        "{t:?}/{levels}: {x:e} ({:#x})",
+                        x.to_bits()
+                    );
+                    assert_eq!(g as u32, c.code(*x) as u32);
+                }
+            }
+        }
+    }
 
     #[test]
     fn srgb_known_values_and_round_trip() {
