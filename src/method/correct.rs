@@ -59,7 +59,7 @@ pub struct Blend<'a> {
 }
 
 /// [`correct_in_place`] with a [`Blend`]: `S` scaled by `k`, and per pixel the blend of
-/// [`crate::method::noise::blend_pixel`]. With `blend: None` this is [`correct_in_place`], bit for bit.
+/// the per-pixel blend of [`Blended`]. With `blend: None` this is [`correct_in_place`], bit for bit.
 #[allow(clippy::too_many_arguments)]
 pub fn correct_with_offset<T: Sample>(
     samples: &mut [T],
@@ -545,7 +545,7 @@ fn blend_row_portable<T: Sample>(row: &mut [T], s: RowScratch, r: &BlendRow) -> 
 }
 
 /// [`correct_row`] with `S` scaled per channel and, with [`Blend::fields`], the noise-aware blend
-/// ([`blend_pixel`]) before the result is coded. `lx` and `wx` hold the blend's level and weight upsampled to the
+/// (the formula of [`Blended`]) before the result is coded. `lx` and `wx` hold the blend's level and weight upsampled to the
 /// row.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -629,7 +629,7 @@ fn scaled_row<T: Sample>(
     clipped as u64
 }
 
-/// The blend of [`blend_pixel`] over one row of `C`-channel pixels (the same formula, rearranged without the
+/// The blend of [`Blended`] over one row of `C`-channel pixels (its formula, rearranged without the
 /// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -845,7 +845,7 @@ mod tests {
     #[test]
     #[allow(clippy::needless_range_loop)] // per-channel formulas, written as in the docs
     fn blend_correction_matches_unfused_reference() {
-        // A = w·Â + (1 − w)·A_low·r per pixel (noise::blend_pixel), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
         // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
         let layout = Layout {
             width: 29,
@@ -995,6 +995,74 @@ mod tests {
                     .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
             }
         }
+    }
+
+    #[test]
+    fn blend_keeps_a_dark_nodule_dark_in_every_channel() {
+        // One pixel, three channels: green and blue well lit, red starved and noisy. A dark nodule (Â/A_low = 0.2 in
+        // green and blue): red takes the shared detail and stays dark too. Linear 16-bit codes, one block of 1 px.
+        let layout = Layout {
+            width: 1,
+            height: 1,
+            channels: 3,
+        };
+        let ahat = [0.30f64, 0.08, 0.085];
+        let f = [0.05f32, 1.0, 0.9];
+        let level = [0.4f32, 0.4, 0.42];
+        let weight = [0.1f32, 0.95, 0.9];
+        let var = [0.0004f32, 0.0001, 0.0001];
+        let prior = 10.0f32;
+        let codes: Vec<u16> = (0..3)
+            .map(|c| (ahat[c] * f[c] as f64 * 65535.0).round() as u16)
+            .collect();
+        let low = Raster::from_fn(1, 1, 3, |_, _, c| f[c]);
+        let fields = Blended {
+            level: Raster::from_fn(1, 1, 3, |_, _, c| level[c]),
+            weight: Raster::from_fn(1, 1, 3, |_, _, c| weight[c]),
+            noise_var: var.to_vec(),
+            prior_precision: prior,
+        };
+        let curve = Curve::new(Transfer::Linear, 65536);
+        let run = |fields: &Blended| {
+            let mut got = codes.clone();
+            let blend = Blend {
+                fields: Some(fields),
+                scatter_scale: &[1.0; 3],
+            };
+            correct_with_offset(&mut got, layout, None, &low, Some(blend), 1, 1e-6, &curve);
+            got
+        };
+        let got = run(&fields);
+        // Independent computation in f64, from the Â the codes carry.
+        let a: Vec<f64> = (0..3)
+            .map(|c| codes[c] as f64 / 65535.0 / f[c] as f64)
+            .collect();
+        let (mut num, mut den) = (prior as f64, prior as f64);
+        for c in 0..3 {
+            let p = ((f[c] * level[c]) as f64).powi(2) / var[c] as f64;
+            num += p * a[c] / level[c] as f64;
+            den += p;
+        }
+        let r = num / den;
+        for c in 0..3 {
+            let w = weight[c] as f64;
+            let want = (w * a[c] + (1.0 - w) * level[c] as f64 * r) * 65535.0;
+            assert!(
+                (got[c] as f64 - want).abs() <= 1.0,
+                "{c}: {} vs {want}",
+                got[c]
+            );
+        }
+        assert!(r < 0.25, "shared detail {r}");
+        assert!(got[0] as f64 / 65535.0 < 0.15, "red stays dark: {}", got[0]);
+        // With w = 1 everywhere the pixel is the plain correction.
+        let ones = Blended {
+            weight: Raster::filled(1, 1, 3, 1.0),
+            ..fields.clone()
+        };
+        let mut plain = codes.clone();
+        correct_in_place(&mut plain, layout, None, &low, 1, 1e-6, &curve);
+        assert_eq!(run(&ones), plain);
     }
 
     #[test]

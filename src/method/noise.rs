@@ -281,42 +281,6 @@ pub struct Blended {
     pub prior_precision: f32,
 }
 
-/// The blended albedo of one pixel (see [`Blended`]): `ahat`, `f`, `level` and `weight` per channel, in linear
-/// light, and `valid` (the sample was neither black nor clipped white: a clipped sample does not guide the other
-/// channels); writes the result into `out`.
-#[allow(clippy::too_many_arguments)]
-#[inline]
-pub fn blend_pixel(
-    ahat: &[f32],
-    f: &[f32],
-    level: &[f32],
-    weight: &[f32],
-    noise_var: &[f32],
-    valid: &[bool],
-    prior: f32,
-    out: &mut [f32],
-) {
-    let (mut num, mut den) = (prior, prior);
-    for ch in 0..ahat.len() {
-        let lv = level[ch].max(LEVEL_MIN);
-        let fl = f[ch] * lv;
-        let p = if !valid[ch] || !ahat[ch].is_finite() {
-            0.0
-        } else if noise_var[ch] > 0.0 {
-            fl * fl * (1.0 / noise_var[ch]).min(1e8)
-        } else {
-            fl * fl * 1e8
-        };
-        num += p * ahat[ch] / lv;
-        den += p;
-    }
-    let r = num / den;
-    for ch in 0..ahat.len() {
-        let w = weight[ch];
-        out[ch] = w * ahat[ch] + (1.0 - w) * level[ch].max(LEVEL_MIN) * r;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,45 +421,5 @@ mod tests {
         );
         assert_eq!(b.weight.data[2], 1.0);
         assert!((b.prior_precision - 0.16 / 0.04).abs() < 1e-3);
-    }
-
-    #[test]
-    fn blend_pixel_against_the_formula() {
-        // Three channels: green and blue well lit, red starved and noisy. A dark nodule (Â/A_low = 0.2 in green and
-        // blue): red takes the shared detail and stays dark too.
-        let ahat = [0.30f32, 0.08, 0.085];
-        let f = [0.05f32, 1.0, 0.9];
-        let level = [0.4f32, 0.4, 0.42];
-        let weight = [0.1f32, 0.95, 0.9];
-        let var = [0.0004f32, 0.0001, 0.0001];
-        let prior = 10.0;
-        let mut out = [0.0f32; 3];
-        blend_pixel(
-            &ahat, &f, &level, &weight, &var, &[true; 3], prior, &mut out,
-        );
-        // Independent computation in f64.
-        let (mut num, mut den) = (prior as f64, prior as f64);
-        for c in 0..3 {
-            let p = ((f[c] * level[c]) as f64).powi(2) / var[c] as f64;
-            num += p * ahat[c] as f64 / level[c] as f64;
-            den += p;
-        }
-        let r = num / den;
-        for c in 0..3 {
-            let want =
-                weight[c] as f64 * ahat[c] as f64 + (1.0 - weight[c] as f64) * level[c] as f64 * r;
-            assert!(
-                (out[c] as f64 - want).abs() < 1e-6,
-                "{c}: {} vs {want}",
-                out[c]
-            );
-        }
-        assert!(r < 0.25, "shared detail {r}");
-        assert!(out[0] < 0.15, "red stays dark: {}", out[0]);
-        // With w = 1 everywhere the pixel is the plain correction.
-        blend_pixel(
-            &ahat, &f, &level, &[1.0; 3], &var, &[true; 3], prior, &mut out,
-        );
-        assert_eq!(out, ahat);
     }
 }
