@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use image::ImageFormat;
+use image::{ImageDecoder, ImageFormat};
 
 use crate::error::{Error, Result};
 use crate::io::metadata::{ifd, Metadata};
@@ -32,17 +32,26 @@ pub struct Assumed {
     pub why: String,
 }
 
-/// The curve `path` declares (see the [module documentation](self)). Errors: the file cannot be read.
+/// The curve `path` declares (see the [module documentation](self)). Reads the file's header and metadata blocks
+/// only, not its pixels. Errors: the file cannot be opened.
 pub fn assume(path: &Path) -> Result<Assumed> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let format = image::guess_format(&bytes).ok();
+    let reader = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| Error::io(path, e))?;
+    let format = reader.format();
     let meta = match format {
         Some(ImageFormat::Jpeg | ImageFormat::Png | ImageFormat::Tiff) => {
-            Metadata::from_bytes(&bytes).unwrap_or_default()
+            Metadata::read(path).unwrap_or_default()
         }
         _ => Metadata::default(),
     };
-    Ok(from_metadata(&meta, format, sixteen_bit(&bytes, format)))
+    // The sample depth from the decoder's header (a JPEG is 8-bit, and its rule does not need it).
+    let sixteen = format != Some(ImageFormat::Jpeg)
+        && reader.into_decoder().is_ok_and(|d| {
+            let t = d.color_type();
+            t.bytes_per_pixel() / t.channel_count() == 2
+        });
+    Ok(from_metadata(&meta, format, sixteen))
 }
 
 /// [`assume`] from what was read: the metadata, the container format and whether the samples are 16-bit.
@@ -122,26 +131,6 @@ pub fn exif_colour_space(exif: &[u8]) -> Option<u32> {
         .uint(order)
 }
 
-/// Whether the file's samples are 16-bit, from the PNG header or the TIFF `BitsPerSample` tag (false otherwise).
-fn sixteen_bit(bytes: &[u8], format: Option<ImageFormat>) -> bool {
-    match format {
-        // IHDR: bit depth at byte 24.
-        Some(ImageFormat::Png) => bytes.get(24) == Some(&16),
-        Some(ImageFormat::Tiff) => {
-            let mut src: &[u8] = bytes;
-            let Ok((order, at)) = ifd::read_header(&mut src) else {
-                return false;
-            };
-            let keep = |depth: usize, tag: u16| depth == 0 && tag == 258;
-            ifd::read_ifd(&mut src, order, at, &keep, &mut Vec::new())
-                .ok()
-                .and_then(|(i, _)| i.get(258).map(|e| e.value.clone()))
-                .is_some_and(|v| v.len() >= 2 && order.u16(&v[..2]) == 16)
-        }
-        _ => false,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -199,6 +188,52 @@ mod tests {
         assert!(from_metadata(&none, png, false)
             .why
             .contains("no colour information"));
+    }
+
+    #[test]
+    fn undeclared_files_by_depth_and_format() {
+        use crate::io::{write_atomic, EncodeSettings};
+        use crate::method::raster::{Layout, Photo, Samples};
+        let d = tempfile::tempdir().unwrap();
+        let layout = Layout {
+            width: 8,
+            height: 8,
+            channels: 3,
+        };
+        let photo = |samples| Photo {
+            layout,
+            samples,
+            alpha: None,
+        };
+        let cases = [
+            (
+                "a.png",
+                Samples::U16(vec![1000; 192]),
+                Transfer::Linear,
+                "16-bit",
+            ),
+            (
+                "b.tif",
+                Samples::U16(vec![1000; 192]),
+                Transfer::Linear,
+                "16-bit",
+            ),
+            (
+                "c.png",
+                Samples::U8(vec![100; 192]),
+                Transfer::Linear,
+                "no colour information",
+            ),
+            ("d.jpg", Samples::U8(vec![100; 192]), Transfer::Srgb, "JPEG"),
+        ];
+        for (name, samples, want, why) in cases {
+            let p = d.path().join(name);
+            write_atomic(&photo(samples), &p, EncodeSettings::default()).unwrap();
+            let a = assume(&p).unwrap();
+            assert_eq!(a.transfer, want, "{name}: {a:?}");
+            assert!(a.why.contains(why), "{name}: {a:?}");
+        }
+        assert!(assume(&d.path().join("missing.png")).is_err());
     }
 
     #[test]
