@@ -186,7 +186,7 @@ fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
 /// The survey's true backscatter over the water-column median, per channel (ratio of the means over all pixels).
 fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
     let frames: Vec<Raster> = dive.water.iter().map(|p| linear(p, t)).collect();
-    let (Some(first), Some(s0)) = (frames.first(), dive.backscatter.first()) else {
+    let (Some(first), false) = (frames.first(), dive.backscatter.is_empty()) else {
         return Vec::new();
     };
     let c = first.channels;
@@ -205,7 +205,6 @@ fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
             sv[i % c] += *v as f64 / dive.backscatter.len() as f64;
         }
     }
-    let _ = s0;
     (0..c).map(|ch| sv[ch] / wc[ch]).collect()
 }
 
