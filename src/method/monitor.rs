@@ -208,19 +208,7 @@ pub fn contamination(
     let c = low.channels;
     let (mut bad, mut n) = (0usize, 0usize);
     for p in 0..low.width * low.height {
-        let mut ratio = 0.0;
-        let mut valid = true;
-        for ch in 0..c {
-            let i = p * c + ch;
-            let s = s_low.map_or(0.0, |s| s.data[i]);
-            let (v, m) = (low.data[i] - s, m_minus_s.data[i]);
-            if v.is_nan() || m.is_nan() || m <= 1e-6 {
-                valid = false;
-                break;
-            }
-            ratio += v / m;
-        }
-        if valid {
+        if let Some((ratio, _, _)) = block_sums(low, m_minus_s, s_low, p) {
             n += 1;
             bad += ((ratio / c as f32 - 1.0).abs() > deviation) as usize;
         }
@@ -230,6 +218,30 @@ pub fn contamination(
     } else {
         bad as f32 / n as f32
     }
+}
+
+/// Block `p` over its channels: the sum of the ratios `(I − S)/(M − S)`, of `I − S` and of `M − S`; `None` when a
+/// channel is masked (`NaN`) or `M − S` is not above `1e-6`.
+fn block_sums(
+    low: &Raster,
+    m_minus_s: &Raster,
+    s_low: Option<&Raster>,
+    p: usize,
+) -> Option<(f32, f32, f32)> {
+    let c = low.channels;
+    let (mut ratio, mut sa, mut sb) = (0.0f32, 0.0f32, 0.0f32);
+    for ch in 0..c {
+        let i = p * c + ch;
+        let s = s_low.map_or(0.0, |s| s.data[i]);
+        let (v, m) = (low.data[i] - s, m_minus_s.data[i]);
+        if v.is_nan() || m.is_nan() || m <= 1e-6 {
+            return None;
+        }
+        ratio += v / m;
+        sa += v;
+        sb += m;
+    }
+    Some((ratio, sa, sb))
 }
 
 /// How a photo's own block medians compare with its window's `M − S` (both at block resolution, linear).
@@ -261,21 +273,7 @@ pub fn photo_fit(
     let mut b = vec![f32::NAN; w * h];
     let mut ratios = Vec::with_capacity(w * h);
     for p in 0..w * h {
-        let (mut sa, mut sb, mut ratio) = (0.0f32, 0.0f32, 0.0f32);
-        let mut valid = true;
-        for ch in 0..c {
-            let i = p * c + ch;
-            let s = s_low.map_or(0.0, |s| s.data[i]);
-            let (v, m) = (low.data[i] - s, m_minus_s.data[i]);
-            if v.is_nan() || m.is_nan() || m <= 1e-6 {
-                valid = false;
-                break;
-            }
-            ratio += v / m;
-            sa += v;
-            sb += m;
-        }
-        if valid {
+        if let Some((ratio, sa, sb)) = block_sums(low, m_minus_s, s_low, p) {
             ratios.push(ratio / c as f32);
             a[p] = sa / c as f32;
             b[p] = sb / c as f32;
