@@ -422,6 +422,29 @@ pub fn floor(
     threads: usize,
     settings: EncodeSettings,
 ) -> Result<(usize, f64)> {
+    let (n, secs, failed) = on_every_photo(survey, threads, |e| {
+        io::decode(&e.path)
+            .and_then(|p| {
+                Sink::Folder {
+                    carry_metadata: true,
+                }
+                .write(&p, &e.path, &out.join(&e.relative), settings, &|_| {})
+            })
+            .is_ok()
+    })?;
+    if failed {
+        return Err(Error::Usage("bench: decode + encode failed".into()));
+    }
+    Ok((n, secs))
+}
+
+/// Run `work` on every photo of `survey` on `threads` threads, each taking the next photo not yet taken. Returns
+/// the number of photos, the seconds it took, and whether `work` failed (returned false) on any.
+fn on_every_photo(
+    survey: &Path,
+    threads: usize,
+    work: impl Fn(&io::Entry) -> bool + Sync,
+) -> Result<(usize, f64, bool)> {
     let found = io::find_photos(survey)?;
     let next = AtomicUsize::new(0);
     let failed = AtomicUsize::new(0);
@@ -431,29 +454,17 @@ pub fn floor(
             s.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::SeqCst);
                 let Some(e) = found.photos.get(i) else { break };
-                let ok = io::decode(&e.path).and_then(|p| {
-                    Sink::Folder {
-                        carry_metadata: true,
-                    }
-                    .write(
-                        &p,
-                        &e.path,
-                        &out.join(&e.relative),
-                        settings,
-                        &|_| {},
-                    )
-                });
-                if ok.is_err() {
+                if !work(e) {
                     failed.fetch_add(1, Ordering::SeqCst);
                 }
             });
         }
     });
-    let secs = t.elapsed().as_secs_f64();
-    if failed.load(Ordering::SeqCst) > 0 {
-        return Err(Error::Usage("bench: decode + encode failed".into()));
-    }
-    Ok((found.photos.len(), secs))
+    Ok((
+        found.photos.len(),
+        t.elapsed().as_secs_f64(),
+        failed.load(Ordering::SeqCst) > 0,
+    ))
 }
 
 /// The child side: run `correct` on one mission and print a [`ChildResult`] line on stdout.
@@ -652,40 +663,23 @@ fn photo_bytes(dir: &Path) -> Result<u64> {
 /// them) every photo of `survey` in memory, on `threads` threads. Seconds.
 #[cfg(feature = "turbojpeg")]
 pub fn turbo_floor(survey: &Path, threads: usize, settings: EncodeSettings) -> Result<f64> {
-    let found = io::find_photos(survey)?;
-    let next = AtomicUsize::new(0);
-    let failed = AtomicUsize::new(0);
-    let t = Instant::now();
-    std::thread::scope(|s| {
-        for _ in 0..threads.max(1) {
-            s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::SeqCst);
-                let Some(e) = found.photos.get(i) else { break };
-                let ok = std::fs::read(&e.path).ok().and_then(|data| {
-                    let st = settings.like(crate::io::jpeg::parse(&data).as_ref());
-                    let (w, h, c, px) = crate::io::jpeg::turbo::decode(&data).ok()?;
-                    crate::io::jpeg::turbo::encode(
-                        &px,
-                        w,
-                        h,
-                        c,
-                        st.jpeg_quality,
-                        st.jpeg_subsampling,
-                    )
+    let (_, secs, failed) = on_every_photo(survey, threads, |e| {
+        std::fs::read(&e.path)
+            .ok()
+            .and_then(|data| {
+                let st = settings.like(crate::io::jpeg::parse(&data).as_ref());
+                let (w, h, c, px) = crate::io::jpeg::turbo::decode(&data).ok()?;
+                crate::io::jpeg::turbo::encode(&px, w, h, c, st.jpeg_quality, st.jpeg_subsampling)
                     .ok()
-                });
-                if ok.is_none() {
-                    failed.fetch_add(1, Ordering::SeqCst);
-                }
-            });
-        }
-    });
-    if failed.load(Ordering::SeqCst) > 0 {
+            })
+            .is_some()
+    })?;
+    if failed {
         return Err(Error::Usage(
             "bench: libjpeg-turbo decode + encode failed".into(),
         ));
     }
-    Ok(t.elapsed().as_secs_f64())
+    Ok(secs)
 }
 
 fn remove(dir: &Path) {
