@@ -19,7 +19,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use abysslight::eval::evaluate::{albedo_error, consistency_parts, residual_pattern};
+use abysslight::eval::evaluate::{
+    albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
+};
 use abysslight::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
 use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
@@ -127,8 +129,14 @@ impl DiveSpec {
 /// Scores of one method on one dive.
 #[derive(Clone, Copy)]
 struct Score {
+    /// Albedo error on the samples with signal ([`signal_mask`]).
     albedo: f64,
+    /// Albedo error on every sample (as `evaluate` scores it without the lighting truth).
+    albedo_all: f64,
+    /// Residual pattern on the samples with signal.
     pattern: f64,
+    /// Residual pattern on every sample.
+    pattern_all: f64,
     consistency: f64,
     overlap: f64,
 }
@@ -143,13 +151,15 @@ fn linear(p: &abysslight::Photo, t: Transfer) -> Raster {
     r
 }
 
-fn score(photos: &[Raster], dive: &Dive) -> Score {
+fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
     let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
     let (consistency, overlap) =
         consistency_parts(photos, &hs, 8.0).unwrap_or((f64::NAN, f64::NAN));
     Score {
-        albedo: albedo_error(photos, &dive.albedo),
-        pattern: residual_pattern(photos, &dive.albedo, (8, 6)),
+        albedo: albedo_error_where(photos, &dive.albedo, Some(signal)),
+        albedo_all: albedo_error(photos, &dive.albedo),
+        pattern: residual_pattern_where(photos, &dive.albedo, (8, 6), Some(signal)),
+        pattern_all: residual_pattern(photos, &dive.albedo, (8, 6)),
         consistency,
         overlap,
     }
@@ -164,6 +174,30 @@ fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
                 &decode(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
                 t,
             )
+        })
+        .collect()
+}
+
+/// Where each survey photo carries the albedo at all: the true lit signal `F·A` is at least one code step of the
+/// camera's encoding (`bits`, curve `t`) at the sample's level `F·A + S`, and that level is below clipping. The
+/// residual pattern is scored on these samples only, for every method alike: where a starved channel (red over
+/// metres of coastal water) is below one code step, no method can recover it and none should be scored on it.
+fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
+    let q = 1.0 / ((1u32 << bits) - 1) as f32;
+    dive.albedo
+        .iter()
+        .zip(dive.factor.iter().zip(&dive.backscatter))
+        .map(|(a, (f, s))| {
+            a.data
+                .iter()
+                .zip(f.data.iter().zip(&s.data))
+                .map(|(&a, (&f, &s))| {
+                    let lit = a * f;
+                    let v = t.from_linear((lit + s).min(1.0));
+                    let step = t.to_linear((v + q).min(1.0)) - t.to_linear(v);
+                    lit + s < 1.0 && lit >= step
+                })
+                .collect()
         })
         .collect()
 }
@@ -345,9 +379,10 @@ fn main() {
             })
             .collect();
         let t_enc = sim.encode;
+        let signal = signal_mask(&dive, t_enc, spec.bits);
         let mut scores = vec![(
             "raw".to_string(),
-            score(&load_set(&survey, &names, t_enc), &dive),
+            score(&load_set(&survey, &names, t_enc), &dive, &signal),
         )];
         for (label, make) in &methods {
             let o = make(Options {
@@ -381,11 +416,14 @@ fn main() {
             }
             scores.push((
                 label.clone(),
-                score(&load_set(&dir.join(label), &names, t_enc), &dive),
+                score(&load_set(&dir.join(label), &names, t_enc), &dive, &signal),
             ));
             let _ = std::fs::remove_dir_all(dir.join(label));
         }
-        scores.push(("oracle".into(), score(&oracle(&dive, t_enc), &dive)));
+        scores.push((
+            "oracle".into(),
+            score(&oracle(&dive, t_enc), &dive, &signal),
+        ));
         if let Some(script) = &peer {
             let o = dir.join("numpy");
             let window = abysslight::choose_window(spec.contamination, 0.01)
@@ -401,14 +439,27 @@ fn main() {
                 .status()
                 .is_ok_and(|s| s.success());
             if ok {
-                scores.push(("numpy".into(), score(&load_set(&o, &names, t_enc), &dive)));
+                scores.push((
+                    "numpy".into(),
+                    score(&load_set(&o, &names, t_enc), &dive, &signal),
+                ));
             }
         }
+        let share: Vec<String> = (0..3)
+            .map(|ch| {
+                let (n, k) = signal.iter().fold((0usize, 0usize), |(n, k), m| {
+                    let on = m.iter().skip(ch).step_by(3).filter(|&&b| b).count();
+                    (n + m.len() / 3, k + on)
+                });
+                format!("{:.0} %", 100.0 * k as f64 / n.max(1) as f64)
+            })
+            .collect();
         eprintln!(
-            "dive_matrix: {} done in {:.1} s; true backscatter scale {:.3?}",
+            "dive_matrix: {} done in {:.1} s; true backscatter scale {:.3?}; samples with signal (R, G, B) {}",
             spec.name,
             t.elapsed().as_secs_f64(),
-            true_scale(&dive, t_enc)
+            true_scale(&dive, t_enc),
+            share.join(", ")
         );
         let desc = format!(
             "{} | {:?}{} | {} | {}±{} m | {:.2} | {}-bit {} {}",
@@ -453,6 +504,8 @@ fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {
         ("residual pattern", |x: &Score| x.pattern),
         ("consistency", |x: &Score| x.consistency),
         ("overlap difference", |x: &Score| x.overlap),
+        ("albedo error, every sample", |x: &Score| x.albedo_all),
+        ("residual pattern, every sample", |x: &Score| x.pattern_all),
     ] {
         s.push_str(&format!(
             "\n**{metric}** (lower is better)\n\n| dive | rig | water | altitude | c | format | {} | default/paper | default/oracle |\n|---|---|---|---|---:|---|{}---:|---:|\n",
@@ -488,6 +541,16 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
         ("abyss-no-gain", |o| Options {
             method: Method::Abyss,
             photo_gain: false,
+            ..o
+        }),
+        ("abyss-floor-0.001", |o| Options {
+            method: Method::Abyss,
+            relative_floor: 0.001,
+            ..o
+        }),
+        ("abyss-floor-0.003", |o| Options {
+            method: Method::Abyss,
+            relative_floor: 0.003,
             ..o
         }),
         ("abyss-floor-0.03", |o| Options {

@@ -4,7 +4,8 @@
 use std::path::Path;
 
 use abysslight::eval::evaluate::{
-    albedo_error, consistency, evaluate, parse_placements, residual_pattern, EvalSettings,
+    albedo_error, consistency, evaluate, parse_placements, residual_pattern,
+    residual_pattern_where, EvalSettings,
 };
 use abysslight::eval::simulate::Simulation;
 use abysslight::method::baseline::Method;
@@ -263,4 +264,81 @@ fn paper_beats_the_polynomial_when_the_light_cones_have_edges_in_the_frame() {
             "paper {paper:?} polynomial {poly:?}"
         );
     }
+}
+
+#[test]
+fn residual_pattern_of_a_black_channel_is_one_not_zero() {
+    // Two channels, truth 1 everywhere. Channel 0 is corrected perfectly; channel 1 is left black (a starved
+    // channel a correction clamped to zero). Black is the whole signal lost, spread 1, not a perfect flatness.
+    let truth = Raster {
+        width: 4,
+        height: 2,
+        channels: 2,
+        data: vec![1.0; 16],
+    };
+    let got = Raster {
+        data: (0..16)
+            .map(|i| if i % 2 == 0 { 0.8 } else { 0.0 })
+            .collect(),
+        ..truth.clone()
+    };
+    let r = residual_pattern(
+        std::slice::from_ref(&got),
+        std::slice::from_ref(&truth),
+        (4, 2),
+    );
+    assert!((r - 0.5).abs() < 1e-9, "{r}");
+    // Black in only the right half of the cells: median of the cell medians is still positive, and the
+    // deviations of the black cells count in full.
+    let half = Raster {
+        data: (0..16)
+            .map(|i| {
+                if i % 2 == 1 && (i / 2) % 4 >= 2 {
+                    0.0
+                } else {
+                    1.0
+                }
+            })
+            .collect(),
+        ..truth.clone()
+    };
+    let r = residual_pattern(
+        std::slice::from_ref(&half),
+        std::slice::from_ref(&truth),
+        (4, 2),
+    );
+    // Channel 1: scale 1/2, cell ratios [2, 2, 0, 0] per row → median 1, deviations all 1 → 1.4826.
+    assert!((r - 1.4826 / 2.0).abs() < 1e-6, "{r}");
+}
+
+#[test]
+fn residual_pattern_where_scores_only_the_flagged_samples() {
+    // Grey 4×1, truth 1; got [1, 1, 2, 2] has a pattern (see residual_pattern_by_hand), but scored only where
+    // the photo carries signal (the first two samples) it has none. With no sample flagged the score is NaN.
+    let truth = Raster {
+        width: 4,
+        height: 1,
+        channels: 1,
+        data: vec![1.0; 4],
+    };
+    let got = Raster {
+        data: vec![1.0, 1.0, 2.0, 2.0],
+        ..truth.clone()
+    };
+    let all = residual_pattern_where(
+        std::slice::from_ref(&got),
+        std::slice::from_ref(&truth),
+        (4, 1),
+        Some(&[vec![true; 4]]),
+    );
+    assert!((all - 1.4826 / 3.0).abs() < 1e-6, "{all}");
+    let left = residual_pattern_where(
+        std::slice::from_ref(&got),
+        std::slice::from_ref(&truth),
+        (4, 1),
+        Some(&[vec![true, true, false, false]]),
+    );
+    assert!(left < 1e-9, "{left}");
+    let none = residual_pattern_where(&[got], &[truth], (4, 1), Some(&[vec![false; 4]]));
+    assert!(none.is_nan());
 }

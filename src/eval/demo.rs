@@ -48,7 +48,7 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
   with s the least-squares scale per channel (so a white balance is not counted as error). 0 is perfect.
 - **residual pattern**: lighting left in the photos. The frame is cut into 8x6 cells; per cell the median of
   corrected / (s*true albedo) over all photos; reported is the robust spread of those cell medians
-  (1.4826*MAD / median). 0 means no trace of the light cones.
+  (1.4826*MAD / median). 0 means no trace of the light cones; a channel left black scores 1 (all of it lost).
 - **consistency** (Köser et al.): overlapping photos should show a patch of seafloor alike. Per mosaic cell seen
   whole by two or more photos, the RMS difference of each photo's mean from the cell's mean, divided by the
   standard deviation of all pixels. 0 means overlapping photos agree exactly.

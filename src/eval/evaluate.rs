@@ -101,14 +101,16 @@ pub fn placements_text<'a>(rows: impl Iterator<Item = (&'a str, &'a [f64; 9])>) 
     s
 }
 
-/// Per-channel least-squares scale `s_c` minimising `Σ (g − s_c·t)²`.
-fn channel_scales(got: &[Raster], truth: &[Raster]) -> Vec<f64> {
+/// Per-channel least-squares scale `s_c` minimising `Σ (g − s_c·t)²` (over the samples `signal` flags, if given).
+fn channel_scales(got: &[Raster], truth: &[Raster], signal: Option<&[Vec<bool>]>) -> Vec<f64> {
     let c = truth[0].channels;
     let (mut num, mut den) = (vec![0.0f64; c], vec![0.0f64; c]);
-    for (g, t) in got.iter().zip(truth) {
+    for (k, (g, t)) in got.iter().zip(truth).enumerate() {
         for (i, (&gv, &tv)) in g.data.iter().zip(&t.data).enumerate() {
-            num[i % c] += gv as f64 * tv as f64;
-            den[i % c] += tv as f64 * tv as f64;
+            if signal.is_none_or(|m| m[k][i]) {
+                num[i % c] += gv as f64 * tv as f64;
+                den[i % c] += tv as f64 * tv as f64;
+            }
         }
     }
     num.iter()
@@ -127,18 +129,35 @@ fn check_pairs(got: &[Raster], truth: &[Raster]) {
 
 /// Albedo error after the best global per-channel scale: `Σ|g − s_c·t| / Σ s_c·t`.
 pub fn albedo_error(got: &[Raster], truth: &[Raster]) -> f64 {
+    albedo_error_where(got, truth, None)
+}
+
+/// [`albedo_error`] over the samples `signal` flags (see [`residual_pattern_where`]).
+pub fn albedo_error_where(got: &[Raster], truth: &[Raster], signal: Option<&[Vec<bool>]>) -> f64 {
     check_pairs(got, truth);
-    let s = channel_scales(got, truth);
+    check_signal(truth, signal);
+    let s = channel_scales(got, truth, signal);
     let c = s.len();
     let (mut err, mut mag) = (0.0f64, 0.0f64);
-    for (g, t) in got.iter().zip(truth) {
+    for (k, (g, t)) in got.iter().zip(truth).enumerate() {
         for (i, (&gv, &tv)) in g.data.iter().zip(&t.data).enumerate() {
-            let e = s[i % c] * tv as f64;
-            err += (gv as f64 - e).abs();
-            mag += e;
+            if signal.is_none_or(|m| m[k][i]) {
+                let e = s[i % c] * tv as f64;
+                err += (gv as f64 - e).abs();
+                mag += e;
+            }
         }
     }
     err / mag.max(1e-30)
+}
+
+fn check_signal(truth: &[Raster], signal: Option<&[Vec<bool>]>) {
+    if let Some(m) = signal {
+        assert_eq!(m.len(), truth.len(), "one signal mask per photo");
+        for (m, t) in m.iter().zip(truth) {
+            assert_eq!(m.len(), t.data.len(), "one signal flag per sample");
+        }
+    }
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -153,37 +172,70 @@ fn median(v: &mut [f64]) -> f64 {
 
 /// Residual lighting pattern: robust spread (1.4826·MAD / median) of the per-cell medians of `g / (s_c·t)` over a `gx`×`gy` grid
 /// of the image frame (pooled over photos), averaged over channels. Samples with `t` below 0.02 are skipped.
+/// A channel left black (its scale `s_c` or the median of its cell medians 0) scores 1, the whole signal lost.
+/// (It used to score 0, a perfect flatness, which rewarded a correction that blacks out a starved channel.)
 pub fn residual_pattern(got: &[Raster], truth: &[Raster], grid: (usize, usize)) -> f64 {
+    residual_pattern_where(got, truth, grid, None)
+}
+
+/// [`residual_pattern`] scored only on the samples where `signal` (one flag per sample of each photo, in the
+/// rasters' order) is set: e.g. where the photo carries the albedo at all, its true lit signal `F·A` at least one
+/// code step of the camera's encoding. The flags come from the data, not from a method's output, so every method
+/// is scored on the same samples. A channel with no scored sample is left out of the average (NaN when none is
+/// left).
+pub fn residual_pattern_where(
+    got: &[Raster],
+    truth: &[Raster],
+    grid: (usize, usize),
+    signal: Option<&[Vec<bool>]>,
+) -> f64 {
     check_pairs(got, truth);
-    let s = channel_scales(got, truth);
+    check_signal(truth, signal);
+    let s = channel_scales(got, truth, signal);
     let c = s.len();
     let (w, h) = (truth[0].width, truth[0].height);
     let (gx, gy) = (grid.0.clamp(1, w), grid.1.clamp(1, h));
-    let mut total = 0.0;
+    let (mut total, mut scored) = (0.0, 0usize);
     for (ch, &sc) in s.iter().enumerate() {
         let mut cells: Vec<Vec<f64>> = vec![Vec::new(); gx * gy];
-        for (g, t) in got.iter().zip(truth) {
+        for (k, (g, t)) in got.iter().zip(truth).enumerate() {
             for y in 0..h {
                 for x in 0..w {
                     let i = (y * w + x) * c + ch;
                     let tv = t.data[i] as f64;
-                    if tv >= 0.02 {
+                    if tv >= 0.02 && signal.is_none_or(|m| m[k][i]) {
                         cells[(y * gy / h) * gx + x * gx / w].push(g.data[i] as f64 / (sc * tv));
                     }
                 }
             }
         }
-        let meds: Vec<f64> = cells
+        let mut meds: Vec<f64> = cells
             .iter_mut()
             .filter(|v| !v.is_empty())
             .map(|v| median(v))
             .collect();
-        let mut meds = meds;
+        if meds.is_empty() {
+            continue;
+        }
+        scored += 1;
+        // A black channel: scale 0 (or NaN), or most cells at 0.
+        let black = |v: f64| v.is_nan() || v <= 0.0 || v.is_infinite();
+        if black(sc) {
+            total += 1.0;
+            continue;
+        }
         let mid = median(&mut meds);
+        if black(mid) {
+            total += 1.0;
+            continue;
+        }
         let mut dev: Vec<f64> = meds.iter().map(|m| (m - mid).abs()).collect();
-        total += 1.4826 * median(&mut dev) / mid.abs().max(1e-30);
+        total += 1.4826 * median(&mut dev) / mid;
     }
-    total / c as f64
+    if scored == 0 {
+        return f64::NAN;
+    }
+    total / scored as f64
 }
 
 /// Bilinear sample at continuous pixel coordinates (pixel centres at `+0.5`), clamped at the border.
