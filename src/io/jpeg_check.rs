@@ -468,3 +468,82 @@ fn next_marker_any(d: &[u8], mut pos: usize) -> usize {
     }
     d.len()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bits of an entropy-coded segment written out independently: stuffed `FF 00` is one `FF`, fill bytes
+    /// `FF FF` before a marker are dropped, the segment stops at a marker or the end.
+    fn reference_bits(d: &[u8]) -> Vec<bool> {
+        let mut bytes = Vec::new();
+        let mut i = 0;
+        while i < d.len() {
+            if d[i] == 0xFF {
+                match d.get(i + 1) {
+                    Some(0) => {
+                        bytes.push(0xFF);
+                        i += 2;
+                    }
+                    Some(0xFF) => i += 1,
+                    _ => break,
+                }
+            } else {
+                bytes.push(d[i]);
+                i += 1;
+            }
+        }
+        bytes
+            .iter()
+            .flat_map(|b| (0..8).rev().map(move |k| (b >> k) & 1 == 1))
+            .collect()
+    }
+
+    /// The reader gives the same bits as the reference, in reads of 1 to 16 bits, and counts the real ones; past the end it pads with zeros.
+    #[test]
+    fn bits_match_a_byte_by_byte_reference() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for case in 0..200 {
+            let len = 1 + (next() % 300) as usize;
+            let mut d: Vec<u8> = Vec::with_capacity(len + 4);
+            while d.len() < len {
+                let r = next();
+                match r % 40 {
+                    0 => d.extend_from_slice(&[0xFF, 0x00]),
+                    1 => d.extend_from_slice(&[0xFF, 0xFF, 0x00]),
+                    _ => d.push((r >> 8) as u8 & 0xFE),
+                }
+            }
+            if case % 2 == 0 {
+                d.extend_from_slice(&[0xFF, 0xD9]);
+            }
+            let want = reference_bits(&d);
+            let mut bits = Bits::new(&d, 0);
+            let mut at = 0usize;
+            while at < want.len() + 40 {
+                let k = 1 + (next() % 16) as u32;
+                if bits.n < k {
+                    bits.fill();
+                }
+                let got = bits.acc >> (64 - k);
+                for j in 0..k as usize {
+                    let expect = want.get(at + j).copied().unwrap_or(false);
+                    let bit = (got >> (k as usize - 1 - j)) & 1 == 1;
+                    assert_eq!(bit, expect, "case {case}, bit {}", at + j);
+                }
+                bits.skip(k);
+                at += k as usize;
+                assert_eq!(bits.within_data(), at <= want.len(), "case {case}, at {at}");
+            }
+            if case % 2 == 0 {
+                assert_eq!(bits.marker, Some(0xD9), "case {case}");
+            }
+        }
+    }
+}

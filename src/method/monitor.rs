@@ -576,6 +576,9 @@ const STILL_NCC: f32 = 0.6;
 const STILL_SPAN: f32 = 0.25;
 /// Window assumed when the monitor is not told.
 const STILL_DEFAULT_WINDOW: usize = 7;
+/// Long side (block-median pixels) up to which photos are matched for the camera-still test without reduction;
+/// larger ones are reduced by an integer factor (at most twice this side after reduction).
+const STILL_MATCH_SIDE: usize = 192;
 
 /// Photos whose balance makes up the mission's reference.
 const REFERENCE_PHOTOS: usize = 5;
@@ -668,7 +671,11 @@ impl Monitor {
         let mut h = self.observe(f, fit.contamination);
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
-        let texture = crate::method::matching::texture(own, 1);
+        // Reduced so that its long side stays under 2·STILL_MATCH_SIDE: a 12 MP photo's 500×375 block medians are
+        // matched at 250×187 (FFT 256×256 instead of 512×512, a quarter of the work); photos up to ~3000 px wide
+        // are matched at full block resolution, as before.
+        let scale = (own.width.max(own.height) / STILL_MATCH_SIDE).max(1);
+        let texture = crate::method::matching::texture(own, scale);
         if let Some(prev) = &self.previous_texture {
             if (prev.width, prev.height) == (texture.width, texture.height)
                 && texture.width >= MIN_ROUGHNESS_SIZE.0
@@ -684,7 +691,8 @@ impl Monitor {
                     .push_back((m.shift.0.hypot(m.shift.1) as f32, m.ncc as f32));
             }
         }
-        let short_side = texture.width.min(texture.height) as f32;
+        // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
+        let short_side = (texture.width.min(texture.height) * scale) as f32;
         self.previous_texture = Some(texture);
         // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
         // benthic, Sparus). Judged on the median of the last few trusted matches.
