@@ -543,9 +543,9 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
             photo_gain: false,
             ..o
         }),
-        ("abyss-floor-0.001", |o| Options {
+        ("abyss-floor-0.01", |o| Options {
             method: Method::Abyss,
-            relative_floor: 0.001,
+            relative_floor: 0.01,
             ..o
         }),
         ("abyss-floor-0.003", |o| Options {

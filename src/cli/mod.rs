@@ -417,7 +417,7 @@ struct CorrectArgs {
     #[arg(long, value_name = "METHOD", help_heading = H_METHOD)]
     method: Option<Method>,
 
-    /// --method abyss: floor of F as a share of the photo's lit level [default: 0.01].
+    /// --method abyss: floor of F as a share of the photo's lit level [default: 0.001].
     ///
     /// The lit level is the 95th percentile of F per channel; F is floored softly, F' = (F^4 + phi^4)^(1/4).
     #[arg(long, value_name = "SHARE", help_heading = H_METHOD)]

@@ -125,7 +125,7 @@ pub struct Params {
     /// Degree of the polynomial of [`Method::Polynomial`]. Default: 4.
     pub degree: usize,
     /// [`Method::Abyss`]: the floor of `F` as a share of the photo's lit level, with a smooth hand-over
-    /// ([`crate::method::refine::soft_floor`]). Default: 0.01.
+    /// ([`crate::method::refine::soft_floor`]). Default: 0.001.
     pub relative_floor: f32,
     /// [`Method::Abyss`]: one robust gain per photo and channel against its window's `M`. Default: true.
     pub photo_gain: bool,
@@ -152,7 +152,7 @@ impl Default for Params {
             factor_floor: 0.05,
             transfer: Transfer::default(),
             degree: 4,
-            relative_floor: 0.01,
+            relative_floor: 0.001,
             photo_gain: true,
             backscatter_scale: Some(1.0),
             denoise: true,

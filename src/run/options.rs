@@ -152,7 +152,7 @@ pub struct Options {
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
     /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
-    /// with a smooth hand-over ([`crate::method::refine::soft_floor`]). Default: 0.01 (measured on the dive matrix,
+    /// with a smooth hand-over ([`crate::method::refine::soft_floor`]). Default: 0.001 (measured on the dive matrix,
     /// docs/evaluation.md).
     #[serde(default = "default_relative_floor")]
     pub relative_floor: f32,
@@ -173,7 +173,7 @@ pub struct Options {
 }
 
 fn default_relative_floor() -> f32 {
-    0.01
+    0.001
 }
 
 fn default_true() -> bool {
