@@ -33,10 +33,10 @@ use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, Blended, NoiseModel};
 pub use crate::method::params::Params;
-use crate::method::raster::{Layout, Photo, Raster, Samples};
+use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, refine_factor, scaled};
 use crate::method::scatter::{Prepared, Scatter};
-use crate::method::transfer::Curve;
+use crate::method::transfer::{Curve, Transfer};
 use crate::method::window::window_range;
 
 /// What the engine does with a photo it is given.
@@ -107,6 +107,10 @@ pub struct Engine<T> {
     mission_mean: Option<Raster>,
     /// Transfer tables for 8- and 16-bit photos.
     curves: (Curve, Curve),
+    /// Linear light of every value an 8-bit block median can take (`s/2 · 1/255`, `s = 0..=510`), as
+    /// `(value, linear)`: the block medians of an sRGB mission are converted by look-up instead of a `powf` each
+    /// (half a million per 12 MP photo). Empty for a linear curve.
+    median_linear_8: Vec<(f32, f32)>,
     /// `C` in linear light, for the mission's channel count (set by the first photo).
     colour: Vec<f32>,
     layout: Option<Layout>,
@@ -114,6 +118,30 @@ pub struct Engine<T> {
     ring: VecDeque<(usize, Raster)>,
     waiting: VecDeque<Waiting<T>>,
     seq: usize,
+}
+
+/// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
+/// computes it (`(a + b)·0.5·(1/255)`), with its linear light. Empty for a linear curve.
+fn median_linear_table(transfer: Transfer) -> Vec<(f32, f32)> {
+    if transfer.is_linear() {
+        return Vec::new();
+    }
+    let scale = 1.0 / <u8 as Sample>::MAX;
+    (0..=510u16)
+        .map(|s| {
+            let v = s as f32 * 0.5 * scale;
+            (v, transfer.to_linear(v))
+        })
+        .collect()
+}
+
+/// `transfer.to_linear(v)`, looked up in `table` (see `Engine::median_linear_8`) when `v` is one of its values.
+fn median_to_linear(table: &[(f32, f32)], transfer: Transfer, v: f32) -> f32 {
+    let j = (v * 510.0).round();
+    match table.get(j as usize) {
+        Some(&(key, lin)) if key.to_bits() == v.to_bits() => lin,
+        _ => transfer.to_linear(v),
+    }
 }
 
 impl<T> Engine<T> {
@@ -169,6 +197,7 @@ impl<T> Engine<T> {
             mask,
             mission_mean: None,
             curves: (Curve::new(transfer, 256), Curve::new(transfer, 65536)),
+            median_linear_8: median_linear_table(transfer),
             colour: Vec::new(),
             layout: None,
             monitor: Monitor::new(Thresholds::default()).with_window(n),
@@ -291,8 +320,10 @@ impl<T> Engine<T> {
         };
         let transfer = self.params.transfer;
         if !transfer.is_linear() {
+            // The value computed exactly as the block median computes it is looked up; any other (16-bit
+            // samples, NaN under a mask) is converted directly: the same result either way.
             for v in &mut low.data {
-                *v = transfer.to_linear(*v);
+                *v = median_to_linear(&self.median_linear_8, transfer, *v);
             }
         }
         low
@@ -476,4 +507,31 @@ fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The look-up gives `to_linear` bit for bit: on every value the block median makes (including the
+    /// neighbouring floats, which miss the table and are converted directly) and on NaN.
+    #[test]
+    fn median_to_linear_is_to_linear() {
+        for t in [Transfer::Srgb, Transfer::Gamma(2.2)] {
+            let table = median_linear_table(t);
+            assert_eq!(table.len(), 511);
+            for (a, b) in (0..=255u16).flat_map(|a| [(a, a), (a, a.saturating_add(1).min(255))]) {
+                let v = (a as f32 + b as f32) * 0.5 * (1.0 / 255.0f32);
+                for w in [v, f32::from_bits(v.to_bits() + 1), v * 0.999] {
+                    assert_eq!(
+                        median_to_linear(&table, t, w).to_bits(),
+                        t.to_linear(w).to_bits(),
+                        "{t:?} {w}"
+                    );
+                }
+            }
+            assert!(median_to_linear(&table, t, f32::NAN).is_nan());
+        }
+        assert!(median_linear_table(Transfer::Linear).is_empty());
+    }
 }
