@@ -338,8 +338,8 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
     }
 }
 
-/// Camera-like JPEG: quality 90, 4:2:0 (as most survey cameras write them; jpeg-encoder's own default would be
-/// 4:4:4, which until issue 14 these inputs were).
+/// Camera-like JPEG: quality 90, 4:2:0 (as most survey cameras write them; until issue 14 these inputs were
+/// 4:4:4).
 fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
     let Samples::U8(d) = &photo.samples else {
         unreachable!("synthetic photos are 8-bit")
@@ -349,14 +349,13 @@ fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
         path: path.to_owned(),
         reason: e,
     };
-    let mut buf = Vec::new();
-    let mut enc = jpeg_encoder::Encoder::new(&mut buf, 90);
-    enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
-    enc.encode(
+    let buf = libjpeg_turbo_rs::compress(
         d,
-        l.width as u16,
-        l.height as u16,
-        jpeg_encoder::ColorType::Rgb,
+        l.width,
+        l.height,
+        libjpeg_turbo_rs::PixelFormat::Rgb,
+        90,
+        libjpeg_turbo_rs::Subsampling::S420,
     )
     .map_err(|e| enc_err(e.to_string()))?;
     std::fs::write(path, buf).map_err(|e| Error::io(path, e))

@@ -63,15 +63,15 @@ impl Subsampling {
         }
     }
 
-    /// The same subsampling as the `jpeg-encoder` crate names it.
-    pub fn jpeg_encoder(self) -> jpeg_encoder::SamplingFactor {
-        use jpeg_encoder::SamplingFactor as F;
+    /// The same subsampling as the `libjpeg-turbo-rs` encoder names it.
+    pub fn rust_encoder(self) -> libjpeg_turbo_rs::Subsampling {
+        use libjpeg_turbo_rs::Subsampling as F;
         match self {
-            Subsampling::S444 => F::R_4_4_4,
-            Subsampling::S422 => F::R_4_2_2,
-            Subsampling::S420 => F::R_4_2_0,
-            Subsampling::S440 => F::R_4_4_0,
-            Subsampling::S411 => F::R_4_1_1,
+            Subsampling::S444 => F::S444,
+            Subsampling::S422 => F::S422,
+            Subsampling::S420 => F::S420,
+            Subsampling::S440 => F::S440,
+            Subsampling::S411 => F::S411,
         }
     }
 }
@@ -332,7 +332,7 @@ pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (JPEG codec: libj
 #[cfg(not(feature = "turbojpeg"))]
 pub const VERSION: &str = concat!(
     env!("CARGO_PKG_VERSION"),
-    " (JPEG codec: jpeg-encoder + zune-jpeg, pure Rust; build with --features turbojpeg for libjpeg-turbo)"
+    " (JPEG codec: libjpeg-turbo-rs encoder + zune-jpeg decoder, pure Rust; build with --features turbojpeg for C libjpeg-turbo)"
 );
 
 /// The JPEG codec abysslight is built with, for `--version` and `bench`.
@@ -340,7 +340,7 @@ pub fn codec_name() -> &'static str {
     if cfg!(feature = "turbojpeg") {
         "libjpeg-turbo (turbojpeg feature)"
     } else {
-        "jpeg-encoder (pure Rust)"
+        "libjpeg-turbo-rs + zune-jpeg (pure Rust)"
     }
 }
 

@@ -579,18 +579,11 @@ pub fn encode_to<W: Write>(
             let Samples::U8(c) = &photo.samples else {
                 return Err("JPEG holds 8-bit samples only".into());
             };
-            let colour = if l.channels == 1 {
-                jpeg_encoder::ColorType::Luma
-            } else {
-                jpeg_encoder::ColorType::Rgb
-            };
-            let (w16, h16) = (
-                u16::try_from(l.width).map_err(|_| "too wide for JPEG")?,
-                u16::try_from(l.height).map_err(|_| "too tall for JPEG")?,
-            );
+            if l.width > u16::MAX as usize || l.height > u16::MAX as usize {
+                return Err("too large for JPEG (65535 pixels a side at most)".into());
+            }
             #[cfg(feature = "turbojpeg")]
             {
-                let _ = (colour, w16, h16);
                 let bytes = crate::io::jpeg::turbo::encode(
                     c,
                     l.width,
@@ -604,9 +597,28 @@ pub fn encode_to<W: Write>(
             }
             #[cfg(not(feature = "turbojpeg"))]
             {
-                let mut enc = jpeg_encoder::Encoder::new(w, settings.jpeg_quality);
-                enc.set_sampling_factor(settings.jpeg_subsampling.jpeg_encoder());
-                enc.encode(c, w16, h16, colour).map_err(|e| e.to_string())
+                let (format, subsampling) = if l.channels == 1 {
+                    (
+                        libjpeg_turbo_rs::PixelFormat::Grayscale,
+                        libjpeg_turbo_rs::Subsampling::S444,
+                    )
+                } else {
+                    (
+                        libjpeg_turbo_rs::PixelFormat::Rgb,
+                        settings.jpeg_subsampling.rust_encoder(),
+                    )
+                };
+                let bytes = libjpeg_turbo_rs::compress(
+                    c,
+                    l.width,
+                    l.height,
+                    format,
+                    settings.jpeg_quality,
+                    subsampling,
+                )
+                .map_err(|e| e.to_string())?;
+                let mut w = w;
+                w.write_all(&bytes).map_err(|e| e.to_string())
             }
         }
         ImageFormat::Png => {
