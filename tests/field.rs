@@ -19,7 +19,7 @@ fn overlay_pixel(x: usize, y: usize, frame: usize) -> Option<[u8; 3]> {
         let on = if digit_zone {
             ((x * 7 + y * 3 + frame * 13) % 5) < 2
         } else {
-            (x / 2 + y) % 3 == 0
+            (x / 2 + y).is_multiple_of(3)
         };
         return Some(if on { [255, 255, 255] } else { [0, 0, 0] });
     }

@@ -149,7 +149,7 @@ impl<T> Engine<T> {
     /// (overlays, vehicle parts), left out of every median, with `F` and `S` filled in smoothly beneath them.
     pub fn new(params: Params, scatter: Option<&Scatter>, mask: Option<Mask>) -> Result<Engine<T>> {
         let n = params.window;
-        if n == 0 || n % 2 == 0 {
+        if n == 0 || n.is_multiple_of(2) {
             return Err(Error::Usage(format!(
                 "the window must be an odd number of photos, got {n}"
             )));

@@ -244,7 +244,7 @@ pub fn block_median<T: Sample>(
                 // Whole blocks per chunk (lanes a multiple of the channel count), so the gather copies pixels, and
                 // a multiple of 64 lanes, so the network's min/max loops have no scalar tail (126 lanes cost 3×
                 // the time of 128). The grouping of lanes does not change any median.
-                let chunk_lanes = if LANES % channels == 0 {
+                let chunk_lanes = if LANES.is_multiple_of(channels) {
                     LANES
                 } else {
                     channels * 64
@@ -323,7 +323,9 @@ fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
     lanes: usize,
     lane0: usize,
 ) {
-    debug_assert!(lane0 % C == 0 && lanes % C == 0 && C1 == C + 1 && stride >= lanes);
+    debug_assert!(
+        lane0.is_multiple_of(C) && lanes.is_multiple_of(C) && C1 == C + 1 && stride >= lanes
+    );
     let (bx0, nb) = (lane0 / C, lanes / C);
     if nb == 0 {
         return;
@@ -362,7 +364,7 @@ fn gather_rgb8_k8(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
 #[target_feature(enable = "avx2")]
 unsafe fn gather_rgb8_k8_avx2(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
     use std::arch::x86_64::*;
-    debug_assert!(lane0 % 3 == 0 && lanes % 3 == 0);
+    debug_assert!(lane0.is_multiple_of(3) && lanes.is_multiple_of(3));
     let (bx0, nb) = (lane0 / 3, lanes / 3);
     // 3-byte pixels to 32-bit lanes (the fourth byte zero), within each 128-bit half: pixels 0–3 of a block
     // row from its bytes 0–11 in the low half, pixels 4–7 from bytes 12–23 in the high half.

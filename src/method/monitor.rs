@@ -1101,7 +1101,13 @@ mod tests {
             let (dx, dy) = (x as f32 - 32.0, y as f32 - 20.0);
             0.2 + (-(dx * dx + dy * dy) / 900.0).exp()
         };
-        let scene = |x: usize, y: usize| if (x / 3 + y / 3) % 2 == 0 { 0.6 } else { 1.0 };
+        let scene = |x: usize, y: usize| {
+            if (x / 3 + y / 3).is_multiple_of(2) {
+                0.6
+            } else {
+                1.0
+            }
+        };
         let own = Raster::from_fn(64, 40, 3, |x, y, _| cone(x, y) * scene(x, y));
         let smooth = Raster::from_fn(64, 40, 3, |x, y, _| cone(x, y) * 0.8);
         let copy = own.clone();

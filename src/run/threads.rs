@@ -88,7 +88,7 @@ struct FlaggedSample {
 impl FlaggedSample {
     fn offer(&mut self, index: usize, lit: &Raster) {
         let stride = self.stride.max(1);
-        if self.seen % stride == 0 {
+        if self.seen.is_multiple_of(stride) {
             if self.kept.len() == FLAGGED_KEPT {
                 let mut i = 0;
                 self.kept.retain(|_| {
@@ -97,7 +97,7 @@ impl FlaggedSample {
                 });
                 self.stride = stride * 2;
             }
-            if self.seen % self.stride.max(1) == 0 {
+            if self.seen.is_multiple_of(self.stride.max(1)) {
                 self.kept.push((index, lit.clone()));
             }
         }

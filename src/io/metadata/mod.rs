@@ -433,7 +433,7 @@ mod tests {
         r.extend_from_slice(&id.to_be_bytes());
         r.push(name.len() as u8);
         r.extend_from_slice(name.as_bytes());
-        if name.len() % 2 == 0 {
+        if name.len().is_multiple_of(2) {
             r.push(0);
         }
         r.extend_from_slice(&(data.len() as u32).to_be_bytes());
