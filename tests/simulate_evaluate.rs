@@ -266,6 +266,20 @@ fn paper_beats_the_polynomial_when_the_light_cones_have_edges_in_the_frame() {
     }
 }
 
+/// The residual pattern of one photo against its truth, on the flagged samples (all without flags).
+fn pattern_of(
+    got: &Raster,
+    truth: &Raster,
+    grid: (usize, usize),
+    signal: Option<Vec<bool>>,
+) -> f64 {
+    let (got, truth) = (std::slice::from_ref(got), std::slice::from_ref(truth));
+    match signal {
+        Some(m) => residual_pattern_where(got, truth, grid, Some(&[m])),
+        None => residual_pattern(got, truth, grid),
+    }
+}
+
 #[test]
 fn residual_pattern_of_a_black_channel_is_one_not_zero() {
     // Two channels, truth 1 everywhere. Channel 0 is corrected perfectly; channel 1 is left black (a starved
@@ -282,11 +296,7 @@ fn residual_pattern_of_a_black_channel_is_one_not_zero() {
             .collect(),
         ..truth.clone()
     };
-    let r = residual_pattern(
-        std::slice::from_ref(&got),
-        std::slice::from_ref(&truth),
-        (4, 2),
-    );
+    let r = pattern_of(&got, &truth, (4, 2), None);
     assert!((r - 0.5).abs() < 1e-9, "{r}");
     // Black in only the right half of the cells: median of the cell medians is still positive, and the
     // deviations of the black cells count in full.
@@ -302,11 +312,7 @@ fn residual_pattern_of_a_black_channel_is_one_not_zero() {
             .collect(),
         ..truth.clone()
     };
-    let r = residual_pattern(
-        std::slice::from_ref(&half),
-        std::slice::from_ref(&truth),
-        (4, 2),
-    );
+    let r = pattern_of(&half, &truth, (4, 2), None);
     // Channel 1: scale 1/2, cell ratios [2, 2, 0, 0] per row → median 1, deviations all 1 → 1.4826.
     assert!((r - 1.4826 / 2.0).abs() < 1e-6, "{r}");
 }
@@ -325,20 +331,10 @@ fn residual_pattern_where_scores_only_the_flagged_samples() {
         data: vec![1.0, 1.0, 2.0, 2.0],
         ..truth.clone()
     };
-    let all = residual_pattern_where(
-        std::slice::from_ref(&got),
-        std::slice::from_ref(&truth),
-        (4, 1),
-        Some(&[vec![true; 4]]),
-    );
+    let all = pattern_of(&got, &truth, (4, 1), Some(vec![true; 4]));
     assert!((all - 1.4826 / 3.0).abs() < 1e-6, "{all}");
-    let left = residual_pattern_where(
-        std::slice::from_ref(&got),
-        std::slice::from_ref(&truth),
-        (4, 1),
-        Some(&[vec![true, true, false, false]]),
-    );
+    let left = pattern_of(&got, &truth, (4, 1), Some(vec![true, true, false, false]));
     assert!(left < 1e-9, "{left}");
-    let none = residual_pattern_where(&[got], &[truth], (4, 1), Some(&[vec![false; 4]]));
+    let none = pattern_of(&got, &truth, (4, 1), Some(vec![false; 4]));
     assert!(none.is_nan());
 }
