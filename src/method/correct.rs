@@ -450,10 +450,22 @@ unsafe fn curve_row_avx2<T: Sample>(
             _mm256_cmp_ps::<_CMP_GT_OQ>(a, one),
         );
         clipped += (_mm256_movemask_ps(out) as u32).count_ones();
-        let mut got = [0i32; 8];
-        _mm256_storeu_si256(got.as_mut_ptr().cast(), curve.codes_avx2(a));
-        for (v, &c) in row[k..k + 8].iter_mut().zip(&got) {
-            *v = T::from_code(c as u16);
+        let codes = curve.codes_avx2(a);
+        if let Some(bytes) = T::as_bytes_mut(&mut row[k..k + 8]) {
+            // 8-bit samples: the codes (0..=255) packed to bytes in registers (a byte-by-byte store of the lanes was
+            // a fifth of this row's time).
+            let p16 = _mm256_packus_epi32(codes, codes);
+            let p8 = _mm256_packus_epi16(p16, p16);
+            let lo = _mm_cvtsi128_si32(_mm256_castsi256_si128(p8)).to_le_bytes();
+            let hi = _mm_cvtsi128_si32(_mm256_extracti128_si256::<1>(p8)).to_le_bytes();
+            bytes[..4].copy_from_slice(&lo);
+            bytes[4..].copy_from_slice(&hi);
+        } else {
+            let mut got = [0i32; 8];
+            _mm256_storeu_si256(got.as_mut_ptr().cast(), codes);
+            for (v, &c) in row[k..k + 8].iter_mut().zip(&got) {
+                *v = T::from_code(c as u16);
+            }
         }
     }
     (n, clipped)
