@@ -49,7 +49,12 @@ pub struct Match {
 
 /// Reduction factor giving a long side of at least [`TARGET_SIDE`] (1 for small photos).
 pub fn reduction(width: usize, height: usize) -> usize {
-    (width.max(height) / TARGET_SIDE).max(1)
+    reduction_to(width, height, TARGET_SIDE)
+}
+
+/// Reduction factor giving a long side of at least `side` (and under `2·side`; 1 for images up to that size).
+pub fn reduction_to(width: usize, height: usize, side: usize) -> usize {
+    (width.max(height) / side).max(1)
 }
 
 /// The texture image of a photo (any channels, linear or not: only the log of its grey level's local contrast

@@ -674,7 +674,7 @@ impl Monitor {
         // Reduced so that its long side stays under 2·STILL_MATCH_SIDE: a 12 MP photo's 500×375 block medians are
         // matched at 250×187 (FFT 256×256 instead of 512×512, a quarter of the work); photos up to ~3000 px wide
         // are matched at full block resolution, as before.
-        let scale = (own.width.max(own.height) / STILL_MATCH_SIDE).max(1);
+        let scale = crate::method::matching::reduction_to(own.width, own.height, STILL_MATCH_SIDE);
         let texture = crate::method::matching::texture(own, scale);
         if let Some(prev) = &self.previous_texture {
             if (prev.width, prev.height) == (texture.width, texture.height)
