@@ -601,18 +601,20 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
         let (water, survey) = (format!("{dive_s}/water"), format!("{dive_s}/survey"));
         let auto = format!("{dive_s}-auto");
         let told = format!("{dive_s}-told");
-        let o = abysslight(
-            &[
+        let correct = |out: &str, extra: &[&str]| {
+            let mut args = vec![
                 "correct",
                 "--water-column",
                 &water,
                 "--survey",
                 &survey,
                 "--out",
-                &auto,
-            ],
-            d.path(),
-        );
+                out,
+            ];
+            args.extend_from_slice(extra);
+            abysslight(&args, d.path())
+        };
+        let o = correct(&auto, &[]);
         assert!(o.status.success(), "{}", stderr(&o));
         assert!(
             stderr(&o).contains(&format!("camera curve {encode}: {said}")),
@@ -621,20 +623,7 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
         );
         let report = std::fs::read_to_string(format!("{auto}/_abysslight/report.json")).unwrap();
         assert!(report.contains(said), "{report}");
-        let o = abysslight(
-            &[
-                "correct",
-                "--water-column",
-                &water,
-                "--survey",
-                &survey,
-                "--out",
-                &told,
-                "--transfer",
-                encode,
-            ],
-            d.path(),
-        );
+        let o = correct(&told, &["--transfer", encode]);
         assert!(o.status.success(), "{}", stderr(&o));
         for i in 1..=8 {
             let name = format!("{i:04}.png");

@@ -823,18 +823,24 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn fused_correction_matches_unfused_reference() {
+    /// The frame of the reference tests: a 29×17 RGB photo's layout, blocks of 4, a low-resolution `F` from
+    /// `base` up (some blocks under the floor 0.05 when `base` is below it) and a full-resolution `S`.
+    fn reference_frame(base: f32) -> (Layout, usize, Raster, Raster) {
         let layout = Layout {
             width: 29,
             height: 17,
             channels: 3,
         };
-        let k = 4;
         let low = Raster::from_fn(8, 5, 3, |x, y, c| {
-            0.02 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
+            base + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
         });
         let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
+        (layout, 4, low, scatter)
+    }
+
+    #[test]
+    fn fused_correction_matches_unfused_reference() {
+        let (layout, k, low, scatter) = reference_frame(0.02);
         let scatter = Prepared::from_raster(&scatter, Transfer::Linear);
         let samples: Vec<u16> = (0..29 * 17 * 3)
             .map(|i| ((i * 7919) % 65536) as u16)
@@ -859,22 +865,13 @@ mod tests {
     fn blend_correction_matches_unfused_reference() {
         // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
         // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
-        let layout = Layout {
-            width: 29,
-            height: 17,
-            channels: 3,
-        };
-        let k = 4;
-        let low = Raster::from_fn(8, 5, 3, |x, y, c| {
-            0.03 + 0.15 * ((x * 3 + y * 5 + c) % 9) as f32
-        });
+        let (layout, k, low, scatter) = reference_frame(0.03);
         let fields = Blended {
             level: Raster::from_fn(8, 5, 3, |x, y, c| 0.2 + 0.05 * ((x + 2 * y + c) % 7) as f32),
             weight: Raster::from_fn(8, 5, 3, |x, y, c| ((x * 5 + y + c) % 11) as f32 / 10.0),
             noise_var: vec![0.001, 0.0002, 0.0],
             prior_precision: 12.0,
         };
-        let scatter = Raster::from_fn(29, 17, 3, |x, y, c| 0.001 * ((x + 2 * y + c) % 40) as f32);
         let up = |r: &Raster| upsample(r, k, 29, 17);
         let (f, lv, wt) = (up(&low), up(&fields.level), up(&fields.weight));
         let kscale = [0.7f32, 0.9, 1.0];
@@ -1086,42 +1083,40 @@ mod tests {
             .map(|i| 0.01 + 0.37 * ((i * 7) % 11) as f32 / 10.0)
             .collect();
         let srow = Raster::from_fn(width, 1, c, |x, _, ch| 0.002 * ((x * c + ch) % 29) as f32);
-        let row8: Vec<u8> = (0..width * c).map(|i| ((i * 31) % 256) as u8).collect();
-        for t in [Transfer::Linear, Transfer::Srgb] {
-            let curve = Curve::new(t, 256);
-            let prepared = Prepared::from_raster(&srow, t);
+        // One row through both builds, with and without S.
+        fn agree<T: Sample + std::fmt::Debug>(
+            row: &[T],
+            t: Transfer,
+            levels: usize,
+            frow: &[f32],
+            tx: &[Tap],
+            srow: &Raster,
+        ) {
+            let (c, n) = (srow.channels, row.len());
+            let curve = Curve::new(t, levels);
+            let prepared = Prepared::from_raster(srow, t);
             let table = prepared.linear_table().unwrap_or(&[]);
             for s in [None, Some(prepared.row(0))] {
-                let (mut a, mut b) = (row8.clone(), row8.clone());
-                let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
-                let sa =
-                    correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, table, &curve);
+                let (mut a, mut b) = (row.to_vec(), row.to_vec());
+                let (mut fa, mut fb) = (vec![0.0; n], vec![0.0; n]);
+                let sa = correct_row_dispatch(&mut a, frow, &mut fa, tx, c, 0.05, s, table, &curve);
                 let sb = correct_row_portable(
-                    &mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve, false,
+                    &mut b, frow, &mut fb, tx, c, 0.05, s, table, &curve, false,
                 );
-                assert_eq!(a, b);
-                assert_eq!(sa, sb);
+                assert_eq!(a, b, "{t:?}");
+                assert_eq!(sa, sb, "{t:?}");
             }
+        }
+        let row8: Vec<u8> = (0..width * c).map(|i| ((i * 31) % 256) as u8).collect();
+        for t in [Transfer::Linear, Transfer::Srgb] {
+            agree(&row8, t, 256, &frow, &tx, &srow);
         }
         // 16-bit codes through the sRGB and a gamma curve (the AVX2 path gathers from 65536-entry tables).
         let row16: Vec<u16> = (0..width * c)
             .map(|i| ((i * 7919) % 65536) as u16)
             .collect();
         for t in [Transfer::Srgb, Transfer::Gamma(2.2)] {
-            let curve = Curve::new(t, 65536);
-            let prepared = Prepared::from_raster(&srow, t);
-            let table = prepared.linear_table().unwrap_or(&[]);
-            for s in [None, Some(prepared.row(0))] {
-                let (mut a, mut b) = (row16.clone(), row16.clone());
-                let (mut fa, mut fb) = (vec![0.0; width * c], vec![0.0; width * c]);
-                let sa =
-                    correct_row_dispatch(&mut a, &frow, &mut fa, &tx, c, 0.05, s, table, &curve);
-                let sb = correct_row_portable(
-                    &mut b, &frow, &mut fb, &tx, c, 0.05, s, table, &curve, false,
-                );
-                assert_eq!(a, b, "{t:?}");
-                assert_eq!(sa, sb, "{t:?}");
-            }
+            agree(&row16, t, 65536, &frow, &tx, &srow);
         }
     }
 
