@@ -13,7 +13,8 @@
 //!
 //! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
 //! difference over overlapping photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
-//! printed.
+//! printed. With `DM_KEEP=1` in the environment each dive's folder (the dive with its truth, every method's output)
+//! is kept under `DIR/NAME/` for a closer look, e.g. `abysslight correct` with other options on the same photos.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -418,7 +419,9 @@ fn main() {
                 label.clone(),
                 score(&load_set(&dir.join(label), &names, t_enc), &dive, &signal),
             ));
-            let _ = std::fs::remove_dir_all(dir.join(label));
+            if std::env::var_os("DM_KEEP").is_none() {
+                let _ = std::fs::remove_dir_all(dir.join(label));
+            }
         }
         scores.push((
             "oracle".into(),
@@ -479,7 +482,9 @@ fn main() {
             if spec.jpeg { "JPEG" } else { "PNG" },
         );
         rows.push((desc, scores));
-        let _ = std::fs::remove_dir_all(&dir);
+        if std::env::var_os("DM_KEEP").is_none() {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
     }
     let md = table(&rows);
     std::fs::create_dir_all(&out).unwrap();
