@@ -2,14 +2,16 @@
 //! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
 //!
 //! ```sh
-//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation]
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation] [--size WxH]
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
 //! with `--factor-floor 0.001`), `default` (`Options::default()`, i.e. `--method abyss`), `oracle` (`(I − S)/F` with
 //! the simulator's true `F` and `S`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
-//! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on).
+//! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
+//! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
+//! camera's are 1/500; larger photos show how much of a score comes from that).
 //!
 //! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
 //! difference over overlapping photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
@@ -95,7 +97,7 @@ const DIVES: &[DiveSpec] = &[
 ];
 
 impl DiveSpec {
-    fn simulation(&self, seed: u64) -> Simulation {
+    fn simulation(&self, seed: u64, size: (usize, usize)) -> Simulation {
         let water = Water::preset(self.water).expect("known water preset");
         // The camera's white balance makes the sediment grey at the centre: gains from the two-way path.
         let path = 2.0 * self.altitude;
@@ -104,8 +106,8 @@ impl DiveSpec {
         Simulation {
             frames: 30,
             water_column: 15,
-            width: 320,
-            height: 240,
+            width: size.0,
+            height: size.1,
             seed,
             contamination: self.contamination,
             bit_depth: self.bits,
@@ -250,6 +252,7 @@ fn main() {
     let mut seed_offset = 0u64;
     let mut only: Option<Vec<String>> = None;
     let mut ablation = false;
+    let mut size = (320usize, 240usize);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -270,6 +273,15 @@ fn main() {
                 )
             }
             "--ablation" => ablation = true,
+            "--size" => {
+                size = args
+                    .next()
+                    .and_then(|v| {
+                        let (w, h) = v.split_once('x')?;
+                        Some((w.parse().ok()?, h.parse().ok()?))
+                    })
+                    .expect("--size WxH")
+            }
             _ => panic!("unknown argument {a:?}; see the example's docs"),
         }
     }
@@ -336,7 +348,7 @@ fn main() {
             continue;
         }
         let t = Instant::now();
-        let sim = spec.simulation(1000 + seed_offset * 100 + i as u64);
+        let sim = spec.simulation(1000 + seed_offset * 100 + i as u64, size);
         let dive = sim.render_with_lighting().expect("render");
         let dir = out.join(spec.name);
         let _ = std::fs::remove_dir_all(&dir);
