@@ -35,7 +35,8 @@ pub struct NoiseModel {
 /// Statistics of one sampled block, per channel, in linear light: the variance of its samples (`var`: texture,
 /// noise and the light's gradient across the block) and the noise-only estimate `diag`, the mean of `d²` over its
 /// 2×2 cells with `d = (a − b − c + e)/2` (`a b` over `c e`), which is `σ²` for white noise and 0 for any plane:
-/// a light-cone edge across the block does not count as noise.
+/// a light-cone edge across the block does not count as noise. Both are NaN in a channel where the block has a
+/// sample at black (code 0) or at the top code: clipping takes noise away, and a black block reads none.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BlockStats {
     /// Index of the block in the low-resolution raster (`by · blocks_x + bx`).
@@ -68,6 +69,11 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
     let cells = ((k / 2) * (k / 2)) as f64;
     let at =
         |x: usize, y: usize, ch: usize| curve.linear(v[(y * l.width + x) * c + ch].to_u16()) as f64;
+    let top = T::MAX as u16;
+    let clipped = |x: usize, y: usize, ch: usize| {
+        let code = v[(y * l.width + x) * c + ch].to_u16();
+        code == 0 || code == top
+    };
     if k < 2 {
         return Vec::new();
     }
@@ -86,8 +92,13 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
                 let mut diag = Vec::with_capacity(c);
                 for ch in 0..c {
                     let (mut sum, mut sq, mut dd) = (0.0f64, 0.0f64, 0.0f64);
+                    let mut clip = false;
                     for y in (py..py + k).step_by(2) {
                         for x in (px..px + k).step_by(2) {
+                            clip |= clipped(x, y, ch)
+                                || clipped(x + 1, y, ch)
+                                || clipped(x, y + 1, ch)
+                                || clipped(x + 1, y + 1, ch);
                             let (a, b, cc, e) = (
                                 at(x, y, ch),
                                 at(x + 1, y, ch),
@@ -99,6 +110,13 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
                             let d = (a - b - cc + e) / 2.0;
                             dd += d * d;
                         }
+                    }
+                    // A block with a sample at black or at the top code has lost part of its noise to the clip
+                    // (a black block reads no noise at all): NaN, left out of the fit.
+                    if clip {
+                        var.push(f32::NAN);
+                        diag.push(f32::NAN);
+                        continue;
                     }
                     let m = sum / n;
                     var.push(((sq / n - m * m).max(0.0) * n / (n - 1.0)) as f32);
@@ -119,7 +137,9 @@ impl NoiseModel {
     /// the median of `diag − τ_d²F²` over the dimmest 10 % of the blocks, where `τ_d²` (the fine texture seen by
     /// `diag`) is the median of `(diag − σ²)/F²` over the brightest 25 % (two rounds from `τ_d² = 0`); then `τ²` is
     /// the median of `(var − σ²)/F²` over the brightest 25 %. A noise-free dim photo gets a small `σ²` and is left as
-    /// the paper corrects it. `None` with fewer than 50 blocks (too small a photo to tell noise from texture).
+    /// the paper corrects it. `None` with fewer than 50 blocks (too small a photo to tell noise from texture); a channel
+    /// with fewer than 20 blocks free of clipped samples gets `σ² = τ² = 0` (divided as the paper does), `None` when
+    /// no channel has them.
     pub fn fit(blocks: &[BlockStats], f: &Raster) -> Option<NoiseModel> {
         let c = f.channels;
         if blocks.len() < 50 {
@@ -127,6 +147,7 @@ impl NoiseModel {
         }
         let mut noise_var = vec![0.0f32; c];
         let mut texture_var = vec![0.0f32; c];
+        let mut measured = 0;
         for ch in 0..c {
             let mut pts: Vec<(f32, f32, f32)> = blocks
                 .iter()
@@ -134,8 +155,11 @@ impl NoiseModel {
                 .filter(|(f, v, d)| f.is_finite() && v.is_finite() && d.is_finite())
                 .collect();
             if pts.len() < 20 {
-                return None;
+                // Too few blocks without clipped samples (a channel black over most of the frame): no noise or
+                // texture measured, so this channel is divided as the paper does; the others still blend.
+                continue;
             }
+            measured += 1;
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             let n = pts.len();
             let dim = &pts[..(n / 10).max(5)];
@@ -177,7 +201,7 @@ impl NoiseModel {
                     .collect(),
             );
         }
-        Some(NoiseModel {
+        (measured > 0).then_some(NoiseModel {
             noise_var,
             texture_var,
         })
@@ -288,6 +312,11 @@ mod tests {
 
     /// A 16-bit grey photo `A·F + S + noise` with a known texture and noise, F falling off to the right.
     fn photo(w: usize, h: usize, sigma: f32, tau: f32) -> (Photo, Raster) {
+        photo_with_offset(w, h, sigma, tau, 0.05)
+    }
+
+    /// [`photo`] with another additive offset (negative: the dim side is clipped at black).
+    fn photo_with_offset(w: usize, h: usize, sigma: f32, tau: f32, offset: f32) -> (Photo, Raster) {
         let mut r = 0x2545_F491u32;
         let mut gauss = move || {
             // Irwin–Hall: sum of 12 uniforms minus 6, unit variance.
@@ -308,7 +337,7 @@ mod tests {
             for x in 0..w {
                 let fv = f.get(x / k, y / k, 0);
                 let a = 0.4 + tau * gauss();
-                let i = a * fv + 0.05 + sigma * gauss();
+                let i = a * fv + offset + sigma * gauss();
                 v[y * w + x] = (i.clamp(0.0, 1.0) * 65535.0).round() as u16;
             }
         }
@@ -387,6 +416,68 @@ mod tests {
         let dark = Raster::from_fn(f.width, f.height, 1, |x, _, _| 1e-5 * (1.0 + x as f32));
         let m = NoiseModel::fit(&blocks, &dark).expect("enough blocks");
         assert_eq!(m.texture_var[0], 0.0);
+    }
+
+    #[test]
+    fn blocks_clipped_at_black_do_not_hide_the_noise() {
+        // The dim side of the frame reads below black and is clipped there: those blocks show less noise than
+        // the sensor has (an all-black block none). They are left out, and σ comes from the dim blocks that are not
+        // clipped.
+        let (sigma, tau) = (0.02f32, 0.08f32);
+        let (p, f) = photo_with_offset(640, 320, sigma, tau, -0.03);
+        let curves = (
+            Curve::new(Transfer::Linear, 256),
+            Curve::new(Transfer::Linear, 65536),
+        );
+        let blocks = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let clipped = blocks.iter().filter(|b| b.diag[0].is_nan()).count();
+        assert!(
+            clipped > blocks.len() / 10,
+            "the test needs more than the dimmest tenth clipped: {clipped} of {}",
+            blocks.len()
+        );
+        let m = NoiseModel::fit(&blocks, &f).expect("enough blocks");
+        let s = m.noise_var[0].sqrt();
+        assert!((s / sigma - 1.0).abs() < 0.2, "σ {s}");
+    }
+
+    #[test]
+    fn a_channel_clipped_throughout_does_not_stop_the_others() {
+        // Channel 0 black in every block (NaN statistics), channel 1 a measurable photo: the model keeps
+        // channel 1's noise and texture and leaves channel 0 at zero (divided as the paper does).
+        let (sigma, tau) = (0.03f32, 0.08f32);
+        let (p, f1) = photo(640, 320, sigma, tau);
+        let curves = (
+            Curve::new(Transfer::Linear, 256),
+            Curve::new(Transfer::Linear, 65536),
+        );
+        let grey = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let blocks: Vec<BlockStats> = grey
+            .iter()
+            .map(|b| BlockStats {
+                index: b.index,
+                var: vec![f32::NAN, b.var[0]],
+                diag: vec![f32::NAN, b.diag[0]],
+            })
+            .collect();
+        let f = Raster::from_fn(f1.width, f1.height, 2, |x, y, _| f1.get(x, y, 0));
+        let m = NoiseModel::fit(&blocks, &f).expect("channel 1 is measurable");
+        assert_eq!((m.noise_var[0], m.texture_var[0]), (0.0, 0.0));
+        assert!(
+            (m.noise_var[1].sqrt() / sigma - 1.0).abs() < 0.15,
+            "σ {}",
+            m.noise_var[1].sqrt()
+        );
+        // No channel measurable: no model.
+        let none: Vec<BlockStats> = blocks
+            .iter()
+            .map(|b| BlockStats {
+                index: b.index,
+                var: vec![f32::NAN; 2],
+                diag: vec![f32::NAN; 2],
+            })
+            .collect();
+        assert!(NoiseModel::fit(&none, &f).is_none());
     }
 
     #[test]
