@@ -356,14 +356,19 @@ mod tests {
         )
     }
 
-    #[test]
-    fn variances_against_a_direct_computation() {
-        let (p, _) = photo(64, 48, 0.02, 0.1);
+    /// [`block_stats`] of 8×8 blocks of a linear photo, every `stride`-th block.
+    fn linear_blocks(p: &Photo, stride: usize) -> Vec<BlockStats> {
         let curves = (
             Curve::new(Transfer::Linear, 256),
             Curve::new(Transfer::Linear, 65536),
         );
-        let got = block_stats(&p, 8, 2, (&curves.0, &curves.1));
+        block_stats(p, 8, stride, (&curves.0, &curves.1))
+    }
+
+    #[test]
+    fn variances_against_a_direct_computation() {
+        let (p, _) = photo(64, 48, 0.02, 0.1);
+        let got = linear_blocks(&p, 2);
         let Samples::U16(v) = &p.samples else {
             unreachable!()
         };
@@ -403,11 +408,7 @@ mod tests {
     fn fit_recovers_noise_and_texture() {
         let (sigma, tau) = (0.03f32, 0.08f32);
         let (p, f) = photo(640, 320, sigma, tau);
-        let curves = (
-            Curve::new(Transfer::Linear, 256),
-            Curve::new(Transfer::Linear, 65536),
-        );
-        let blocks = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let blocks = linear_blocks(&p, 1);
         let m = NoiseModel::fit(&blocks, &f).expect("enough blocks");
         let (s2, t2) = (m.noise_var[0], m.texture_var[0]);
         assert!((s2.sqrt() / sigma - 1.0).abs() < 0.15, "σ {}", s2.sqrt());
@@ -425,11 +426,7 @@ mod tests {
         // clipped.
         let (sigma, tau) = (0.02f32, 0.08f32);
         let (p, f) = photo_with_offset(640, 320, sigma, tau, -0.03);
-        let curves = (
-            Curve::new(Transfer::Linear, 256),
-            Curve::new(Transfer::Linear, 65536),
-        );
-        let blocks = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let blocks = linear_blocks(&p, 1);
         let clipped = blocks.iter().filter(|b| b.diag[0].is_nan()).count();
         assert!(
             clipped > blocks.len() / 10,
@@ -447,11 +444,7 @@ mod tests {
         // channel 1's noise and texture and leaves channel 0 at zero (divided as the paper does).
         let (sigma, tau) = (0.03f32, 0.08f32);
         let (p, f1) = photo(640, 320, sigma, tau);
-        let curves = (
-            Curve::new(Transfer::Linear, 256),
-            Curve::new(Transfer::Linear, 65536),
-        );
-        let grey = block_stats(&p, 8, 1, (&curves.0, &curves.1));
+        let grey = linear_blocks(&p, 1);
         let blocks: Vec<BlockStats> = grey
             .iter()
             .map(|b| BlockStats {
