@@ -209,7 +209,8 @@ impl NoiseModel {
 
     /// The blend for one photo, at block resolution: from `F` (refined), the photo's block medians `own` and the
     /// backscatter `s` (both linear) and the seafloor colour `C`, the block's level `A_low = (own − S)/F` (blended
-    /// towards `C` with the weight of a block median, noise variance `σ²·π/(2K²)` for `K`×`K` blocks) and the
+    /// towards `C·λ*` with the weight of a block median, noise variance `σ²·π/(2K²)` for `K`×`K` blocks, where `λ*`
+    /// is the block's relative level `A_low/C` pooled over the channels by their precision, prior 1) and the
     /// Wiener weight `w = τ²F²/(τ²F² + σ²)`, per channel. Blocks flagged in `keep` (one flag per block: overlays,
     /// vehicle parts) get `w = 1`, no blend. Blending towards block means instead of medians was worse on every
     /// score of the dive matrix.
@@ -226,39 +227,63 @@ impl NoiseModel {
         let mut level = f.clone();
         let mut weight = f.clone();
         let median_var = std::f32::consts::FRAC_PI_2 / (k * k) as f32;
-        for (i, (lv, wt)) in level.data.iter_mut().zip(&mut weight.data).enumerate() {
-            let ch = i % c;
-            let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
-            let fv = f.data[i];
-            let signal = t2 * fv * fv;
-            let w = if signal + s2 > 0.0 {
-                signal / (signal + s2)
-            } else {
-                1.0
-            };
-            let w_low = if signal + s2 * median_var > 0.0 {
-                signal / (signal + s2 * median_var)
-            } else {
-                1.0
-            };
-            let a_low = (own.data[i] - s.map_or(0.0, |s| s.data[i])) / fv;
-            let a_low = if a_low.is_finite() {
-                colour[ch] + w_low * (a_low - colour[ch])
-            } else {
-                colour[ch]
-            };
-            *lv = a_low.max(LEVEL_MIN);
-            *wt = if keep.is_some_and(|m| m[i / c]) {
-                1.0
-            } else {
-                w.clamp(0.0, 1.0)
-            };
-        }
-        // Prior on the relative detail ρ = A/A_low (1 ± τ/C): its precision, from the channels' texture.
+        // Prior on the relative detail ρ = A/A_low (1 ± τ/C): its precision, from the channels' texture. The same
+        // prior holds the block levels' shared relative level λ* below.
         let rel: f32 = (0..c)
             .map(|ch| self.texture_var[ch] / (colour[ch] * colour[ch]))
             .sum::<f32>()
             / c as f32;
+        let prior = if rel > 0.0 { 1.0 / rel } else { 1e6 };
+        let mut own_rel = vec![f32::NAN; c];
+        let mut w_low = vec![1.0f32; c];
+        for b in 0..f.data.len() / c {
+            // Per channel: the block's own relative level λ_c = ((median − S)/F)/C and the weight of a block
+            // median against the seafloor colour; λ* pools the channels by the precision of their levels, so a
+            // starved channel's level follows the well-lit ones (a nodule as large as a block stays dark in red
+            // too, instead of red falling back to the seafloor colour alone).
+            let (mut num, mut den) = (prior, prior);
+            for ch in 0..c {
+                let i = b * c + ch;
+                let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
+                let fv = f.data[i];
+                let signal = t2 * fv * fv;
+                w_low[ch] = if signal + s2 * median_var > 0.0 {
+                    signal / (signal + s2 * median_var)
+                } else {
+                    1.0
+                };
+                let lam = (own.data[i] - s.map_or(0.0, |s| s.data[i])) / fv / colour[ch];
+                own_rel[ch] = lam;
+                if lam.is_finite() && t2 > 0.0 {
+                    let p = (fv * colour[ch]).powi(2) / (s2 * median_var).max(1e-12);
+                    let p = p.min(1e8);
+                    num += p * lam;
+                    den += p;
+                }
+            }
+            let shared = num / den;
+            for ch in 0..c {
+                let i = b * c + ch;
+                let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
+                let signal = t2 * f.data[i] * f.data[i];
+                let w = if signal + s2 > 0.0 {
+                    signal / (signal + s2)
+                } else {
+                    1.0
+                };
+                let lam = if own_rel[ch].is_finite() {
+                    shared + w_low[ch] * (own_rel[ch] - shared)
+                } else {
+                    shared
+                };
+                level.data[i] = (colour[ch] * lam).max(LEVEL_MIN);
+                weight.data[i] = if keep.is_some_and(|m| m[b]) {
+                    1.0
+                } else {
+                    w.clamp(0.0, 1.0)
+                };
+            }
+        }
         Blended {
             level,
             weight,
@@ -272,7 +297,7 @@ impl NoiseModel {
                     }
                 })
                 .collect(),
-            prior_precision: if rel > 0.0 { 1.0 / rel } else { 1e6 },
+            prior_precision: prior,
         }
     }
 }
@@ -471,6 +496,39 @@ mod tests {
             })
             .collect();
         assert!(NoiseModel::fit(&none, &f).is_none());
+    }
+
+    #[test]
+    fn a_starved_channel_takes_its_block_level_from_the_well_lit_ones() {
+        // Two blocks, three channels: channel 0 drowned in noise, 1 and 2 clean. Block 1 is a dark object (30 % of
+        // the seafloor's level in every channel). The clean channels keep their own levels; the starved channel's
+        // level follows them (0.3·C) instead of falling back to the seafloor colour C, which made dark objects red.
+        let m = NoiseModel {
+            noise_var: vec![1.0, 1e-6, 1e-6],
+            texture_var: vec![0.01, 0.01, 0.01],
+        };
+        let f = Raster::filled(2, 1, 3, 0.5);
+        let colour = [0.4f32, 0.4, 0.4];
+        let own = Raster::from_fn(2, 1, 3, |x, _, _| {
+            0.5 * 0.4 * if x == 1 { 0.3 } else { 1.0 }
+        });
+        let b = m.blend(&f, &own, None, &colour, 8, None);
+        for ch in 1..3 {
+            assert!(
+                (b.level.get(1, 0, ch) - 0.12).abs() < 1e-3,
+                "ch {ch}: {}",
+                b.level.get(1, 0, ch)
+            );
+        }
+        let starved = b.level.get(1, 0, 0);
+        assert!(
+            (starved - 0.12).abs() < 0.01,
+            "starved channel's level {starved}, want about 0.12"
+        );
+        // On the seafloor block every channel stays at C.
+        for ch in 0..3 {
+            assert!((b.level.get(0, 0, ch) - 0.4).abs() < 1e-3);
+        }
     }
 
     #[test]
