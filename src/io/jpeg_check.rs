@@ -148,16 +148,28 @@ impl<'a> Bits<'a> {
         self.consumed += k as u64;
     }
 
-    #[inline]
-    fn decode(&mut self, t: &Huffman) -> Result<u8, Why> {
+    /// The fast table's entry for the next bits, `(symbol, code length)`; length 0 when the code is longer than
+    /// [`FAST`] bits (then [`Bits::decode_long`]).
+    #[inline(always)]
+    fn peek_fast(&mut self, t: &Huffman) -> (u8, u8) {
         if self.n < 16 {
             self.fill();
         }
-        let (sym, len) = t.fast[(self.acc >> (64 - FAST)) as usize];
+        t.fast[(self.acc >> (64 - FAST)) as usize]
+    }
+
+    #[inline]
+    fn decode(&mut self, t: &Huffman) -> Result<u8, Why> {
+        let (sym, len) = self.peek_fast(t);
         if len > 0 {
             self.skip(len as u32);
             return Ok(sym);
         }
+        self.decode_long(t)
+    }
+
+    /// A code longer than [`FAST`] bits, by the canonical code's limits (at least 16 bits in the reader).
+    fn decode_long(&mut self, t: &Huffman) -> Result<u8, Why> {
         for len in (FAST as usize + 1)..=16 {
             let code = (self.acc >> (64 - len)) as i32;
             if code <= t.maxcode[len] {
@@ -177,15 +189,12 @@ impl<'a> Bits<'a> {
     /// (the check's inner loop).
     #[inline]
     fn decode_ac(&mut self, t: &Huffman) -> Result<u8, Why> {
-        if self.n < 16 {
-            self.fill();
-        }
-        let (sym, len) = t.fast[(self.acc >> (64 - FAST)) as usize];
+        let (sym, len) = self.peek_fast(t);
         if len > 0 {
             self.skip(len as u32 + (sym & 15) as u32);
             return Ok(sym);
         }
-        let sym = self.decode(t)?;
+        let sym = self.decode_long(t)?;
         self.skip((sym & 15) as u32);
         Ok(sym)
     }
