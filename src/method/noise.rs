@@ -234,24 +234,28 @@ impl NoiseModel {
             .sum::<f32>()
             / c as f32;
         let prior = if rel > 0.0 { 1.0 / rel } else { 1e6 };
-        let mut own_rel = vec![f32::NAN; c];
-        let mut w_low = vec![1.0f32; c];
+        // Wiener weight of a signal against a noise variance (1 where neither is measured).
+        let wiener = |signal: f32, noise: f32| {
+            if signal + noise > 0.0 {
+                signal / (signal + noise)
+            } else {
+                1.0
+            }
+        };
+        let (mut own_rel, mut w, mut w_low) = (vec![f32::NAN; c], vec![1.0f32; c], vec![1.0f32; c]);
         for b in 0..f.data.len() / c {
-            // Per channel: the block's own relative level λ_c = ((median − S)/F)/C and the weight of a block
-            // median against the seafloor colour; λ* pools the channels by the precision of their levels, so a
-            // starved channel's level follows the well-lit ones (a nodule as large as a block stays dark in red
-            // too, instead of red falling back to the seafloor colour alone).
+            // Per channel: the pixel weight, the block's own relative level λ_c = ((median − S)/F)/C and the
+            // weight of a block median against the seafloor colour; λ* pools the channels by the precision of their
+            // levels, so a starved channel's level follows the well-lit ones (a nodule as large as a block stays
+            // dark in red too, instead of red falling back to the seafloor colour alone).
             let (mut num, mut den) = (prior, prior);
             for ch in 0..c {
                 let i = b * c + ch;
                 let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
                 let fv = f.data[i];
                 let signal = t2 * fv * fv;
-                w_low[ch] = if signal + s2 * median_var > 0.0 {
-                    signal / (signal + s2 * median_var)
-                } else {
-                    1.0
-                };
+                w[ch] = wiener(signal, s2);
+                w_low[ch] = wiener(signal, s2 * median_var);
                 let lam = (own.data[i] - s.map_or(0.0, |s| s.data[i])) / fv / colour[ch];
                 own_rel[ch] = lam;
                 if lam.is_finite() && t2 > 0.0 {
@@ -264,13 +268,6 @@ impl NoiseModel {
             let shared = num / den;
             for ch in 0..c {
                 let i = b * c + ch;
-                let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
-                let signal = t2 * f.data[i] * f.data[i];
-                let w = if signal + s2 > 0.0 {
-                    signal / (signal + s2)
-                } else {
-                    1.0
-                };
                 let lam = if own_rel[ch].is_finite() {
                     shared + w_low[ch] * (own_rel[ch] - shared)
                 } else {
@@ -280,7 +277,7 @@ impl NoiseModel {
                 weight.data[i] = if keep.is_some_and(|m| m[b]) {
                     1.0
                 } else {
-                    w.clamp(0.0, 1.0)
+                    w[ch].clamp(0.0, 1.0)
                 };
             }
         }
