@@ -33,7 +33,7 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 
             threshold: t.factor_change,
         },
         Series {
-            title: "colour shift of F against the mission start",
+            title: "colour shift of F against what its level predicts",
             values: frames.iter().map(|f| f.health.colour_shift).collect(),
             threshold: t.colour_shift,
         },
