@@ -280,15 +280,15 @@ fn block_sums(
 /// How a photo's own block medians compare with its window's `M − S` (both at block resolution, linear).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhotoFit {
-    /// The photo's overall level: median over blocks of the ratio `Σ(I − S)/Σ(M − S)` over the
-    /// channels that carry light (`BlockSums::ratio`).
+    /// The photo's overall level: median over blocks of the ratio `Σ(I − S)/Σ(M − S)` over the channels that
+    /// carry light (`BlockSums::ratio`).
     pub level: f32,
     /// Share of blocks whose ratio, divided by `level`, is off 1 by more than the block deviation.
     pub contamination: f32,
     /// Fine structure of the corrected photo over that of the photo itself: the median of `|hp(ln I′ − ln M′)|`
-    /// over that of `|hp(ln I′)|`, where `I′ = I − S` and `M′ = M − S` are means over the channels
-    /// that carry light, `hp(v) = v − v̄` with
-    /// `v̄` the box average of [`roughness`], over blocks lit in both (above a tenth of the 99th percentile).
+    /// over that of `|hp(ln I′)|`, where `I′ = I − S` and `M′ = M − S` are means over the channels that carry
+    /// light, `hp(v) = v − v̄` with `v̄` the box average of [`roughness`], over blocks lit in both (above a tenth of
+    /// the 99th percentile).
     /// When `F` is smooth the correction keeps the seafloor's texture (≈ 1); when `F` copies the scene (a camera
     /// that hardly moves, or a window short of seafloor) the corrected photo is flat (≪ 1). 1 when the image is
     /// smaller than [`MIN_ROUGHNESS_SIZE`] or has no texture at all.
