@@ -59,16 +59,10 @@ fn main() {
         .map(|i| (15_000 + (i % 97) * 200) as u16 + (next() % 10_000) as u16)
         .collect();
     let p8: Vec<u8> = codes.iter().map(|&v| (v >> 8) as u8).collect();
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into());
-    println!("correction kernel, 4000x3000 RGB, one thread, best of 7 ({cpu})");
+    let (cpu, cores, rustc) = abysslight::eval::bench::machine();
+    println!(
+        "correction kernel, 4000x3000 RGB, one thread, best of 7 ({cpu}, {cores} cores, {rustc})"
+    );
     let linear = time(&p8, layout, Transfer::Linear, 256);
     println!("  8-bit linear   {linear:7.1} ms");
     for (label, ms) in [

@@ -223,7 +223,8 @@ pub fn peak_memory_kib() -> u64 {
         .unwrap_or(0)
 }
 
-fn machine() -> (String, usize, String) {
+/// The machine a benchmark ran on: CPU model, cores available, `rustc -V`.
+pub fn machine() -> (String, usize, String) {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| {
