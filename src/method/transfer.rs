@@ -372,8 +372,6 @@ mod tests {
             (Transfer::Gamma(4.0), 65536),
         ] {
             let c = Curve::new(t, levels);
-            // Both vector paths are exercised: one packed gather for 8-bit curves, bucket start plus threshold
-            // steps for 16-bit ones.
             // Both vector paths are exercised: one packed gather where every bucket holds at most one threshold
             // (8- and 16-bit sRGB, usual gammas), bucket start plus threshold steps otherwise (gamma 0.5 and 0.8
             // at 16 bits).
