@@ -412,11 +412,40 @@ fn previews_sheet_summary_and_rerun_note() {
         d.path(),
     );
     assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("input | corrected | F·C"),
+        "{}",
+        stderr(&o)
+    );
     let sheet = image::open(d.path().join("sheet.png")).unwrap();
     assert!(
         sheet.width() >= 3 * 200 && sheet.height() >= 3 * 133,
         "{:?}",
         (sheet.width(), sheet.height())
+    );
+    // Without saved factors: two columns, and the message says how to get the third.
+    std::fs::remove_dir_all(d.path().join("out/_abysslight/factors")).unwrap();
+    let o = abysslight(
+        &[
+            "sheet",
+            "survey",
+            "out",
+            "sheet2.png",
+            "--rows",
+            "3",
+            "--width",
+            "200",
+        ],
+        d.path(),
+    );
+    assert!(stderr(&o).contains("--save-factors"), "{}", stderr(&o));
+    let two = image::open(d.path().join("sheet2.png")).unwrap();
+    // Two 200-pixel tiles and three 4-pixel gaps: no captioned empty column beside them.
+    assert_eq!(
+        two.width(),
+        2 * 200 + 3 * 4,
+        "{:?}",
+        (two.width(), sheet.width())
     );
     let o = abysslight(&["sheet", "nowhere", "out", "s.png"], d.path());
     assert_eq!(o.status.code(), Some(2));

@@ -1055,10 +1055,18 @@ fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
     let img =
         abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
     abysslight::run::pictures::save_png(&img, &a.sheet)?;
-    eprintln!(
-        "abysslight: before/after sheet written to {} (input | corrected | F·C)",
-        a.sheet.display()
-    );
+    if abysslight::run::pictures::has_factors(&a.corrected) {
+        eprintln!(
+            "abysslight: before/after sheet written to {} (input | corrected | F·C)",
+            a.sheet.display()
+        );
+    } else {
+        eprintln!(
+            "abysslight: before/after sheet written to {} (input | corrected; for an F·C column run correct with \
+             --save-factors)",
+            a.sheet.display()
+        );
+    }
     Ok(ExitCode::from(EXIT_OK))
 }
 

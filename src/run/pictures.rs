@@ -213,7 +213,8 @@ pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<Rg
 }
 
 /// A before/after contact sheet of a corrected folder: `rows` photos spread evenly over the mission, each as
-/// input | corrected | `F·C` (the last only where `--save-factors` wrote it), `width` pixels wide per tile.
+/// input | corrected | `F·C` (the last only where `--save-factors` wrote it; without any, no `F·C` column),
+/// `width` pixels wide per tile.
 /// For looking at a run; `examples/before_after.rs` and `examples/real_sheets.rs` use it.
 pub fn before_after_sheet(
     input: &Path,
@@ -245,7 +246,18 @@ pub fn before_after_sheet(
         }
         tiles.push(row);
     }
-    Ok(draw::grid(&["input", "corrected", "F*C"], &tiles, 4))
+    // No empty, captioned F·C column when the run did not save its factors.
+    let captions: &[&str] = if tiles.iter().any(|r| r.len() > 2) {
+        &["input", "corrected", "F*C"]
+    } else {
+        &["input", "corrected"]
+    };
+    Ok(draw::grid(captions, &tiles, 4))
+}
+
+/// Whether `output` (a corrected folder) holds the `F·C` images that `--save-factors` writes.
+pub fn has_factors(output: &Path) -> bool {
+    output.join("_abysslight/factors").is_dir()
 }
 
 /// Smallest width of a factor preview: a 4000-pixel photo's `F·C` is 500 blocks wide, a 1920-pixel video frame's
