@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let rows: usize = args.get(3).map_or(Ok(4), |s| s.parse())?;
     let width: u32 = args.get(4).map_or(Ok(480), |s| s.parse())?;
-    let sheet = abysslight::run::pictures::before_after_sheet(
+    let (sheet, with_factors) = abysslight::run::pictures::before_after_sheet(
         &PathBuf::from(&args[0]),
         &PathBuf::from(&args[1]),
         rows,
@@ -26,6 +26,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     let path = PathBuf::from(&args[2]);
     abysslight::run::pictures::save_png(&sheet, &path)?;
-    eprintln!("wrote {} (input | corrected | F·C)", path.display());
+    let columns = if with_factors {
+        "input | corrected | F·C"
+    } else {
+        "input | corrected"
+    };
+    eprintln!("wrote {} ({columns})", path.display());
     Ok(())
 }

@@ -154,7 +154,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for f in report.frames.iter().flat_map(|f| &f.health.flags) {
             *kinds.entry(f.kind()).or_default() += 1;
         }
-        let sheet = abysslight::run::pictures::before_after_sheet(&survey, &corrected, 4, 360)?;
+        let (sheet, _) =
+            abysslight::run::pictures::before_after_sheet(&survey, &corrected, 4, 360)?;
         let sheet_path = out.join(format!("{}.png", set.name));
         abysslight::run::pictures::save_png(&sheet, &sheet_path)?;
         println!(

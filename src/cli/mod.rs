@@ -1052,10 +1052,10 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
 }
 
 fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
-    let img =
+    let (img, with_factors) =
         abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
     abysslight::run::pictures::save_png(&img, &a.sheet)?;
-    if abysslight::run::pictures::has_factors(&a.corrected) {
+    if with_factors {
         eprintln!(
             "abysslight: before/after sheet written to {} (input | corrected | F·C)",
             a.sheet.display()

@@ -214,14 +214,14 @@ pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<Rg
 
 /// A before/after contact sheet of a corrected folder: `rows` photos spread evenly over the mission, each as
 /// input | corrected | `F·C` (the last only where `--save-factors` wrote it; without any, no `F·C` column),
-/// `width` pixels wide per tile.
+/// `width` pixels wide per tile; and whether it has the `F·C` column.
 /// For looking at a run; `examples/before_after.rs` and `examples/real_sheets.rs` use it.
 pub fn before_after_sheet(
     input: &Path,
     output: &Path,
     rows: usize,
     width: u32,
-) -> Result<RgbImage> {
+) -> Result<(RgbImage, bool)> {
     let found = crate::io::find_photos(input)?;
     let n = found.photos.len();
     if n == 0 || rows == 0 {
@@ -232,7 +232,8 @@ pub fn before_after_sheet(
     for r in 0..rows {
         let e = &found.photos[r * (n - 1) / (rows - 1).max(1)];
         let factor = output
-            .join("_abysslight/factors")
+            .join(crate::io::WORK_DIR)
+            .join("factors")
             .join(&e.relative)
             .with_extension("png");
         let mut row: Vec<RgbImage> = [e.path.clone(), output.join(&e.relative)]
@@ -247,17 +248,13 @@ pub fn before_after_sheet(
         tiles.push(row);
     }
     // No empty, captioned F·C column when the run did not save its factors.
-    let captions: &[&str] = if tiles.iter().any(|r| r.len() > 2) {
+    let with_factors = tiles.iter().any(|r| r.len() > 2);
+    let captions: &[&str] = if with_factors {
         &["input", "corrected", "F*C"]
     } else {
         &["input", "corrected"]
     };
-    Ok(draw::grid(captions, &tiles, 4))
-}
-
-/// Whether `output` (a corrected folder) holds the `F·C` images that `--save-factors` writes.
-pub fn has_factors(output: &Path) -> bool {
-    output.join("_abysslight/factors").is_dir()
+    Ok((draw::grid(captions, &tiles, 4), with_factors))
 }
 
 /// Smallest width of a factor preview: a 4000-pixel photo's `F·C` is 500 blocks wide, a 1920-pixel video frame's
