@@ -25,7 +25,8 @@ use std::time::Instant;
 use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
-use abysslight::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
+use abysslight::eval::matrix::{self, DIVES};
+use abysslight::eval::simulate::Dive;
 use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
 use abysslight::method::transfer::Transfer;
@@ -34,100 +35,6 @@ use abysslight::{correct_mission, Silent};
 
 /// Options of one column, made from the options every column shares.
 type MakeOptions = Box<dyn Fn(Options) -> Options>;
-
-/// One dive of the matrix.
-struct DiveSpec {
-    name: &'static str,
-    rig: Rig,
-    beam: f32,
-    water: &'static str,
-    altitude: f32,
-    swing: f32,
-    contamination: f64,
-    bits: u32,
-    srgb: bool,
-    jpeg: bool,
-    fov: f32,
-}
-
-#[allow(clippy::too_many_arguments)]
-const fn d(
-    name: &'static str,
-    rig: Rig,
-    beam: f32,
-    water: &'static str,
-    altitude: f32,
-    swing: f32,
-    contamination: f64,
-    bits: u32,
-    srgb: bool,
-    jpeg: bool,
-    fov: f32,
-) -> DiveSpec {
-    DiveSpec {
-        name,
-        rig,
-        beam,
-        water,
-        altitude,
-        swing,
-        contamination,
-        bits,
-        srgb,
-        jpeg,
-        fov,
-    }
-}
-
-#[rustfmt::skip]
-const DIVES: &[DiveSpec] = &[
-    //  name     rig        beam  water          alt  swing  c     bits srgb   jpeg   fov
-    d("a01", Rig::Three, 36.0, "oceanic-i",   5.0, 0.3, 0.10, 8,  true,  false, 90.0),
-    d("a02", Rig::Aft,   36.0, "oceanic-i",   6.0, 0.6, 0.20, 16, false, false, 80.0),
-    d("a03", Rig::Two,   36.0, "oceanic-iii", 4.0, 0.2, 0.35, 8,  true,  true,  75.0),
-    d("a04", Rig::Four,  36.0, "coastal",     4.5, 0.5, 0.25, 16, false, false, 85.0),
-    d("a05", Rig::Three, 25.0, "oceanic-i",   5.0, 0.4, 0.15, 8,  true,  false, 80.0),
-    d("a06", Rig::Aft,   36.0, "oceanic-iii", 7.0, 0.6, 0.30, 8,  true,  true,  90.0),
-    d("a07", Rig::Two,   25.0, "coastal",     5.5, 0.3, 0.20, 16, true,  false, 75.0),
-    d("a08", Rig::Four,  36.0, "oceanic-i",   6.5, 0.0, 0.10, 8,  false, false, 90.0),
-    d("a09", Rig::Three, 36.0, "oceanic-iii", 4.0, 0.6, 0.35, 8,  true,  true,  80.0),
-    d("a10", Rig::Aft,   30.0, "oceanic-i",   5.0, 0.5, 0.25, 16, false, false, 85.0),
-    d("a11", Rig::Two,   36.0, "oceanic-i",   7.0, 0.2, 0.30, 8,  true,  false, 90.0),
-    d("a12", Rig::Four,  28.0, "oceanic-iii", 5.0, 0.4, 0.15, 8,  true,  true,  80.0),
-];
-
-impl DiveSpec {
-    fn simulation(&self, seed: u64, size: (usize, usize)) -> Simulation {
-        let water = Water::preset(self.water).expect("known water preset");
-        // The camera's white balance makes the sediment grey at the centre: gains from the two-way path.
-        let path = 2.0 * self.altitude;
-        let eta = water.attenuation;
-        let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
-        Simulation {
-            frames: 30,
-            water_column: 15,
-            width: size.0,
-            height: size.1,
-            seed,
-            contamination: self.contamination,
-            bit_depth: self.bits,
-            encode: if self.srgb {
-                Transfer::Srgb
-            } else {
-                Transfer::Linear
-            },
-            rig: self.rig,
-            altitude: self.altitude,
-            fov_deg: self.fov,
-            beam_deg: self.beam,
-            water,
-            altitude_swing: Some(self.swing),
-            white_balance: [gain(0), 1.0, gain(2)],
-            exposure: Exposure::Brightest,
-            ..Simulation::default()
-        }
-    }
-}
 
 /// Scores of one method on one dive.
 #[derive(Clone, Copy)]
@@ -348,7 +255,7 @@ fn main() {
             continue;
         }
         let t = Instant::now();
-        let sim = spec.simulation(1000 + seed_offset * 100 + i as u64, size);
+        let sim = spec.simulation(matrix::seed(i, seed_offset), size);
         let dive = sim.render_with_lighting().expect("render");
         let dir = out.join(spec.name);
         let _ = std::fs::remove_dir_all(&dir);

@@ -9,7 +9,7 @@ use image::{Rgb, RgbImage};
 
 use crate::error::{Error, Result};
 use crate::eval::evaluate::{evaluate, EvalSettings, Evaluation};
-use crate::eval::simulate::{Exposure, Rig, Simulation, Water};
+use crate::eval::simulate::Simulation;
 use crate::io::decode;
 use crate::method::baseline::Method;
 use crate::method::raster::Raster;
@@ -61,23 +61,10 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
 /// ~0.4/m), 5 m ± 0.4 m, 15 % nodules, ×6 red white balance, exposure from the brightest sediment, 8-bit sRGB.
 /// (`Simulation::default()` is the older bright 3 m dive.)
 pub fn demo_simulation() -> Simulation {
-    let water = Water::preset("oceanic-i").expect("a known preset");
-    let path = 2.0 * 5.0;
-    let eta = water.attenuation;
-    let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
-    Simulation {
-        contamination: 0.15,
-        encode: Transfer::Srgb,
-        rig: Rig::Three,
-        altitude: 5.0,
-        fov_deg: 80.0,
-        beam_deg: 25.0,
-        water,
-        altitude_swing: Some(0.4),
-        white_balance: [gain(0), 1.0, gain(2)],
-        exposure: Exposure::Brightest,
-        ..Simulation::default()
-    }
+    let d = Simulation::default();
+    crate::eval::matrix::dive("a05")
+        .expect("a05 is in the matrix")
+        .simulation(d.seed, (d.width, d.height))
 }
 
 /// Run the demo into `out` (`out/dive/` the simulated dive, `out/<method>/` the corrected photos,

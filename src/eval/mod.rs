@@ -3,5 +3,6 @@
 pub mod bench;
 pub mod demo;
 pub mod evaluate;
+pub mod matrix;
 pub mod register;
 pub mod simulate;

@@ -1,0 +1,126 @@
+//! The dive matrix of issue 12 (docs/evaluation.md, `examples/dive_matrix.rs`): twelve abyssal dives (light rigs,
+//! beams, waters, altitudes, contamination, 8/16-bit, linear/sRGB, PNG/JPEG) that the example scores every method
+//! on, and the tests and the demo render from the same table.
+
+use crate::eval::simulate::{Exposure, Rig, Simulation, Water};
+use crate::method::transfer::Transfer;
+
+/// One dive of the matrix: its light rig, water, altitude, contamination and how the camera stores it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiveSpec {
+    /// Its name in the tables (`a01` … `a12`).
+    pub name: &'static str,
+    /// Light rig.
+    pub rig: Rig,
+    /// Beam width of the lights, degrees.
+    pub beam: f32,
+    /// Water preset ([`Water::preset`]).
+    pub water: &'static str,
+    /// Mean altitude, metres.
+    pub altitude: f32,
+    /// Altitude swing, metres.
+    pub swing: f32,
+    /// Share of the seafloor covered by nodules.
+    pub contamination: f64,
+    /// Bits per stored sample (8 or 16).
+    pub bits: u32,
+    /// Stored sRGB-encoded (otherwise linear).
+    pub srgb: bool,
+    /// Saved as JPEG (quality 92) by the matrix.
+    pub jpeg: bool,
+    /// Horizontal field of view, degrees.
+    pub fov: f32,
+}
+
+#[allow(clippy::too_many_arguments)]
+const fn d(
+    name: &'static str,
+    rig: Rig,
+    beam: f32,
+    water: &'static str,
+    altitude: f32,
+    swing: f32,
+    contamination: f64,
+    bits: u32,
+    srgb: bool,
+    jpeg: bool,
+    fov: f32,
+) -> DiveSpec {
+    DiveSpec {
+        name,
+        rig,
+        beam,
+        water,
+        altitude,
+        swing,
+        contamination,
+        bits,
+        srgb,
+        jpeg,
+        fov,
+    }
+}
+
+#[rustfmt::skip]
+/// The twelve dives (docs/evaluation.md, "The dive matrix").
+pub const DIVES: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     bits srgb   jpeg   fov
+    d("a01", Rig::Three, 36.0, "oceanic-i",   5.0, 0.3, 0.10, 8,  true,  false, 90.0),
+    d("a02", Rig::Aft,   36.0, "oceanic-i",   6.0, 0.6, 0.20, 16, false, false, 80.0),
+    d("a03", Rig::Two,   36.0, "oceanic-iii", 4.0, 0.2, 0.35, 8,  true,  true,  75.0),
+    d("a04", Rig::Four,  36.0, "coastal",     4.5, 0.5, 0.25, 16, false, false, 85.0),
+    d("a05", Rig::Three, 25.0, "oceanic-i",   5.0, 0.4, 0.15, 8,  true,  false, 80.0),
+    d("a06", Rig::Aft,   36.0, "oceanic-iii", 7.0, 0.6, 0.30, 8,  true,  true,  90.0),
+    d("a07", Rig::Two,   25.0, "coastal",     5.5, 0.3, 0.20, 16, true,  false, 75.0),
+    d("a08", Rig::Four,  36.0, "oceanic-i",   6.5, 0.0, 0.10, 8,  false, false, 90.0),
+    d("a09", Rig::Three, 36.0, "oceanic-iii", 4.0, 0.6, 0.35, 8,  true,  true,  80.0),
+    d("a10", Rig::Aft,   30.0, "oceanic-i",   5.0, 0.5, 0.25, 16, false, false, 85.0),
+    d("a11", Rig::Two,   36.0, "oceanic-i",   7.0, 0.2, 0.30, 8,  true,  false, 90.0),
+    d("a12", Rig::Four,  28.0, "oceanic-iii", 5.0, 0.4, 0.15, 8,  true,  true,  80.0),
+];
+
+impl DiveSpec {
+    /// The dive rendered with `seed` at `size` (width, height): 30 photos and 15 water-column frames, the camera's
+    /// white balance from the two-way path (red capped at ×6) and the exposure from the brightest sediment;
+    /// `jpeg` is left to the caller (the matrix saves the rendered PNGs as JPEGs).
+    pub fn simulation(&self, seed: u64, size: (usize, usize)) -> Simulation {
+        let water = Water::preset(self.water).expect("known water preset");
+        // The camera's white balance makes the sediment grey at the centre: gains from the two-way path.
+        let path = 2.0 * self.altitude;
+        let eta = water.attenuation;
+        let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
+        Simulation {
+            frames: 30,
+            water_column: 15,
+            width: size.0,
+            height: size.1,
+            seed,
+            contamination: self.contamination,
+            bit_depth: self.bits,
+            encode: if self.srgb {
+                Transfer::Srgb
+            } else {
+                Transfer::Linear
+            },
+            rig: self.rig,
+            altitude: self.altitude,
+            fov_deg: self.fov,
+            beam_deg: self.beam,
+            water,
+            altitude_swing: Some(self.swing),
+            white_balance: [gain(0), 1.0, gain(2)],
+            exposure: Exposure::Brightest,
+            ..Simulation::default()
+        }
+    }
+}
+
+/// The dive of the matrix called `name` (`a01` … `a12`).
+pub fn dive(name: &str) -> Option<&'static DiveSpec> {
+    DIVES.iter().find(|d| d.name == name)
+}
+
+/// The seed of the matrix's `index`-th dive in seed set `offset` (0: the set the method was tuned on).
+pub fn seed(index: usize, offset: u64) -> u64 {
+    1000 + offset * 100 + index as u64
+}
