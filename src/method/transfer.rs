@@ -176,7 +176,9 @@ impl Curve {
             })
             .max()
             .unwrap_or(0);
-        let packed = if max_steps <= 1 && shift < 16 && !start.is_empty() {
+        let packed = if max_steps <= 1 && !start.is_empty() {
+            // The low bits, and the "no threshold" mark 1 << shift, fit the entry's 16 low bits.
+            debug_assert!(shift < 16);
             let low_mask = (1u32 << shift) - 1;
             start
                 .iter()
