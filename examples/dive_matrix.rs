@@ -25,7 +25,7 @@ use std::time::Instant;
 use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
-use abysslight::eval::matrix::{self, DIVES};
+use abysslight::eval::matrix::{self, linear, load_set, signal_mask, DIVES};
 use abysslight::eval::simulate::Dive;
 use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
@@ -51,16 +51,6 @@ struct Score {
     overlap: f64,
 }
 
-fn linear(p: &abysslight::Photo, t: Transfer) -> Raster {
-    let mut r = Raster::from_photo(p);
-    if !t.is_linear() {
-        for v in &mut r.data {
-            *v = t.to_linear(*v);
-        }
-    }
-    r
-}
-
 fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
     let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
     let (consistency, overlap) =
@@ -73,43 +63,6 @@ fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
         consistency,
         overlap,
     }
-}
-
-fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
-    names
-        .iter()
-        .map(|n| {
-            let p = dir.join(n);
-            linear(
-                &decode(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
-                t,
-            )
-        })
-        .collect()
-}
-
-/// Where each survey photo carries the albedo at all: the true lit signal `F·A` is at least one code step of the
-/// camera's encoding (`bits`, curve `t`) at the sample's level `F·A + S`, and that level is below clipping. The
-/// residual pattern is scored on these samples only, for every method alike: where a starved channel (red over
-/// metres of coastal water) is below one code step, no method can recover it and none should be scored on it.
-fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
-    let q = 1.0 / ((1u32 << bits) - 1) as f32;
-    dive.albedo
-        .iter()
-        .zip(dive.factor.iter().zip(&dive.backscatter))
-        .map(|(a, (f, s))| {
-            a.data
-                .iter()
-                .zip(f.data.iter().zip(&s.data))
-                .map(|(&a, (&f, &s))| {
-                    let lit = a * f;
-                    let v = t.from_linear((lit + s).min(1.0));
-                    let step = t.to_linear((v + q).min(1.0)) - t.to_linear(v);
-                    lit + s < 1.0 && lit >= step
-                })
-                .collect()
-        })
-        .collect()
 }
 
 /// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`).
@@ -490,6 +443,11 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
         ("abyss-no-denoise", |o| Options {
             method: Method::Abyss,
             denoise: false,
+            ..o
+        }),
+        ("abyss-no-level-by-light", |o| Options {
+            method: Method::Abyss,
+            level_by_light: false,
             ..o
         }),
         ("abyss-scale-auto", |o| Options {

@@ -2,7 +2,9 @@
 //! the default method (`abyss`) against the paper as published on small dives of the dive matrix
 //! (examples/dive_matrix.rs, docs/evaluation.md).
 
-use abysslight::eval::evaluate::{evaluate, EvalSettings};
+use abysslight::eval::evaluate::{
+    albedo_error_where, evaluate, residual_pattern_where, EvalSettings,
+};
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::{Exposure, Rig, Simulation, Water};
 use abysslight::method::baseline::Method;
@@ -293,6 +295,51 @@ fn sound_abyssal_dives_raise_no_flags() {
         assert!(
             kinds.get("exposure-jump").copied().unwrap_or(0) <= 1,
             "{name}: {kinds:?}"
+        );
+    }
+}
+
+/// The blend's levels evened out across light levels (`level_by_light`, on by default): on dim, nodule-dotted
+/// dives of the matrix the rim used to come out 6–18 % darker than the lit centre (noise pulls a dim block's
+/// median towards its mean, the water-column `S` takes a larger share of a small signal). Two dives of seed set 1
+/// (not the set the method was tuned on), scored as the matrix scores them (on the samples with signal): the
+/// residual pattern at least 10 % lower than without it, the albedo error no more than 2 % higher.
+#[test]
+fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
+    for name in ["a07", "a11"] {
+        let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
+        let spec = &matrix::DIVES[i];
+        assert!(!spec.jpeg, "{name}: the test reads the rendered PNGs");
+        let sim = spec.simulation(matrix::seed(i, 1), (320, 240));
+        let dive = sim.render_with_lighting().unwrap();
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().join("dive");
+        dive.write(&root).unwrap();
+        let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
+        let signal = matrix::signal_mask(&dive, sim.encode, spec.bits);
+        let mut got = Vec::new();
+        for level_by_light in [true, false] {
+            let out = d.path().join(format!("out-{level_by_light}"));
+            correct_dive(
+                &sim,
+                &root,
+                &out,
+                Options {
+                    level_by_light,
+                    ..Options::default()
+                },
+            );
+            let photos = matrix::load_set(&out, &names, sim.encode);
+            got.push((
+                albedo_error_where(&photos, &dive.albedo, Some(&signal)),
+                residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(&signal)),
+            ));
+        }
+        let (with, without) = (got[0], got[1]);
+        eprintln!("{name}: (albedo error, residual pattern) with {with:?}, without {without:?}");
+        assert!(
+            with.1 < 0.9 * without.1 && with.0 < 1.02 * without.0,
+            "{name}: with {with:?}, without {without:?}"
         );
     }
 }

@@ -445,6 +445,14 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_METHOD)]
     no_denoise: bool,
 
+    /// --method abyss: do not even out the blended levels of dim regions (on by default).
+    ///
+    /// In dim blocks noise, an over-estimated S and the window's quantile bias the local level low; by default
+    /// each photo measures that loss as the typical level of its blocks at each light level against its brightest
+    /// quarter's, and divides it out, so dim regions are not left darker than lit ones.
+    #[arg(long, help_heading = H_METHOD)]
+    no_level_by_light: bool,
+
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     ///
     /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
@@ -639,6 +647,9 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if let Some(ScaleArg(k)) = args.backscatter_scale {
         o.backscatter_scale = k;
+    }
+    if args.no_level_by_light {
+        o.level_by_light = false;
     }
     if args.no_denoise {
         o.denoise = false;

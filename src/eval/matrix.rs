@@ -2,7 +2,11 @@
 //! beams, waters, altitudes, contamination, 8/16-bit, linear/sRGB, PNG/JPEG) that the example scores every method
 //! on, and the tests and the demo render from the same table.
 
-use crate::eval::simulate::{Exposure, Rig, Simulation, Water};
+use std::path::Path;
+
+use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
+use crate::io::decode;
+use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
 
 /// One dive of the matrix: its light rig, water, altitude, contamination and how the camera stores it.
@@ -123,4 +127,53 @@ pub fn dive(name: &str) -> Option<&'static DiveSpec> {
 /// The seed of the matrix's `index`-th dive in seed set `offset` (0: the set the method was tuned on).
 pub fn seed(index: usize, offset: u64) -> u64 {
     1000 + offset * 100 + index as u64
+}
+
+/// A decoded photo in linear light (`t`: the curve it was stored with).
+pub fn linear(p: &crate::Photo, t: Transfer) -> Raster {
+    let mut r = Raster::from_photo(p);
+    if !t.is_linear() {
+        for v in &mut r.data {
+            *v = t.to_linear(*v);
+        }
+    }
+    r
+}
+
+/// The photos `names` of `dir`, each in linear light; panics on a file that does not decode (the matrix wrote it).
+pub fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
+    names
+        .iter()
+        .map(|n| {
+            let p = dir.join(n);
+            linear(
+                &decode(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+                t,
+            )
+        })
+        .collect()
+}
+
+/// Where each survey photo carries the albedo at all: the true lit signal `F·A` is at least one code step of the
+/// camera's encoding (`bits`, curve `t`) at the sample's level `F·A + S`, and that level is below clipping. The
+/// residual pattern is scored on these samples only, for every method alike: where a starved channel (red over
+/// metres of coastal water) is below one code step, no method can recover it and none should be scored on it.
+pub fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
+    let q = 1.0 / ((1u32 << bits) - 1) as f32;
+    dive.albedo
+        .iter()
+        .zip(dive.factor.iter().zip(&dive.backscatter))
+        .map(|(a, (f, s))| {
+            a.data
+                .iter()
+                .zip(f.data.iter().zip(&s.data))
+                .map(|(&a, (&f, &s))| {
+                    let lit = a * f;
+                    let v = t.from_linear((lit + s).min(1.0));
+                    let step = t.to_linear((v + q).min(1.0)) - t.to_linear(v);
+                    lit + s < 1.0 && lit >= step
+                })
+                .collect()
+        })
+        .collect()
 }

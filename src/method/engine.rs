@@ -31,7 +31,7 @@ use crate::method::factor::{factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
-use crate::method::noise::{block_stats, Blended, NoiseModel};
+use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, refine_factor, scaled};
@@ -448,7 +448,11 @@ impl<T> Engine<T> {
                 .as_ref()
                 .map(|model| {
                     let keep = self.masked_blocks.as_deref();
-                    model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
+                    let mut b = model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep);
+                    if self.params.level_by_light {
+                        level_by_light(&mut b.level, &f, &self.colour, keep);
+                    }
+                    b
                 })
                 // A photo whose blend changes nothing (no noise measured: most camera JPEGs) takes the plain path.
                 .filter(|b| b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND));

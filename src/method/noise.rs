@@ -299,6 +299,85 @@ impl NoiseModel {
     }
 }
 
+/// Bins of `F` (equal numbers of blocks) in which [`level_by_light`] measures the blocks' typical level.
+pub const LIGHT_BINS: usize = 16;
+
+/// Blocks that [`level_by_light`] samples at most for its bins (every `k`-th block beyond that).
+pub const MAX_LIGHT_SAMPLES: usize = 16384;
+
+/// Largest factor by which [`level_by_light`] moves a block level, either way.
+pub const MAX_LEVEL_SHIFT: f32 = 2.0;
+
+/// The blend's block levels evened out across light levels, per channel: each level `A_low` is divided by the
+/// typical level of the photo's blocks that get the same light `F`, relative to its brightest quarter's.
+///
+/// In a block where noise is comparable to the signal, `(median − S)/F` is biased low: the noise pulls the median
+/// of a skewed albedo (dark nodules in pale sediment) towards its mean, the window's quantile `M` sits further
+/// above a noisy block's median, and a water-column `S` that over-estimates the survey's backscatter takes a larger
+/// share of a small signal. All of these depend on the block's light, not on its place or content, so the blocks
+/// of one light level share them: their median level against the brightest quarter's measures the bias on the
+/// photo itself. A block keeps its difference from the blocks lit like it (a patch of nodules stays darker);
+/// where the light is good (the blend's weight near 1, where the level hardly counts) the factor is about 1.
+///
+/// The factor is the median `A_low/C` of the brightest quarter of blocks over that of the block's bin of `F`
+/// ([`LIGHT_BINS`] bins, linear between bin centres, constant beyond them), at most [`MAX_LEVEL_SHIFT`] either
+/// way. Blocks flagged in `keep` (overlays, vehicle parts) neither count nor change. A channel with fewer than
+/// `8·LIGHT_BINS` blocks is left as it is; on large photos the bins are measured on every `k`-th block (at most
+/// [`MAX_LIGHT_SAMPLES`]) and every block is corrected. Measured on the dive matrix: docs/evaluation.md.
+pub fn level_by_light(level: &mut Raster, f: &Raster, colour: &[f32], keep: Option<&[bool]>) {
+    let c = f.channels;
+    let blocks = f.data.len() / c;
+    // The bins' medians from at most about MAX_LIGHT_SAMPLES blocks (a 12 MP photo has 187,500).
+    let step = blocks.div_ceil(MAX_LIGHT_SAMPLES).max(1);
+    for (ch, &colour) in colour.iter().enumerate().take(c) {
+        let mut pts: Vec<(f32, f32)> = (0..blocks)
+            .step_by(step)
+            .filter(|&b| !keep.is_some_and(|m| m[b]))
+            .map(|b| (f.data[b * c + ch], level.data[b * c + ch] / colour))
+            .filter(|(fv, l)| fv.is_finite() && *fv > 0.0 && l.is_finite())
+            .collect();
+        let n = pts.len();
+        if n < 8 * LIGHT_BINS {
+            continue;
+        }
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let median_of = |part: &[(f32, f32)], pick: fn(&(f32, f32)) -> f32| {
+            let mut v: Vec<f32> = part.iter().map(pick).collect();
+            quantile(&mut v, 0.5)
+        };
+        let reference = median_of(&pts[n - n / 4..], |p| p.1);
+        if reference.is_nan() || reference <= 0.0 {
+            continue;
+        }
+        let (centres, typical): (Vec<f32>, Vec<f32>) = (0..LIGHT_BINS)
+            .map(|i| {
+                let part = &pts[i * n / LIGHT_BINS..(i + 1) * n / LIGHT_BINS];
+                (median_of(part, |p| p.0), median_of(part, |p| p.1))
+            })
+            .unzip();
+        let factor = |fv: f32| {
+            let j = centres.partition_point(|&x| x < fv);
+            let t = if j == 0 {
+                typical[0]
+            } else if j == LIGHT_BINS {
+                typical[LIGHT_BINS - 1]
+            } else {
+                let u =
+                    (fv - centres[j - 1]) / (centres[j] - centres[j - 1]).max(f32::MIN_POSITIVE);
+                typical[j - 1] + u * (typical[j] - typical[j - 1])
+            };
+            (reference / t).clamp(1.0 / MAX_LEVEL_SHIFT, MAX_LEVEL_SHIFT)
+        };
+        for b in 0..blocks {
+            let i = b * c + ch;
+            if keep.is_some_and(|m| m[b]) || !f.data[i].is_finite() || f.data[i] <= 0.0 {
+                continue;
+            }
+            level.data[i] = (level.data[i] * factor(f.data[i])).max(LEVEL_MIN);
+        }
+    }
+}
+
 /// Smallest median `F` of a channel's brightest quarter of blocks for its texture `τ²` to be measured (a channel
 /// with no light at all, e.g. red over many metres of water, would otherwise divide its variance by a near-zero
 /// `F²`).
@@ -560,5 +639,106 @@ mod tests {
         );
         assert_eq!(b.weight.data[2], 1.0);
         assert!((b.prior_precision - 0.16 / 0.04).abs() < 1e-3);
+    }
+
+    /// Block levels `C·bias(F)·v` on a frame lit from one side: `v` a block's own deviation (±20 %, pseudo-random),
+    /// `bias` a loss that grows as the light fades, as noise and an over-estimated `S` make it.
+    fn levels(bias: impl Fn(f32) -> f32) -> (Raster, Raster, Vec<f32>) {
+        levels_sized(48, 36, bias)
+    }
+
+    fn levels_sized(w: usize, h: usize, bias: impl Fn(f32) -> f32) -> (Raster, Raster, Vec<f32>) {
+        let mut r = 0x9E37_79B9u32;
+        let mut v = Vec::new();
+        let f = Raster::from_fn(w, h, 1, |x, y, _| {
+            0.002 + (x as f32 / (w - 1) as f32).powi(2) * (1.0 - 0.3 * y as f32 / h as f32)
+        });
+        let level = Raster::from_fn(w, h, 1, |x, y, _| {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            let dev = 0.8 + 0.4 * (r as f32 / u32::MAX as f32);
+            v.push(dev);
+            0.4 * bias(f.get(x, y, 0)) * dev
+        });
+        (f, level, v)
+    }
+
+    /// Median of `level/C` of the blocks with `F` in `range`.
+    fn typical(level: &Raster, f: &Raster, range: std::ops::Range<f32>) -> f32 {
+        let mut v: Vec<f32> = (0..f.data.len())
+            .filter(|&i| range.contains(&f.data[i]))
+            .map(|i| level.data[i] / 0.4)
+            .collect();
+        assert!(v.len() > 30, "{range:?}: {} blocks", v.len());
+        quantile(&mut v, 0.5)
+    }
+
+    #[test]
+    fn level_by_light_removes_a_loss_that_follows_the_light_and_keeps_each_block_s_own() {
+        let bias = |f: f32| 0.7 + 0.3 * (f / 0.25).min(1.0);
+        // The second size has more blocks than the bins sample (every second block is measured, all corrected).
+        for (w, h) in [(48, 36), (200, 150)] {
+            removes_the_loss(levels_sized(w, h, bias));
+        }
+    }
+
+    fn removes_the_loss((f, before, dev): (Raster, Raster, Vec<f32>)) {
+        let mut after = before.clone();
+        level_by_light(&mut after, &f, &[0.4], None);
+        // Before: the dimmest blocks' typical level is about 0.7 of the bright ones'; after, within 4 %.
+        let bright = typical(&after, &f, 0.5..2.0);
+        for range in [0.0..0.01, 0.01..0.03, 0.03..0.08, 0.08..0.2] {
+            let (was, now) = (
+                typical(&before, &f, range.clone()),
+                typical(&after, &f, range.clone()),
+            );
+            assert!(
+                (now / bright - 1.0).abs() < 0.04,
+                "{range:?}: {was} -> {now}, bright {bright}"
+            );
+        }
+        assert!(typical(&before, &f, 0.0..0.01) < 0.8 * typical(&before, &f, 0.5..2.0));
+        // The factor depends on F alone: a block keeps its deviation v from its light level's peers, so between
+        // neighbours of nearly equal F the ratio after/v moves smoothly, never by the ±20 % of v.
+        let mut pairs = 0;
+        for i in 0..f.data.len() - 1 {
+            let (a, b) = (after.data[i] / dev[i], after.data[i + 1] / dev[i + 1]);
+            if (f.data[i] - f.data[i + 1]).abs() < 0.002 {
+                assert!((a / b - 1.0).abs() < 0.05, "block {i}: {a} vs {b}");
+                pairs += 1;
+            }
+        }
+        assert!(pairs > 50, "{pairs} pairs of neighbours");
+    }
+
+    #[test]
+    fn level_by_light_leaves_levels_without_a_loss_within_their_spread() {
+        let (f, before, _) = levels(|_| 1.0);
+        let mut after = before.clone();
+        level_by_light(&mut after, &f, &[0.4], None);
+        for (a, b) in after.data.iter().zip(&before.data) {
+            assert!((a / b - 1.0).abs() < 0.06, "{b} -> {a}");
+        }
+    }
+
+    #[test]
+    fn level_by_light_skips_kept_blocks_and_small_photos() {
+        let bias = |f: f32| 0.7 + 0.3 * (f / 0.25).min(1.0);
+        let (f, before, _) = levels(bias);
+        let keep: Vec<bool> = (0..f.data.len()).map(|i| i % 3 == 0).collect();
+        let mut after = before.clone();
+        level_by_light(&mut after, &f, &[0.4], Some(&keep));
+        for (i, &kept) in keep.iter().enumerate() {
+            if kept {
+                assert_eq!(after.data[i], before.data[i]);
+            }
+        }
+        assert!((0..f.data.len()).any(|i| !keep[i] && after.data[i] != before.data[i]));
+        let small_f = Raster::from_fn(10, 10, 1, |x, _, _| 0.01 + x as f32 * 0.1);
+        let small = Raster::from_fn(10, 10, 1, |x, _, _| 0.4 * bias(0.01 + x as f32 * 0.1));
+        let mut got = small.clone();
+        level_by_light(&mut got, &small_f, &[0.4], None);
+        assert_eq!(got, small);
     }
 }

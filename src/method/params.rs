@@ -136,6 +136,9 @@ pub struct Params {
     /// [`Method::Abyss`]: blend dim regions towards their local level by their signal-to-noise ratio instead of
     /// amplifying noise ([`crate::method::noise`]). Default: true.
     pub denoise: bool,
+    /// [`Method::Abyss`] with `denoise`: even out the blend's block levels across light levels
+    /// ([`crate::method::noise::level_by_light`]), so dim regions are not left darker than lit ones. Default: true.
+    pub level_by_light: bool,
     /// [`Method::Abyss`]: the quantile of the window's samples taken as `M` (0.5: the median, as in the paper).
     /// With a contamination rate `c` of dark objects (nodules, shadows) the seafloor's own median is the
     /// `(1 + c)/2` quantile; `correct` sets that when `--contamination` is given. Default: 0.5.
@@ -156,6 +159,7 @@ impl Default for Params {
             photo_gain: true,
             backscatter_scale: Some(1.0),
             denoise: true,
+            level_by_light: true,
             window_quantile: 0.5,
         }
     }

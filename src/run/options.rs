@@ -170,6 +170,10 @@ pub struct Options {
     /// each photo) instead of amplifying noise ([`crate::method::noise`]). Default: true.
     #[serde(default = "default_true")]
     pub denoise: bool,
+    /// `method = abyss` with `denoise`: even out the blend's block levels across light levels, so that dim regions
+    /// come out as bright as lit ones ([`crate::method::noise::level_by_light`]). Default: true.
+    #[serde(default = "default_true")]
+    pub level_by_light: bool,
 }
 
 fn default_relative_floor() -> f32 {
@@ -220,6 +224,7 @@ impl Default for Options {
             photo_gain: true,
             backscatter_scale: default_scale(),
             denoise: true,
+            level_by_light: true,
             transfer_auto: false,
         }
     }

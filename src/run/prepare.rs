@@ -71,6 +71,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         photo_gain: opts.photo_gain,
         backscatter_scale: opts.backscatter_scale,
         denoise: opts.denoise,
+        level_by_light: opts.level_by_light,
         // Abyssal contamination is dark (nodules, shadows): the seafloor's median is the (1 + c)/2 quantile.
         window_quantile: match (opts.method, opts.contamination) {
             (Method::Abyss, Some(c)) => ((1.0 + c) / 2.0) as f32,
