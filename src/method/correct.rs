@@ -126,9 +126,10 @@ pub fn correct_with_offset<T: Sample>(
                     vec![0.0f32; row_len],
                     vec![0.0f32; extra],
                     vec![0.0f32; extra],
+                    vec![0.0f32; extra],
                 )
             },
-            |(frow, fx, lx, wx), (y, row)| {
+            |(frow, fx, lx, wx, ax), (y, row)| {
                 let t = ty[y];
                 lerp_rows(
                     factor_low.row(t.i0 as usize),
@@ -143,7 +144,13 @@ pub fn correct_with_offset<T: Sample>(
                     }
                     Some(blend) => blend_row_dispatch(
                         row,
-                        RowScratch { frow, fx, lx, wx },
+                        RowScratch {
+                            frow,
+                            fx,
+                            lx,
+                            wx,
+                            ax,
+                        },
                         &BlendRow {
                             tx: &tx,
                             rows: (t.i0 as usize, t.i1 as usize, t.t),
@@ -488,12 +495,13 @@ struct BlendRow<'a> {
 }
 
 /// A row's scratch: `frow` (`F` interpolated between block rows, on entry), and `fx`, `lx`, `wx` (`F`, the blend's
-/// level and weight upsampled along the row).
+/// level and weight upsampled along the row), `ax` (`Â` of each sample, for [`blend_row_passes`]).
 struct RowScratch<'b> {
     frow: &'b mut [f32],
     fx: &'b mut [f32],
     lx: &'b mut [f32],
     wx: &'b mut [f32],
+    ax: &'b mut [f32],
 }
 
 /// One row with a [`Blend`]: `F` (floored) and the blend's level and weight upsampled along the row, then
@@ -522,7 +530,13 @@ fn blend_row_portable<T: Sample>(
     r: &BlendRow,
     simd: bool,
 ) -> CorrectStats {
-    let RowScratch { frow, fx, lx, wx } = s;
+    let RowScratch {
+        frow,
+        fx,
+        lx,
+        wx,
+        ax,
+    } = s;
     let BlendRow {
         tx,
         rows,
@@ -556,7 +570,9 @@ fn blend_row_portable<T: Sample>(
     }
     CorrectStats {
         floored_pixels,
-        clipped_samples: correct_row_blend(row, fx, lx, wx, blend, c, srow, s_linear, curve, simd),
+        clipped_samples: correct_row_blend(
+            row, fx, lx, wx, ax, blend, c, srow, s_linear, curve, simd,
+        ),
     }
 }
 
@@ -567,9 +583,10 @@ fn blend_row_portable<T: Sample>(
 #[inline(always)]
 fn correct_row_blend<T: Sample>(
     row: &mut [T],
-    f: &[f32],
+    f: &mut [f32],
     lx: &mut [f32],
     wx: &[f32],
+    ax: &mut [f32],
     blend: Blend,
     c: usize,
     q: Option<&[u16]>,
@@ -579,16 +596,19 @@ fn correct_row_blend<T: Sample>(
 ) -> u64 {
     let k = blend.scatter_scale;
     match (c, blend.fields) {
-        // Coding afterwards, 8 at a time, with AVX2 and a non-linear curve (a constant, so the per-sample loop
-        // has no branch on it).
-        (3, Some(b)) if simd && !curve.is_identity() => {
-            blend_row::<T, 3, true>(row, f, lx, wx, k, b, q, s_linear, curve)
-        }
-        (1, Some(b)) if simd && !curve.is_identity() => {
-            blend_row::<T, 1, true>(row, f, lx, wx, k, b, q, s_linear, curve)
-        }
-        (3, Some(b)) => blend_row::<T, 3, false>(row, f, lx, wx, k, b, q, s_linear, curve),
-        (1, Some(b)) => blend_row::<T, 1, false>(row, f, lx, wx, k, b, q, s_linear, curve),
+        // With AVX2 and a non-linear curve: the same blend in passes, 8 samples at a time.
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `simd` is only true on the AVX2 path (the CPU was checked), and the curve is not linear.
+        (3, Some(b)) if simd && !curve.is_identity() => unsafe {
+            blend_row_passes::<T, 3>(row, f, lx, wx, ax, k, b, q, s_linear, curve)
+        },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        (1, Some(b)) if simd && !curve.is_identity() => unsafe {
+            blend_row_passes::<T, 1>(row, f, lx, wx, ax, k, b, q, s_linear, curve)
+        },
+        (3, Some(b)) => blend_row::<T, 3>(row, f, lx, wx, k, b, q, s_linear, curve),
+        (1, Some(b)) => blend_row::<T, 1>(row, f, lx, wx, k, b, q, s_linear, curve),
         _ => scaled_row(row, f, blend.scatter_scale, c, q, s_linear, curve),
     }
 }
@@ -652,15 +672,14 @@ fn scaled_row<T: Sample>(
 }
 
 /// The blend of [`Blended`] over one row of `C`-channel pixels (its formula, rearranged without the
-/// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`). With `LATER` (AVX2 and a non-linear
-/// curve) the results go to `lx` (each pixel's level is read before its result is written there) and are coded 8
-/// at a time afterwards ([`codes_into`]): the code search one sample at a time was a third of the row's time.
+/// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`), one pixel at a time; with AVX2 and a
+/// non-linear curve [`blend_row_passes`] does the same in passes.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn blend_row<T: Sample, const C: usize, const LATER: bool>(
+fn blend_row<T: Sample, const C: usize>(
     row: &mut [T],
     f: &[f32],
-    lx: &mut [f32],
+    lx: &[f32],
     wx: &[f32],
     scale: &[f32],
     b: &Blended,
@@ -707,22 +726,126 @@ fn blend_row<T: Sample, const C: usize, const LATER: bool>(
             let i = i0 + ch;
             let w = wx[i];
             let a = w * ahat[ch] + (1.0 - w) * lx[i].max(LEVEL_MIN) * r;
-            if LATER {
-                #[allow(clippy::manual_range_contains)]
-                // NaN is not clipped; `contains` would say it is
-                let o = (a < 0.0) | (a > 1.0);
-                lx[i] = a;
-                clipped += o as u32;
-            } else {
-                let (code, o) = code_and_clip::<T>(a, curve);
-                px[ch] = code;
-                clipped += o as u32;
-            }
+            let (code, o) = code_and_clip::<T>(a, curve);
+            px[ch] = code;
+            clipped += o as u32;
         }
     }
-    if LATER {
-        codes_into(row, lx, curve);
+    clipped as u64
+}
+
+/// [`blend_row`] for a non-linear curve in three passes, so that the per-sample work runs 8 samples at a time:
+/// (1) per sample `Â = (I − k·S)/F` (into `ax`) and the precision weight `g` (into `f`, not needed after), 8 at a
+/// time with AVX2 gathers; (2) per pixel `r` from its samples' `g` and `Â`, written over its `g`s; (3) per sample
+/// `w·Â + (1 − w)·A_low·r` (into `lx`), then coded 8 at a time ([`codes_into`]). The same operations in the same
+/// order as [`blend_row`], so the same bits (tested).
+///
+/// # Safety
+/// The CPU must have AVX2 and `curve` must not be linear.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn blend_row_passes<T: Sample, const C: usize>(
+    row: &mut [T],
+    f: &mut [f32],
+    lx: &mut [f32],
+    wx: &[f32],
+    ax: &mut [f32],
+    scale: &[f32],
+    b: &Blended,
+    q: Option<&[u16]>,
+    s_linear: &[f32],
+    curve: &Curve,
+) -> u64 {
+    use std::arch::x86_64::*;
+    let len = row.len();
+    let (f, lx, wx, ax) = (&mut f[..len], &mut lx[..len], &wx[..len], &mut ax[..len]);
+    let top = curve.max() as u16;
+    let to_lin = curve.linear_table();
+    // Per-channel constants repeated along a group of 8: lane j of the group at sample i is channel (i + j) % C.
+    let (mut kpat, mut vpat) = ([0.0f32; 16], [0.0f32; 16]);
+    for j in 0..16 {
+        let v = b.noise_var[j % C];
+        kpat[j] = scale[j % C];
+        vpat[j] = if v > 0.0 { (1.0 / v).min(1e8) } else { 1e8 };
     }
+    // Pass 1.
+    let n = len / 8 * 8;
+    let (zero, lmin) = (_mm256_setzero_ps(), _mm256_set1_ps(LEVEL_MIN));
+    let (zeroi, topi) = (_mm256_setzero_si256(), _mm256_set1_epi32(top as i32));
+    for i in (0..n).step_by(8) {
+        let mut codes = [0i32; 8];
+        for (c, v) in codes.iter_mut().zip(&row[i..i + 8]) {
+            *c = v.to_u16() as i32;
+        }
+        let cv = _mm256_loadu_si256(codes.as_ptr().cast());
+        let lin = _mm256_i32gather_ps::<4>(to_lin.as_ptr(), cv);
+        let s = match q {
+            Some(q) => {
+                let mut qi = [0i32; 8];
+                for (d, &v) in qi.iter_mut().zip(&q[i..i + 8]) {
+                    *d = v as i32;
+                }
+                _mm256_i32gather_ps::<4>(s_linear.as_ptr(), _mm256_loadu_si256(qi.as_ptr().cast()))
+            }
+            None => zero,
+        };
+        let (kv, iv) = (
+            _mm256_loadu_ps(kpat[i % C..].as_ptr()),
+            _mm256_loadu_ps(vpat[i % C..].as_ptr()),
+        );
+        let fv = _mm256_loadu_ps(f[i..].as_ptr());
+        let a = _mm256_div_ps(_mm256_sub_ps(lin, _mm256_mul_ps(kv, s)), fv);
+        // `lx.max(LEVEL_MIN)`: max_ps returns its second operand for a NaN, as f32::max returns the other value.
+        let lv = _mm256_max_ps(_mm256_loadu_ps(lx[i..].as_ptr()), lmin);
+        let ok = _mm256_and_ps(
+            _mm256_castsi256_ps(_mm256_and_si256(
+                _mm256_cmpgt_epi32(cv, zeroi),
+                _mm256_cmpgt_epi32(topi, cv),
+            )),
+            // finite: a − a is 0 (NaN for NaN and ±∞)
+            _mm256_cmp_ps::<_CMP_EQ_OQ>(_mm256_sub_ps(a, a), zero),
+        );
+        let g = _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(fv, fv), lv), iv);
+        _mm256_storeu_ps(ax[i..].as_mut_ptr(), a);
+        _mm256_storeu_ps(f[i..].as_mut_ptr(), _mm256_and_ps(ok, g));
+    }
+    for i in n..len {
+        let ch = i % C;
+        let code = row[i].to_u16();
+        let (lin, s) = sample_and_scatter(row[i], i, q, s_linear, curve, 1.0);
+        let a = (lin - kpat[ch] * s) / f[i];
+        let lv = lx[i].max(LEVEL_MIN);
+        let ok = (code > 0) & (code < top) & a.is_finite();
+        ax[i] = a;
+        f[i] = if ok { f[i] * f[i] * lv * vpat[ch] } else { 0.0 };
+    }
+    // Pass 2.
+    let prior = b.prior_precision;
+    for ((g, a), l) in f
+        .chunks_exact_mut(C)
+        .zip(ax.chunks_exact(C))
+        .zip(lx.chunks_exact(C))
+    {
+        let (mut num, mut den) = (prior, prior);
+        for ch in 0..C {
+            num += g[ch] * a[ch];
+            den += g[ch] * l[ch].max(LEVEL_MIN);
+        }
+        let r = num / den;
+        g.fill(r);
+    }
+    // Pass 3.
+    let mut clipped = 0u32;
+    for (((l, &w), &a), &r) in lx.iter_mut().zip(wx).zip(ax.iter()).zip(f.iter()) {
+        let v = w * a + (1.0 - w) * l.max(LEVEL_MIN) * r;
+        #[allow(clippy::manual_range_contains)]
+        // NaN is not clipped; `contains` would say it is
+        let o = (v < 0.0) | (v > 1.0);
+        clipped += o as u32;
+        *l = v;
+    }
+    codes_into(row, lx, curve);
     clipped as u64
 }
 
@@ -1096,6 +1219,118 @@ mod tests {
                     .zip(&c)
                     .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
             }
+        }
+    }
+
+    /// The blend in passes (AVX2) against the per-pixel blend, bit for bit: codes and clipped counts, for 8- and
+    /// 16-bit sRGB rows of 1 and 3 channels whose lengths leave a tail, with black and top codes, F near 0 and
+    /// NaN, levels below LEVEL_MIN and NaN, weights 0 to 1, S scaled or absent, noise variances of 0.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn blend_in_passes_is_the_per_pixel_blend_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2: the passes are not used on this CPU");
+            return;
+        }
+        let mut r = 0x2545_F491u32;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            r
+        };
+        fn run<T: Sample, const C: usize>(
+            next: &mut dyn FnMut() -> u32,
+            levels: usize,
+            len: usize,
+        ) {
+            let curve = Curve::new(Transfer::Srgb, levels);
+            let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
+            let n = len * C;
+            let codes: Vec<T> = (0..n)
+                .map(|_| {
+                    let v = match next() % 12 {
+                        0 => 0,
+                        1 => levels - 1,
+                        _ => next() as usize % levels,
+                    };
+                    T::from_code(v as u16)
+                })
+                .collect();
+            let f: Vec<f32> = (0..n)
+                .map(|_| match next() % 20 {
+                    0 => f32::NAN,
+                    1 => 1e-7,
+                    _ => (next() % 1000) as f32 / 500.0 + 1e-4,
+                })
+                .collect();
+            let lx: Vec<f32> = (0..n)
+                .map(|_| match next() % 20 {
+                    0 => f32::NAN,
+                    1 => 1e-5,
+                    _ => (next() % 1000) as f32 / 1000.0,
+                })
+                .collect();
+            let wx: Vec<f32> = (0..n).map(|_| (next() % 1001) as f32 / 1000.0).collect();
+            let q: Vec<u16> = (0..n).map(|_| next() as u16).collect();
+            let b = Blended {
+                level: Raster::filled(1, 1, C, 0.4),
+                weight: Raster::filled(1, 1, C, 0.5),
+                noise_var: (0..C).map(|c| [1e-4, 0.0, 3e-3][c % 3]).collect(),
+                prior_precision: 17.0,
+            };
+            for (scale, with_s) in [
+                (vec![1.0f32; C], true),
+                (vec![0.8f32; C], true),
+                (vec![1.0; C], false),
+            ] {
+                let qs = with_s.then_some(q.as_slice());
+                let mut want = codes.clone();
+                let c_want = blend_row::<T, C>(
+                    &mut want,
+                    &f,
+                    &lx,
+                    &wx,
+                    &scale,
+                    &b,
+                    qs,
+                    &prepared_table,
+                    &curve,
+                );
+                let mut got = codes.clone();
+                let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
+                // SAFETY: AVX2 checked above; the curve is sRGB.
+                let c_got = unsafe {
+                    blend_row_passes::<T, C>(
+                        &mut got,
+                        &mut f2,
+                        &mut l2,
+                        &wx,
+                        &mut ax,
+                        &scale,
+                        &b,
+                        qs,
+                        &prepared_table,
+                        &curve,
+                    )
+                };
+                assert_eq!(
+                    c_got, c_want,
+                    "clipped, {levels} levels, {C} channels, {len} px"
+                );
+                let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
+                assert_eq!(
+                    as16(&got),
+                    as16(&want),
+                    "{levels} levels, {C} channels, {len} px"
+                );
+            }
+        }
+        for len in [1usize, 7, 8, 13, 61, 200] {
+            run::<u8, 3>(&mut next, 256, len);
+            run::<u8, 1>(&mut next, 256, len);
+            run::<u16, 3>(&mut next, 65536, len);
+            run::<u16, 1>(&mut next, 65536, len);
         }
     }
 
