@@ -1,7 +1,8 @@
 //! `cargo bench --bench kernels`: the correction kernel alone, one thread, on a synthetic 12 MP photo (4000×3000
 //! RGB, `F` at 8×8 blocks, a full-resolution `S`), for each kind of sample the cruise meets: 8-bit linear codes,
-//! 8-bit sRGB (camera JPEGs: a table into linear light, a search back to the code) and 16-bit sRGB, and 8-bit sRGB
-//! with the noise-aware blend of `--method abyss` over the whole frame (what a noisy, dim photo pays). Prints the
+//! 8-bit sRGB (camera JPEGs: a table into linear light, a search back to the code) and 16-bit sRGB, and 8- and
+//! 16-bit sRGB and 16-bit linear with the noise-aware blend of `--method abyss` over the whole frame (what a
+//! noisy, dim photo pays). Prints the
 //! best of 7 runs per kind and its ratio to 8-bit linear, measured in the same run, and the machine.
 
 use std::time::Instant;
@@ -85,9 +86,9 @@ fn main() {
         "correction kernel, 4000x3000 RGB, one thread, best of 7 ({cpu}, {cores} cores, {rustc})"
     );
     let linear = time(&p8, layout, Transfer::Linear, 256, false);
-    println!("  8-bit linear   {linear:7.1} ms");
+    println!("  {:20} {linear:7.1} ms", "8-bit linear");
     for (label, ms) in [
-        ("8-bit sRGB ", time(&p8, layout, Transfer::Srgb, 256, false)),
+        ("8-bit sRGB", time(&p8, layout, Transfer::Srgb, 256, false)),
         (
             "16-bit sRGB",
             time(&codes, layout, Transfer::Srgb, 65536, false),
@@ -100,9 +101,13 @@ fn main() {
             "16-bit sRGB, blend",
             time(&codes, layout, Transfer::Srgb, 65536, true),
         ),
+        (
+            "16-bit linear, blend",
+            time(&codes, layout, Transfer::Linear, 65536, true),
+        ),
     ] {
         println!(
-            "  {label}    {ms:7.1} ms   {:.2}x the 8-bit linear kernel",
+            "  {label:20} {ms:7.1} ms   {:.2}x the 8-bit linear kernel",
             ms / linear
         );
     }

@@ -582,15 +582,15 @@ fn correct_row_blend<T: Sample>(
 ) -> u64 {
     let k = blend.scatter_scale;
     match (c, blend.fields) {
-        // With AVX2 and a non-linear curve: the same blend in passes, 8 samples at a time.
+        // With AVX2: the same blend in passes, 8 samples at a time.
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd` is only true on the AVX2 path (the CPU was checked), and the curve is not linear.
-        (3, Some(b)) if simd && !curve.is_identity() => unsafe {
+        // SAFETY: `simd` is only true on the AVX2 path (the CPU was checked).
+        (3, Some(b)) if simd => unsafe {
             blend_row_passes::<T, 3>(row, f, lx, wx, ax, k, b, q, s_linear, curve)
         },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: as above.
-        (1, Some(b)) if simd && !curve.is_identity() => unsafe {
+        (1, Some(b)) if simd => unsafe {
             blend_row_passes::<T, 1>(row, f, lx, wx, ax, k, b, q, s_linear, curve)
         },
         (3, Some(b)) => blend_row::<T, 3>(row, f, lx, wx, k, b, q, s_linear, curve),
@@ -720,14 +720,14 @@ fn blend_row<T: Sample, const C: usize>(
     clipped as u64
 }
 
-/// [`blend_row`] for a non-linear curve in three passes, so that the per-sample work runs 8 samples at a time:
-/// (1) per sample `Â = (I − k·S)/F` (into `ax`) and the precision weight `g` (into `f`, not needed after), 8 at a
-/// time with AVX2 gathers; (2) per pixel `r` from its samples' `g` and `Â`, written over its `g`s; (3) per sample
-/// `w·Â + (1 − w)·A_low·r` (into `lx`), then coded 8 at a time ([`codes_into`]). The same operations in the same
-/// order as [`blend_row`], so the same bits (tested).
+/// [`blend_row`] in three passes, so that the per-sample work runs 8 samples at a time: (1) per sample
+/// `Â = (I − k·S)/F` (into `ax`) and the precision weight `g` (into `f`, not needed after), 8 at a time (with AVX2
+/// gathers for a non-linear curve); (2) per pixel `r` from its samples' `g` and `Â`, written over its `g`s; (3) per
+/// sample `w·Â + (1 − w)·A_low·r` (into `lx`), then coded (8 at a time by [`codes_into`] for a non-linear curve).
+/// The same operations in the same order as [`blend_row`], so the same bits (tested).
 ///
 /// # Safety
-/// The CPU must have AVX2 and `curve` must not be linear.
+/// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
@@ -748,6 +748,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     let (f, lx, wx, ax) = (&mut f[..len], &mut lx[..len], &wx[..len], &mut ax[..len]);
     let top = curve.max() as u16;
     let to_lin = curve.linear_table();
+    let (identity, max, inv_max) = (curve.is_identity(), curve.max(), 1.0 / curve.max());
     // Per-channel constants repeated along a group of 8: lane j of the group at sample i is channel (i + j) % C.
     let (mut kpat, mut vpat) = ([0.0f32; 16], [0.0f32; 16]);
     for j in 0..16 {
@@ -760,8 +761,29 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     let (zero, lmin) = (_mm256_setzero_ps(), _mm256_set1_ps(LEVEL_MIN));
     let (zeroi, topi) = (_mm256_setzero_si256(), _mm256_set1_epi32(top as i32));
     for i in (0..n).step_by(8) {
-        let (cv, lin, s) =
-            gather_lin_and_s(&row[i..i + 8], q.map(|q| &q[i..i + 8]), to_lin, s_linear);
+        let (cv, lin, s) = if identity {
+            // As `sample_and_scatter`: code / max, and S's grid index / 65535.
+            let mut codes = [0i32; 8];
+            for (c, v) in codes.iter_mut().zip(&row[i..i + 8]) {
+                *c = v.to_u16() as i32;
+            }
+            let cv = _mm256_loadu_si256(codes.as_ptr().cast());
+            let lin = _mm256_mul_ps(_mm256_cvtepi32_ps(cv), _mm256_set1_ps(inv_max));
+            let s = match q {
+                Some(q) => {
+                    let mut qi = [0i32; 8];
+                    for (d, &v) in qi.iter_mut().zip(&q[i..i + 8]) {
+                        *d = v as i32;
+                    }
+                    let qv = _mm256_cvtepi32_ps(_mm256_loadu_si256(qi.as_ptr().cast()));
+                    _mm256_mul_ps(qv, _mm256_set1_ps(1.0 / 65535.0))
+                }
+                None => zero,
+            };
+            (cv, lin, s)
+        } else {
+            gather_lin_and_s(&row[i..i + 8], q.map(|q| &q[i..i + 8]), to_lin, s_linear)
+        };
         let (kv, iv) = (
             _mm256_loadu_ps(kpat[i % C..].as_ptr()),
             _mm256_loadu_ps(vpat[i % C..].as_ptr()),
@@ -785,7 +807,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     for i in n..len {
         let ch = i % C;
         let code = row[i].to_u16();
-        let (lin, s) = sample_and_scatter(row[i], i, q, s_linear, curve, 1.0);
+        let (lin, s) = sample_and_scatter(row[i], i, q, s_linear, curve, inv_max);
         let a = (lin - kpat[ch] * s) / f[i];
         let lv = lx[i].max(LEVEL_MIN);
         let ok = (code > 0) & (code < top) & a.is_finite();
@@ -817,7 +839,13 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         clipped += o as u32;
         *l = v;
     }
-    codes_into(row, lx, curve);
+    if identity {
+        for (v, &a) in row.iter_mut().zip(lx.iter()) {
+            *v = T::from_code(code_of(a * max + 0.5, max));
+        }
+    } else {
+        codes_into(row, lx, curve);
+    }
     clipped as u64
 }
 
@@ -1233,7 +1261,7 @@ mod tests {
     }
 
     /// The blend in passes (AVX2) against the per-pixel blend, bit for bit: codes and clipped counts, for 8- and
-    /// 16-bit sRGB rows of 1 and 3 channels whose lengths leave a tail, with black and top codes, F near 0 and
+    /// 16-bit rows, sRGB and linear, of 1 and 3 channels whose lengths leave a tail, with black and top codes, F near 0 and
     /// NaN, levels below LEVEL_MIN and NaN, weights 0 to 1, S scaled or absent, noise variances of 0.
     #[cfg(target_arch = "x86_64")]
     #[test]
@@ -1251,10 +1279,11 @@ mod tests {
         };
         fn run<T: Sample, const C: usize>(
             next: &mut dyn FnMut() -> u32,
+            transfer: Transfer,
             levels: usize,
             len: usize,
         ) {
-            let curve = Curve::new(Transfer::Srgb, levels);
+            let curve = Curve::new(transfer, levels);
             let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
             let n = len * C;
             let codes: Vec<T> = (0..n)
@@ -1309,7 +1338,7 @@ mod tests {
                 );
                 let mut got = codes.clone();
                 let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
-                // SAFETY: AVX2 checked above; the curve is sRGB.
+                // SAFETY: AVX2 checked above.
                 let c_got = unsafe {
                     blend_row_passes::<T, C>(
                         &mut got,
@@ -1326,21 +1355,23 @@ mod tests {
                 };
                 assert_eq!(
                     c_got, c_want,
-                    "clipped, {levels} levels, {C} channels, {len} px"
+                    "clipped, {transfer:?}, {levels} levels, {C} channels, {len} px"
                 );
                 let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
                 assert_eq!(
                     as16(&got),
                     as16(&want),
-                    "{levels} levels, {C} channels, {len} px"
+                    "{transfer:?}, {levels} levels, {C} channels, {len} px"
                 );
             }
         }
-        for len in [1usize, 7, 8, 13, 61, 200] {
-            run::<u8, 3>(&mut next, 256, len);
-            run::<u8, 1>(&mut next, 256, len);
-            run::<u16, 3>(&mut next, 65536, len);
-            run::<u16, 1>(&mut next, 65536, len);
+        for t in [Transfer::Srgb, Transfer::Linear] {
+            for len in [1usize, 7, 8, 13, 61, 200] {
+                run::<u8, 3>(&mut next, t, 256, len);
+                run::<u8, 1>(&mut next, t, 256, len);
+                run::<u16, 3>(&mut next, t, 65536, len);
+                run::<u16, 1>(&mut next, t, 65536, len);
+            }
         }
     }
 
