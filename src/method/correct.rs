@@ -657,9 +657,20 @@ fn scaled_row<T: Sample>(
     clipped as u64
 }
 
+/// `1/σ²` of a channel's noise variance in the blend. A noise-free channel gets a large precision (1e8: `p` stays
+/// finite in f32 for `F·A_low` up to 10³).
+#[inline(always)]
+fn precision(noise_var: f32) -> f32 {
+    if noise_var > 0.0 {
+        (1.0 / noise_var).min(1e8)
+    } else {
+        1e8
+    }
+}
+
 /// The blend of [`Blended`] over one row of `C`-channel pixels (its formula, rearranged without the
-/// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`), one pixel at a time; with AVX2 and a
-/// non-linear curve [`blend_row_passes`] does the same in passes.
+/// divisions by `A_low`: `p·ρ = (F·A_low)²/σ² · Â/A_low = F²·A_low·Â/σ²`), one pixel at a time; with AVX2
+/// [`blend_row_passes`] does the same in passes.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn blend_row<T: Sample, const C: usize>(
@@ -678,9 +689,7 @@ fn blend_row<T: Sample, const C: usize>(
     let mut inv_var = [0.0f32; C];
     let mut k = [1.0f32; C];
     for ch in 0..C {
-        let v = b.noise_var[ch];
-        // A noise-free channel: a large precision (1e8: p stays finite in f32 for F·A_low up to 10³).
-        inv_var[ch] = if v > 0.0 { (1.0 / v).min(1e8) } else { 1e8 };
+        inv_var[ch] = precision(b.noise_var[ch]);
         k[ch] = scale[ch];
     }
     let prior = b.prior_precision;
@@ -723,7 +732,7 @@ fn blend_row<T: Sample, const C: usize>(
 /// [`blend_row`] in three passes, so that the per-sample work runs 8 samples at a time: (1) per sample
 /// `Â = (I − k·S)/F` (into `ax`) and the precision weight `g` (into `f`, not needed after), 8 at a time (with AVX2
 /// gathers for a non-linear curve); (2) per pixel `r` from its samples' `g` and `Â`, written over its `g`s; (3) per
-/// sample `w·Â + (1 − w)·A_low·r` (into `lx`), then coded (8 at a time by [`codes_into`] for a non-linear curve).
+/// sample `w·Â + (1 − w)·A_low·r` (into `lx`), then coded (8 at a time by [`codes_into_avx2`] for a non-linear curve).
 /// The same operations in the same order as [`blend_row`], so the same bits (tested).
 ///
 /// # Safety
@@ -752,9 +761,8 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     // Per-channel constants repeated along a group of 8: lane j of the group at sample i is channel (i + j) % C.
     let (mut kpat, mut vpat) = ([0.0f32; 16], [0.0f32; 16]);
     for j in 0..16 {
-        let v = b.noise_var[j % C];
         kpat[j] = scale[j % C];
-        vpat[j] = if v > 0.0 { (1.0 / v).min(1e8) } else { 1e8 };
+        vpat[j] = precision(b.noise_var[j % C]);
     }
     // Pass 1.
     let n = len / 8 * 8;
@@ -844,29 +852,16 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
             *v = T::from_code(code_of(a * max + 0.5, max));
         }
     } else {
-        codes_into(row, lx, curve);
+        let done = codes_into_avx2(row, lx, curve);
+        for (v, &a) in row.iter_mut().zip(lx.iter()).skip(done) {
+            *v = T::from_code(curve.code(a));
+        }
     }
     clipped as u64
 }
 
-/// `row[i] = curve.code(l[i])` for a non-linear `curve`, 8 at a time by [`Curve::codes_avx2`] (the same codes,
-/// tested) where the CPU has AVX2.
-fn codes_into<T: Sample>(row: &mut [T], l: &[f32], curve: &Curve) {
-    #[cfg(target_arch = "x86_64")]
-    let done = if std::arch::is_x86_feature_detected!("avx2") && !curve.is_identity() {
-        // SAFETY: the CPU has AVX2 (checked above) and the curve is not linear.
-        unsafe { codes_into_avx2(row, l, curve) }
-    } else {
-        0
-    };
-    #[cfg(not(target_arch = "x86_64"))]
-    let done = 0;
-    for (v, &a) in row.iter_mut().zip(l).skip(done) {
-        *v = T::from_code(curve.code(a));
-    }
-}
-
-/// The first `8·⌊len/8⌋` samples of [`codes_into`]; returns how many.
+/// `row[k] = curve.code(l[k])` for the first `8·⌊len/8⌋` samples, 8 at a time by [`Curve::codes_avx2`] (the same
+/// codes, tested); returns how many.
 ///
 /// # Safety
 /// The CPU must have AVX2 and `curve` must not be linear.
