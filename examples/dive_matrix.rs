@@ -25,7 +25,7 @@ use std::time::Instant;
 use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
-use abysslight::eval::matrix::{self, linear, load_set, signal_mask, DIVES};
+use abysslight::eval::matrix::{self, load_set, signal_mask, DIVES};
 use abysslight::eval::simulate::Dive;
 use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
@@ -71,7 +71,7 @@ fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
         .iter()
         .zip(dive.factor.iter().zip(&dive.backscatter))
         .map(|(p, (f, s))| {
-            let mut r = linear(p, t);
+            let mut r = Raster::from_photo_linear(p, t);
             for ((v, &f), &s) in r.data.iter_mut().zip(&f.data).zip(&s.data) {
                 *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
             }
@@ -82,7 +82,11 @@ fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
 
 /// The survey's true backscatter over the water-column median, per channel (ratio of the means over all pixels).
 fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
-    let frames: Vec<Raster> = dive.water.iter().map(|p| linear(p, t)).collect();
+    let frames: Vec<Raster> = dive
+        .water
+        .iter()
+        .map(|p| Raster::from_photo_linear(p, t))
+        .collect();
     let (Some(first), false) = (frames.first(), dive.backscatter.is_empty()) else {
         return Vec::new();
     };

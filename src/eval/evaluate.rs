@@ -484,13 +484,7 @@ fn truth_file(p: &Path) -> PathBuf {
 
 /// Decode a photo and undo its transfer curve.
 pub fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
-    let mut r = Raster::from_photo(&decode(path)?);
-    if !transfer.is_linear() {
-        for v in &mut r.data {
-            *v = transfer.to_linear(*v);
-        }
-    }
-    Ok(r)
+    Ok(Raster::from_photo_linear(&decode(path)?, transfer))
 }
 
 /// Box average by `k` (the right and bottom remainders dropped); `k = 1` returns a copy.

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use crate::eval::evaluate::load_linear;
 use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
-use crate::io::decode;
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
 
@@ -129,27 +129,13 @@ pub fn seed(index: usize, offset: u64) -> u64 {
     1000 + offset * 100 + index as u64
 }
 
-/// A decoded photo in linear light (`t`: the curve it was stored with).
-pub fn linear(p: &crate::Photo, t: Transfer) -> Raster {
-    let mut r = Raster::from_photo(p);
-    if !t.is_linear() {
-        for v in &mut r.data {
-            *v = t.to_linear(*v);
-        }
-    }
-    r
-}
-
 /// The photos `names` of `dir`, each in linear light; panics on a file that does not decode (the matrix wrote it).
 pub fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
     names
         .iter()
         .map(|n| {
             let p = dir.join(n);
-            linear(
-                &decode(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
-                t,
-            )
+            load_linear(&p, t).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
         })
         .collect()
 }

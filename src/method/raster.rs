@@ -254,6 +254,18 @@ impl Raster {
         }
     }
 
+    /// [`Raster::from_photo`] in linear light: the photo's transfer curve (`transfer`, the one it was stored with)
+    /// undone.
+    pub fn from_photo_linear(photo: &Photo, transfer: crate::method::transfer::Transfer) -> Raster {
+        let mut r = Raster::from_photo(photo);
+        if !transfer.is_linear() {
+            for v in &mut r.data {
+                *v = transfer.to_linear(*v);
+            }
+        }
+        r
+    }
+
     /// Quantise to 16-bit samples (rounded, clamped to `[0, 1]`).
     pub fn to_u16(&self) -> Vec<u16> {
         self.data

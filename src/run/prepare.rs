@@ -258,12 +258,7 @@ pub fn mission_mean(
         .par_iter()
         .map(|e| {
             let p = decode(&e.path).ok()?;
-            let mut r = Raster::from_photo(&p);
-            if !transfer.is_linear() {
-                for v in &mut r.data {
-                    *v = transfer.to_linear(*v);
-                }
-            }
+            let r = Raster::from_photo_linear(&p, transfer);
             Some((p.layout, block_mean(&r, k)))
         })
         .collect();
