@@ -448,14 +448,22 @@ impl<T> Engine<T> {
                 .as_ref()
                 .map(|model| {
                     let keep = self.masked_blocks.as_deref();
-                    let mut b = model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep);
-                    if self.params.level_by_light {
-                        level_by_light(&mut b.level, &f, &self.colour, keep);
-                    }
-                    b
+                    model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
                 })
                 // A photo whose blend changes nothing (no noise measured: most camera JPEGs) takes the plain path.
-                .filter(|b| b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND));
+                .filter(|b| b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND))
+                .map(|mut b| {
+                    // Only for a blend that is used (the weights do not change).
+                    if self.params.level_by_light {
+                        level_by_light(
+                            &mut b.level,
+                            &f,
+                            &self.colour,
+                            self.masked_blocks.as_deref(),
+                        );
+                    }
+                    b
+                });
             use_blend = blended.is_some() || scale.iter().any(|&v| v != 1.0);
             noise = model;
         }
