@@ -479,6 +479,20 @@ pub fn stack_quantile(frames: &[&Raster], q: f64) -> Raster {
     let k = (pos.floor() as usize).min(n - 1);
     let t = (pos - k as f64) as f32;
     let mut out = Raster::filled(first.width, first.height, first.channels, 0.0);
+    if network_fits(frames) {
+        // The order statistics k and k + 1 through the pruned sorting network, many samples at once: the same
+        // values as the selection below (min/max order equals `total_cmp` order without NaN and −0).
+        let hi_at = (k + 1).min(n - 1);
+        let net = prune_network(&sorting_network(n), &[k, hi_at]);
+        per_lanes(frames, &mut out, &net, |v, lanes, o| {
+            let lo = &v[k * lanes..(k + 1) * lanes];
+            let hi = &v[hi_at * lanes..(hi_at + 1) * lanes];
+            for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                *o = if t == 0.0 { a } else { a + t * (b - a) };
+            }
+        });
+        return out;
+    }
     per_sample(frames, &mut out, |v| {
         let (_, &mut lo, above) = v.select_nth_unstable_by(k, f32::total_cmp);
         if t == 0.0 {
@@ -488,6 +502,42 @@ pub fn stack_quantile(frames: &[&Raster], q: f64) -> Raster {
         lo + t * (hi - lo)
     });
     out
+}
+
+/// Whether a stack can go through a sorting network: at most [`NETWORK_MAX`] frames, and no NaN or −0 (which
+/// order differently under `total_cmp` than under `<`; those rare stacks take the scalar path).
+fn network_fits(frames: &[&Raster]) -> bool {
+    let odd = |v: &f32| v.is_nan() || (*v == 0.0 && v.is_sign_negative());
+    frames.len() <= NETWORK_MAX && !frames.iter().any(|f| f.data.iter().any(odd))
+}
+
+/// `net` applied to the stack's values at every position, [`LANES`] positions at a time (`v[e * lanes + lane]`:
+/// frame `e`'s value at the lane's position); `take(v, lanes, out)` then writes the lanes' results. Chunks of
+/// positions run in parallel.
+fn per_lanes(
+    frames: &[&Raster],
+    out: &mut Raster,
+    net: &[(u16, u16)],
+    take: impl Fn(&[f32], usize, &mut [f32]) + Sync,
+) {
+    let n = frames.len();
+    out.data
+        .par_chunks_mut(LANES * 16)
+        .enumerate()
+        .for_each(|(chunk, out_chunk)| {
+            let start = chunk * LANES * 16;
+            let mut v = vec![0.0f32; n * LANES];
+            for (sub, o) in out_chunk.chunks_mut(LANES).enumerate() {
+                let lanes = o.len();
+                let s0 = start + sub * LANES;
+                let v = &mut v[..n * lanes];
+                for (e, f) in frames.iter().enumerate() {
+                    v[e * lanes..(e + 1) * lanes].copy_from_slice(&f.data[s0..s0 + lanes]);
+                }
+                apply_network(net, v, lanes);
+                take(v, lanes, o);
+            }
+        });
 }
 
 /// `out` = `of(samples)` at every position, `samples` being the stack's values there (in a scratch buffer the
@@ -528,38 +578,22 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
         return out;
     }
     let n = frames.len();
-    // NaN and −0 order differently under `total_cmp` than under `<`: those (rare) stacks take the scalar path.
-    let odd = |v: &f32| v.is_nan() || (*v == 0.0 && v.is_sign_negative());
-    if n > NETWORK_MAX || frames.iter().any(|f| f.data.iter().any(odd)) {
+    if !network_fits(frames) {
         per_sample(frames, &mut out, median_of_f32);
         return out;
     }
     let net = prune_network(&sorting_network(n), &median_positions(n));
-    out.data
-        .par_chunks_mut(LANES * 16)
-        .enumerate()
-        .for_each(|(chunk, out_chunk)| {
-            let start = chunk * LANES * 16;
-            let mut v = vec![0.0f32; n * LANES];
-            for (sub, o) in out_chunk.chunks_mut(LANES).enumerate() {
-                let lanes = o.len();
-                let s0 = start + sub * LANES;
-                let v = &mut v[..n * lanes];
-                for (e, f) in frames.iter().enumerate() {
-                    v[e * lanes..(e + 1) * lanes].copy_from_slice(&f.data[s0..s0 + lanes]);
-                }
-                apply_network(&net, v, lanes);
-                if n % 2 == 1 {
-                    o.copy_from_slice(&v[(n / 2) * lanes..(n / 2 + 1) * lanes]);
-                } else {
-                    let lo = &v[(n / 2 - 1) * lanes..(n / 2) * lanes];
-                    let hi = &v[(n / 2) * lanes..(n / 2 + 1) * lanes];
-                    for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
-                        *o = 0.5 * (a + b);
-                    }
-                }
+    per_lanes(frames, &mut out, &net, |v, lanes, o| {
+        if n % 2 == 1 {
+            o.copy_from_slice(&v[(n / 2) * lanes..(n / 2 + 1) * lanes]);
+        } else {
+            let lo = &v[(n / 2 - 1) * lanes..(n / 2) * lanes];
+            let hi = &v[(n / 2) * lanes..(n / 2 + 1) * lanes];
+            for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
+                *o = 0.5 * (a + b);
             }
-        });
+        }
+    });
     out
 }
 
@@ -631,13 +665,25 @@ mod tests {
             r ^= r << 5;
             (r % 1000) as f32 / 999.0
         };
-        for n in [1usize, 2, 5, 7, 13] {
+        // Up to 256 frames the sorting network's path, above it (and with NaN, below) the selection's.
+        for n in [1usize, 2, 5, 7, 13, 300] {
             let frames: Vec<Raster> = (0..n)
                 .map(|_| Raster::from_fn(7, 3, 3, |_, _, _| next()))
                 .collect();
             let refs: Vec<&Raster> = frames.iter().collect();
             for q in [0.0, 0.3, 0.5, 0.675, 1.0] {
                 let got = stack_quantile(&refs, q);
+                // One NaN sends the whole stack down the selection's path: elsewhere the same bits.
+                let mut with_nan = frames.clone();
+                with_nan[0].data[0] = f32::NAN;
+                let scalar = stack_quantile(&with_nan.iter().collect::<Vec<_>>(), q);
+                for i in 1..got.data.len() {
+                    assert_eq!(
+                        got.data[i].to_bits(),
+                        scalar.data[i].to_bits(),
+                        "n {n} q {q} i {i}"
+                    );
+                }
                 for i in 0..got.data.len() {
                     let mut v: Vec<f32> = frames.iter().map(|f| f.data[i]).collect();
                     v.sort_by(f32::total_cmp);
