@@ -2,7 +2,7 @@
 //! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
 //!
 //! ```sh
-//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation] [--size WxH]
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH]
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
@@ -116,6 +116,7 @@ fn main() {
     let mut seed_offset = 0u64;
     let mut only: Option<Vec<String>> = None;
     let mut ablation = false;
+    let mut ablation_only: Option<Vec<String>> = None;
     let mut size = (320usize, 240usize);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -137,6 +138,16 @@ fn main() {
                 )
             }
             "--ablation" => ablation = true,
+            "--ablation-only" => {
+                ablation = true;
+                ablation_only = Some(
+                    args.next()
+                        .expect("--ablation-only COLUMN[,COLUMN]")
+                        .split(',')
+                        .map(str::to_owned)
+                        .collect(),
+                )
+            }
             "--size" => {
                 size = args
                     .next()
@@ -199,6 +210,12 @@ fn main() {
     ];
     if ablation {
         for (label, f) in ablations() {
+            if ablation_only
+                .as_ref()
+                .is_some_and(|o| !o.iter().any(|n| n == label))
+            {
+                continue;
+            }
             methods.push((label.to_string(), Box::new(f)));
         }
     }
@@ -447,6 +464,16 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
         ("abyss-no-denoise", |o| Options {
             method: Method::Abyss,
             denoise: false,
+            ..o
+        }),
+        ("abyss-blocks-8", |o| Options {
+            method: Method::Abyss,
+            downsample: Some(8),
+            ..o
+        }),
+        ("abyss-blocks-4", |o| Options {
+            method: Method::Abyss,
+            downsample: Some(4),
             ..o
         }),
         ("abyss-no-level-by-light", |o| Options {

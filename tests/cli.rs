@@ -385,9 +385,10 @@ fn previews_sheet_summary_and_rerun_note() {
         err.contains("report.json") && err.contains("overview.png"),
         "{err}"
     );
-    // 16-bit data one pixel per block, and an 8-bit preview at least 640 wide.
+    // 16-bit data one pixel per block (4×4 for photos this small: --downsample auto), and an 8-bit preview at
+    // least 640 wide.
     let data = image::open(d.path().join("out/_abysslight/factors/img2.png")).unwrap();
-    assert_eq!((data.width(), data.height()), (6, 4));
+    assert_eq!((data.width(), data.height()), (12, 8));
     assert!(matches!(data, image::DynamicImage::ImageRgb16(_)));
     let preview = image::open(d.path().join("out/_abysslight/factors-preview/img2.png")).unwrap();
     assert!(matches!(preview, image::DynamicImage::ImageRgb8(_)));

@@ -146,8 +146,8 @@ fn sixteen_bit_tree_is_mirrored_in_natural_order() {
     let f = decode(&work.join("factors/leg2/img2.png")).unwrap();
     assert_eq!(
         (f.layout.width, f.layout.height),
-        (5, 3),
-        "factors are stored one pixel per 8x8 block"
+        (10, 6),
+        "factors are stored one pixel per block (4x4 for photos this small: --downsample auto)"
     );
     // Windows: shifted at the ends, centred in the middle.
     assert_eq!(report.frames[0].window, [0, 4]);
@@ -205,4 +205,57 @@ fn short_mission_uses_all_photos_and_warns() {
         r.warnings
     );
     assert!(r.frames.iter().all(|f| f.window == [0, 2]));
+}
+
+/// `--downsample auto` (the default): blocks from the photos' size for `--method abyss` (about 160 across, 4 to 8
+/// pixels), the paper's 8 for the paper as published; a given size is kept. The report records what was used.
+#[test]
+fn automatic_block_size_follows_the_photo_size_and_the_method() {
+    use abysslight::run::options::Method;
+    let cases: [(usize, usize, Method, Option<usize>, usize); 7] = [
+        (96, 24, Method::Abyss, None, 4),
+        (97, 24, Method::Abyss, None, 8), // with --mask-auto (below)
+        (968, 16, Method::Abyss, None, 6),
+        (1300, 16, Method::Abyss, None, 8),
+        (968, 16, Method::Paper, None, 8),
+        (96, 24, Method::Polynomial, None, 8),
+        (96, 24, Method::Abyss, Some(3), 3),
+    ];
+    for (w, h, method, given, want) in cases {
+        let d = tempfile::tempdir().unwrap();
+        let dive = dive(w, h, 5, 3, 0.1, false, 11);
+        write_all(&dive.water, &d.path().join("water"), "w", "png");
+        write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+        let report = run(&Options {
+            water_column: Some(d.path().join("water")),
+            survey: Some(d.path().join("survey")),
+            out: Some(d.path().join("out")),
+            window: Some(3),
+            method,
+            downsample: given,
+            mask_auto: w == 97,
+            save_factors: true,
+            ..Options::default()
+        });
+        assert_eq!(report.failed, 0, "{w}x{h} {method}");
+        assert_eq!(
+            report.options.downsample,
+            Some(want),
+            "{w}x{h} {method} --downsample {given:?}"
+        );
+        // The factor images have one sample per block of that size.
+        let factors = d.path().join("out/_abysslight/factors");
+        let first = std::fs::read_dir(&factors)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .min()
+            .unwrap();
+        let f = decode(&first).unwrap();
+        assert_eq!(
+            (f.layout.width, f.layout.height),
+            (w.div_ceil(want), h.div_ceil(want)),
+            "{w}x{h} {method}: {}",
+            first.display()
+        );
+    }
 }

@@ -153,6 +153,8 @@ fn engine_and_folder_run_give_the_same_photos() {
     let mut engine = Engine::new(
         Params {
             window: 5,
+            // The folder run's `--downsample auto` for photos of this size (the engine takes a block size).
+            downsample: abysslight::method::factor::auto_block(96, 64),
             ..Params::default()
         },
         scatter.as_ref(),

@@ -580,7 +580,7 @@ proptest! {
     #[test]
     fn validate_decides_before_the_run(window in any::<usize>(), downsample in any::<usize>(),
                                         floor in any::<f32>(), idle in any::<f64>(), poll in any::<u64>()) {
-        let o = Options { window: Some(window), downsample, factor_floor: floor, idle_timeout: Some(idle),
+        let o = Options { window: Some(window), downsample: Some(downsample), factor_floor: floor, idle_timeout: Some(idle),
                           poll_interval: poll, watch: true, ..Options::default() };
         if o.validate().is_ok() {
             prop_assert!(window % 2 == 1 && window <= abysslight::run::options::limits::WINDOW);

@@ -60,7 +60,7 @@ fn outputs_are_byte_identical_for_1_2_and_3_threads() {
                 out: Some(out.clone()),
                 threads: Some(threads),
                 window: Some(5),
-                downsample: 8,
+                downsample: Some(8),
                 transfer,
                 ..Options::default()
             };

@@ -473,9 +473,15 @@ struct CorrectArgs {
     #[arg(long, value_name = "R", help_heading = H_METHOD)]
     risk: Option<f64>,
 
-    /// Block size K of the spatial median before the temporal median [default: 8].
-    #[arg(long, value_name = "K", help_heading = H_METHOD)]
-    downsample: Option<usize>,
+    /// Block size K of the spatial median before the temporal median, or auto [default: auto].
+    ///
+    /// auto, with --method abyss: about 160 blocks across the photo's longer side, from 4 to 8 pixels, so the
+    /// paper's 8 from 1280 pixels up (every 12-24 MP camera) and 4 up to 800. F and the blend's level are
+    /// estimated per block, so a block large against the frame smooths the light cones' edges and the seafloor's
+    /// detail (docs/evaluation.md). The other methods, and runs with --mask or --mask-auto (overlays), take the
+    /// paper's 8. The run says what it took.
+    #[arg(long, value_name = "K|auto", value_parser = parse_blocks, help_heading = H_METHOD)]
+    downsample: Option<BlocksArg>,
 
     /// Colour C the seafloor gets after correction (white balance) [default: grey = 0.4].
     ///
@@ -672,7 +678,7 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     if let Some(v) = args.risk {
         o.risk = v;
     }
-    if let Some(v) = args.downsample {
+    if let Some(BlocksArg(v)) = args.downsample {
         o.downsample = v;
     }
     if let Some(v) = args.seafloor_colour {
@@ -1134,6 +1140,21 @@ fn parse_scale(s: &str) -> Result<ScaleArg, String> {
         .parse::<f32>()
         .map(|v| ScaleArg(Some(v)))
         .map_err(|_| format!("expected a number such as 0.8, or auto, got {s:?}"))
+}
+
+/// `--downsample`: a block size, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct BlocksArg(Option<usize>);
+
+/// `--downsample`: `auto` or a whole number of pixels.
+fn parse_blocks(s: &str) -> Result<BlocksArg, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(BlocksArg(None));
+    }
+    s.trim()
+        .parse::<usize>()
+        .map(|v| BlocksArg(Some(v)))
+        .map_err(|_| format!("expected a block size in pixels such as 8, or auto, got {s:?}"))
 }
 
 /// `--transfer`: a curve, or `None` for `auto`.

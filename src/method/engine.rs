@@ -27,10 +27,10 @@ use std::time::Instant;
 use crate::error::{Error, Result};
 use crate::method::baseline::{polynomial_m, Method};
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats, NEGLIGIBLE_BLEND};
-use crate::method::factor::{factor, lit_seafloor, upsample};
+use crate::method::factor::{auto_block, factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median, stack_quantile};
-use crate::method::monitor::{Flag, Health, Monitor, Thresholds};
+use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
@@ -115,7 +115,9 @@ pub struct Engine<T> {
     colour: Vec<f32>,
     layout: Option<Layout>,
     monitor: Monitor,
-    ring: VecDeque<(usize, Raster)>,
+    /// The window's block medians: sequence number, the `K`×`K` blocks, and with blocks under 5 pixels the
+    /// same pooled to about 8 pixels for the monitor ([`pool_factor`]).
+    ring: VecDeque<(usize, Raster, Option<Raster>)>,
     waiting: VecDeque<Waiting<T>>,
     seq: usize,
 }
@@ -154,10 +156,17 @@ impl<T> Engine<T> {
                 "the window must be an odd number of photos, got {n}"
             )));
         }
+        let mut params = params;
         if params.downsample == 0 {
-            return Err(Error::Usage("the block size must be at least 1".into()));
+            // From the photos' size where S or the mask knows it; else at the first photo (`accept`).
+            let size = scatter
+                .map(|s| (s.layout.width, s.layout.height))
+                .or(mask.as_ref().map(|m| (m.width, m.height)));
+            if let Some((w, h)) = size {
+                params.downsample = auto_block(w, h);
+            }
         }
-        let k = params.downsample;
+        let k = params.downsample.max(1);
         let transfer = params.transfer;
         if let (Some(m), Some(s)) = (&mask, scatter) {
             if (m.width, m.height) != (s.layout.width, s.layout.height) {
@@ -246,7 +255,11 @@ impl<T> Engine<T> {
         let t = Instant::now();
         let low = self.block_medians(&photo);
         let n = self.params.window;
-        self.ring.push_back((self.seq, low));
+        let judged = match pool_factor(self.params.downsample) {
+            1 => None,
+            p => Some(pooled(&low, p)),
+        };
+        self.ring.push_back((self.seq, low, judged));
         if self.ring.len() > n {
             self.ring.pop_front();
         }
@@ -297,6 +310,9 @@ impl<T> Engine<T> {
                     }
                 }
                 self.layout = Some(photo.layout);
+                if self.params.downsample == 0 {
+                    self.params.downsample = auto_block(photo.layout.width, photo.layout.height);
+                }
                 self.colour = self
                     .params
                     .seafloor_colour
@@ -306,6 +322,25 @@ impl<T> Engine<T> {
                     .collect();
                 Ok(())
             }
+        }
+    }
+
+    /// `M` of the photo whose block medians are `own`, from its window's `stack` (the mission's mean for
+    /// [`Method::Mean`], the photo's own polynomial fit for [`Method::Polynomial`]).
+    fn window_m(
+        &self,
+        own: &Raster,
+        stack: &[&Raster],
+        s_low: Option<&Raster>,
+        mission_mean: Option<&Raster>,
+    ) -> Raster {
+        match (self.params.method, mission_mean) {
+            (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
+            (Method::Polynomial, _) => polynomial_m(own, s_low, self.params.degree),
+            (Method::Abyss, _) if self.params.window_quantile != 0.5 => {
+                stack_quantile(stack, self.params.window_quantile as f64)
+            }
+            _ => stack_median(stack),
         }
     }
 
@@ -367,38 +402,51 @@ impl<T> Engine<T> {
         let stack: Vec<&Raster> = self
             .ring
             .iter()
-            .filter(|(s, _)| range.contains(s))
-            .map(|(_, r)| r)
+            .filter(|(s, ..)| range.contains(s))
+            .map(|(_, r, _)| r)
             .collect();
         debug_assert_eq!(
             stack.len(),
             range.len(),
             "ring buffer lost a frame of the window"
         );
-        let own = self
+        let (own, own_judged) = self
             .ring
             .iter()
-            .find(|(s, _)| *s == i)
-            .map(|(_, r)| r)
+            .find(|(s, ..)| *s == i)
+            .map(|(_, r, j)| (r, j.as_ref()))
             .expect("a photo's own low-resolution image is in its window");
-        let m = match (self.params.method, &self.mission_mean) {
-            (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
-            (Method::Polynomial, _) => {
-                polynomial_m(own, self.scatter_low.as_ref(), self.params.degree)
-            }
-            (Method::Abyss, _) if self.params.window_quantile != 0.5 => {
-                stack_quantile(&stack, self.params.window_quantile as f64)
-            }
-            _ => stack_median(&stack),
-        };
-        let mut f = factor(&m, self.scatter_low.as_ref(), &self.colour);
+        let s_low = self.scatter_low.as_ref();
+        let m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
+        let mut f = factor(&m, s_low, &self.colour);
         if self.mask.is_some() {
             fill_missing(&mut f);
         }
         let lit = lit_seafloor(&f, &self.colour);
-        let mut health = self
-            .monitor
-            .observe_photo(own, &lit, self.scatter_low.as_ref(), &f);
+        // The monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set there):
+        // with smaller blocks, its own M from the window's block medians pooled to that size.
+        let mut health = match own_judged {
+            None => self.monitor.observe_photo(own, &lit, s_low, &f),
+            Some(own_j) => {
+                let p = pool_factor(self.params.downsample);
+                let stack_j: Vec<&Raster> = self
+                    .ring
+                    .iter()
+                    .filter(|(s, ..)| range.contains(s))
+                    .filter_map(|(.., j)| j.as_ref())
+                    .collect();
+                let s_j = s_low.map(|s| pooled(s, p));
+                let mean_j = self.mission_mean.as_ref().map(|m| pooled(m, p));
+                let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
+                let mut f_j = factor(&m_j, s_j.as_ref(), &self.colour);
+                if self.mask.is_some() {
+                    fill_missing(&mut f_j);
+                }
+                let lit_j = lit_seafloor(&f_j, &self.colour);
+                self.monitor
+                    .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
+            }
+        };
         if eof && self.seq < self.params.window {
             health.flags.push(Flag::ShortMission {
                 photos: self.seq,

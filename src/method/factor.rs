@@ -7,6 +7,25 @@
 use crate::method::median::blocks;
 use crate::method::raster::Raster;
 
+/// Blocks across the photo's longer side that `--downsample auto` aims for. `F` is estimated per block and
+/// upsampled between block centres, and the blend's level is a block's, so a block that is large against the
+/// frame smooths the light cones' edges and the seafloor's detail: on the dive matrix, blocks of 4 against 8
+/// lowered the residual pattern's median by 5–10 % at 320×240 and 20 % at 640×480 (docs/evaluation.md).
+pub const AUTO_BLOCKS_ACROSS: usize = 160;
+
+/// Largest block `--downsample auto` chooses: the paper's 8 (12–24 MP photos have 500 and more blocks across).
+pub const AUTO_MAX_BLOCK: usize = 8;
+
+/// Smallest block `--downsample auto` chooses: a median of 16 samples (blocks of 2 raised the albedo error on the
+/// dive matrix at 320×240 and at 640×480).
+pub const AUTO_MIN_BLOCK: usize = 4;
+
+/// The block size `K` that `--downsample auto` takes for photos of `width`×`height`: about
+/// [`AUTO_BLOCKS_ACROSS`] blocks across the longer side, from [`AUTO_MIN_BLOCK`] to [`AUTO_MAX_BLOCK`] pixels.
+pub fn auto_block(width: usize, height: usize) -> usize {
+    (width.max(height) / AUTO_BLOCKS_ACROSS).clamp(AUTO_MIN_BLOCK, AUTO_MAX_BLOCK)
+}
+
 /// `F = (M − S_low) / C` per channel (`S_low = 0` when there is no scatter estimate). Not floored: the floor is
 /// applied per full-resolution pixel in [`crate::method::correct`].
 pub fn factor(m: &Raster, s_low: Option<&Raster>, colour: &[f32]) -> Raster {
@@ -164,6 +183,32 @@ mod tests {
     fn k1_upsampling_is_identity() {
         let low = Raster::from_fn(5, 4, 3, |x, y, c| (x * 7 + y * 3 + c) as f32);
         assert_eq!(upsample(&low, 1, 5, 4), low);
+    }
+
+    #[test]
+    fn auto_block_is_about_160_blocks_across_within_four_to_eight() {
+        for (w, h) in [
+            (320, 240),
+            (240, 320),
+            (640, 480),
+            (968, 608),
+            (1229, 691),
+            (1360, 1024),
+            (4000, 3000),
+            (100, 50),
+        ] {
+            let k = auto_block(w, h);
+            assert!((4..=8).contains(&k), "{w}x{h}: {k}");
+            let long = w.max(h);
+            // Either at a bound, or the largest block that leaves at least 160 blocks across.
+            if k > 4 && k < 8 {
+                assert!(long / k >= 160 && long / (k + 1) < 160, "{w}x{h}: {k}");
+            }
+        }
+        assert_eq!(auto_block(320, 240), 4);
+        assert_eq!(auto_block(640, 480), 4);
+        assert_eq!(auto_block(968, 608), 6);
+        assert_eq!(auto_block(4000, 3000), 8);
     }
 
     #[test]

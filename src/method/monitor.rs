@@ -224,6 +224,47 @@ pub fn contamination(
     }
 }
 
+/// Block size, in photo pixels, at which the monitor judges a photo: its thresholds were set on 8×8-pixel blocks
+/// (docs/evaluation.md), and a finer block's median is noisier (blocks of 4 on the dive matrix read sound dim
+/// photos as "contamination").
+pub const JUDGED_BLOCK: usize = 8;
+
+/// How many blocks of `k` pixels [`pooled`] groups along each side so the monitor judges blocks of about
+/// [`JUDGED_BLOCK`] pixels: `round(8 / k)`, at least 1.
+pub fn pool_factor(k: usize) -> usize {
+    ((JUDGED_BLOCK + k / 2) / k.max(1)).max(1)
+}
+
+/// `r` with each `p`×`p` group of samples (partial at the right and bottom edges) replaced by the median of its
+/// values that are not `NaN` (masked), per channel; `NaN` where none is. `p = 1` is a copy.
+pub fn pooled(r: &Raster, p: usize) -> Raster {
+    if p <= 1 {
+        return r.clone();
+    }
+    let (w, h, c) = (r.width.div_ceil(p), r.height.div_ceil(p), r.channels);
+    let mut out = Raster::filled(w, h, c, f32::NAN);
+    let mut v = Vec::with_capacity(p * p);
+    for by in 0..h {
+        for bx in 0..w {
+            for ch in 0..c {
+                v.clear();
+                for y in by * p..((by + 1) * p).min(r.height) {
+                    for x in bx * p..((bx + 1) * p).min(r.width) {
+                        let s = r.get(x, y, ch);
+                        if !s.is_nan() {
+                            v.push(s);
+                        }
+                    }
+                }
+                if !v.is_empty() {
+                    out.data[(by * w + bx) * c + ch] = crate::method::median::median_of_f32(&mut v);
+                }
+            }
+        }
+    }
+    out
+}
+
 /// `M − S` at or below which a channel of a block carries no light to judge (a red channel after 10 m of water).
 const NO_LIGHT: f32 = 1e-6;
 
@@ -947,6 +988,75 @@ mod tests {
     /// Whether `flags` hold a flag of `kind` ([`Flag::kind`]).
     fn has(flags: &[Flag], kind: &str) -> bool {
         flags.iter().any(|f| f.kind() == kind)
+    }
+
+    #[test]
+    fn pooled_is_the_median_of_each_group_without_masked_samples() {
+        // Brute force: every group's values collected anew, sorted, the middle one (or the mean of the two).
+        fn brute(r: &Raster, p: usize, bx: usize, by: usize, ch: usize) -> f32 {
+            let mut v: Vec<f32> = (0..r.height)
+                .flat_map(|y| (0..r.width).map(move |x| (x, y)))
+                .filter(|&(x, y)| x / p == bx && y / p == by)
+                .map(|(x, y)| r.get(x, y, ch))
+                .filter(|s| !s.is_nan())
+                .collect();
+            v.sort_by(f32::total_cmp);
+            match v.len() {
+                0 => f32::NAN,
+                n if n % 2 == 1 => v[n / 2],
+                n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+            }
+        }
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for (w, h, c, p) in [(9, 7, 3, 2), (10, 6, 1, 3), (5, 5, 2, 1), (3, 2, 3, 4)] {
+            let mut r = Raster::filled(w, h, c, 0.0);
+            for v in &mut r.data {
+                let u = next();
+                // A fifth of the samples masked, and a whole 2×2 corner group masked in the first raster.
+                *v = if u < 0.2 { f32::NAN } else { next() };
+            }
+            if p == 2 {
+                for (x, y) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    for ch in 0..c {
+                        r.data[(y * w + x) * c + ch] = f32::NAN;
+                    }
+                }
+            }
+            let out = pooled(&r, p);
+            assert_eq!((out.width, out.height), (w.div_ceil(p), h.div_ceil(p)));
+            for by in 0..out.height {
+                for bx in 0..out.width {
+                    for ch in 0..c {
+                        let (got, want) = (out.get(bx, by, ch), brute(&r, p, bx, by, ch));
+                        assert!(
+                            got == want || (got.is_nan() && want.is_nan()),
+                            "{w}x{h} p {p} group ({bx}, {by}) channel {ch}: {got} against {want}"
+                        );
+                    }
+                }
+            }
+            if p == 2 {
+                assert!(
+                    out.get(0, 0, 0).is_nan(),
+                    "a group with every sample masked"
+                );
+            }
+        }
+        // Blocks of about 8 pixels for every block size.
+        for k in 1..=16 {
+            let judged = pool_factor(k) * k;
+            assert!(
+                (5..=12).contains(&judged) || k > 8,
+                "K {k}: judged at {judged}"
+            );
+        }
+        assert_eq!((pool_factor(4), pool_factor(8), pool_factor(2)), (2, 1, 4));
     }
 
     #[test]

@@ -114,7 +114,8 @@ pub struct Params {
     pub method: Method,
     /// Photos in the sliding window, `n` (odd). Default: 7.
     pub window: usize,
-    /// Block size `K` of the spatial median. Default: 8.
+    /// Block size `K` of the spatial median; 0 takes [`crate::method::factor::auto_block`] of the photos' size
+    /// (from `S` or the mask when given, else from the first photo). Default: 8.
     pub downsample: usize,
     /// Seafloor colour `C`. Default: grey 0.4.
     pub seafloor_colour: SeafloorColour,

@@ -340,7 +340,7 @@ mod tests {
             ),
             (
                 Options {
-                    downsample: 4,
+                    downsample: Some(4),
                     resume: true,
                     ..o.clone()
                 },

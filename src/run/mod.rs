@@ -53,9 +53,19 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let plan = Plan::new(opts, progress)?;
     // --transfer auto: the curve the first survey photo declares, for the whole mission.
     let (resolved, transfer_assumed) = resolve_transfer(opts, &plan)?;
+    // --downsample auto: blocks from the mission's photo size.
+    let (k, blocks_why) = plan.downsample(&resolved);
+    let resolved = Options {
+        downsample: k,
+        ..resolved
+    };
+    let blocks = k.map_or_else(|| "auto".to_string(), |k| format!("{k}x{k}"));
     let opts = &resolved;
     if let Some(why) = &transfer_assumed {
         progress.stage(&format!("camera curve {why}; --transfer sets it"));
+    }
+    if let Some(why) = &blocks_why {
+        progress.stage(&format!("blocks {blocks} ({why}); --downsample sets them"));
     }
     plan.create_work_dir()?;
     // One run per --out (per shard), the same options as earlier runs there, stale temp files removed
@@ -95,16 +105,16 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             FileError::from_error(&s.path, &e)
         })
         .collect();
-    let (n, k) = (plan.window.n, opts.downsample);
+    let n = plan.window.n;
     if plan.streaming {
         progress.stage(&format!(
             "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in; \
-             blocks {k}x{k})",
+             blocks {blocks})",
             n / 2
         ));
     } else {
         progress.stage(&format!(
-            "correcting {} survey photos (window n = {n}, blocks {k}x{k})",
+            "correcting {} survey photos (window n = {n}, blocks {blocks})",
             plan.chunk.len() - plan.skipped_existing
         ));
     }

@@ -83,8 +83,12 @@ pub struct Options {
     pub contamination: Option<f64>,
     /// Accepted breakdown probability `P_half` when choosing `n` from `contamination`. Default: 0.01.
     pub risk: f64,
-    /// Block size `K` of the spatial median downsampling. Default: 8.
-    pub downsample: usize,
+    /// Block size `K` of the spatial median downsampling; `None` (`auto`) takes it, for `method = abyss`, from the
+    /// mission's photo size ([`crate::method::factor::auto_block`]: about 160 blocks across the longer side, from
+    /// 4 to 8 pixels, so the paper's 8 from 1280 pixels up), and the paper's 8 for the other methods and with a
+    /// mask (`mask`, `mask_auto`). Default: `None` (auto). In a TOML file a number or `"auto"`.
+    #[serde(default, deserialize_with = "number_or_auto")]
+    pub downsample: Option<usize>,
     /// Seafloor colour `C`. Default: grey 0.4.
     #[serde(alias = "seafloor-color")]
     pub seafloor_colour: SeafloorColour,
@@ -159,6 +163,7 @@ pub struct Options {
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
     #[serde(default = "default_true")]
     pub photo_gain: bool,
+
     /// `method = abyss`: scale of the water-column `S` for the survey photos (the water column is deeper than the
     /// camera's altitude, so its backscatter can be stronger than the survey's); `None` (`auto`) estimates it per
     /// window from how the seafloor's contrast follows the light ([`crate::method::refine::backscatter_scale`]).
@@ -184,6 +189,23 @@ fn default_true() -> bool {
     true
 }
 
+/// A TOML value that is a number, or the string `"auto"` (`None`).
+fn number_or_auto<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<usize>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Value {
+        Number(usize),
+        Text(String),
+    }
+    match Value::deserialize(d)? {
+        Value::Number(n) => Ok(Some(n)),
+        Value::Text(t) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
+        Value::Text(t) => Err(serde::de::Error::custom(format!(
+            "expected a whole number of pixels or \"auto\", got {t:?}"
+        ))),
+    }
+}
+
 fn default_scale() -> Option<f32> {
     Some(1.0)
 }
@@ -198,7 +220,7 @@ impl Default for Options {
             window: None,
             contamination: None,
             risk: 0.01,
-            downsample: 8,
+            downsample: None,
             seafloor_colour: SeafloorColour::default(),
             factor_floor: 0.05,
             save_scatter: false,
@@ -390,6 +412,13 @@ pub mod limits {
 }
 
 impl Options {
+    /// The block size `K`: `downsample`, or the paper's 8 where `auto` has not been resolved (a run resolves it
+    /// from the photos' size before it starts: [`crate::run::plan::Plan::downsample`]).
+    pub fn block(&self) -> usize {
+        self.downsample
+            .unwrap_or(crate::method::factor::AUTO_MAX_BLOCK)
+    }
+
     /// Range checks of every numeric option, each error naming its flag. Part of [`Options::validate`].
     pub fn check_ranges(&self) -> Result<(), Error> {
         let usage = |m: String| Err(Error::Usage(m));
@@ -409,12 +438,13 @@ impl Options {
         if !(self.risk > 0.0 && self.risk < 1.0) {
             return usage(format!("--risk must be in (0, 1), got {}", self.risk));
         }
-        if !(1..=limits::DOWNSAMPLE).contains(&self.downsample) {
-            return usage(format!(
-                "--downsample must be 1 to {}, got {}",
-                limits::DOWNSAMPLE,
-                self.downsample
-            ));
+        if let Some(k) = self.downsample {
+            if !(1..=limits::DOWNSAMPLE).contains(&k) {
+                return usage(format!(
+                    "--downsample must be auto or 1 to {}, got {k}",
+                    limits::DOWNSAMPLE
+                ));
+            }
         }
         if !(self.factor_floor > 0.0 && self.factor_floor <= limits::FACTOR_FLOOR) {
             return usage(format!(
@@ -520,7 +550,18 @@ mod tests {
         assert_eq!(o.survey.unwrap(), dir.path().join("photos"));
         assert_eq!(o.out.unwrap(), PathBuf::from("/abs/out"));
         assert_eq!(o.window, Some(9));
-        assert_eq!(o.downsample, 8, "unset keys keep their defaults");
+        assert_eq!(o.downsample, None, "unset keys keep their defaults (auto)");
+        for (text, want) in [("4", Some(4)), ("\"auto\"", None), ("\"Auto\"", None)] {
+            std::fs::write(&cfg, format!("downsample = {text}\n")).unwrap();
+            assert_eq!(
+                Options::from_toml_file(&cfg).unwrap().downsample,
+                want,
+                "{text}"
+            );
+        }
+        std::fs::write(&cfg, "downsample = \"big\"\n").unwrap();
+        let err = Options::from_toml_file(&cfg).unwrap_err().to_string();
+        assert!(err.contains("auto") && err.contains("big"), "{err}");
         std::fs::write(&cfg, "windw = 9\n").unwrap();
         let err = Options::from_toml_file(&cfg).unwrap_err().to_string();
         assert!(

@@ -257,10 +257,13 @@ impl Plan {
             }
         ));
         line(format!(
-            "method: {}, blocks {}x{}, seafloor colour {}, transfer {}, factor floor {}",
+            "method: {}, blocks {}, seafloor colour {}, transfer {}, factor floor {}",
             opts.method,
-            opts.downsample,
-            opts.downsample,
+            match self.downsample(opts) {
+                (Some(k), Some(why)) => format!("{k}x{k} (auto: {why})"),
+                (Some(k), None) => format!("{k}x{k}"),
+                (None, why) => format!("auto ({})", why.unwrap_or_default()),
+            },
             opts.seafloor_colour,
             if opts.transfer_auto {
                 match self.found.photos.first() {
@@ -275,6 +278,62 @@ impl Plan {
             opts.factor_floor
         ));
         s
+    }
+
+    /// The block size `K`: `--downsample K`, or for `auto` (`None`) with `--method abyss`
+    /// [`crate::method::factor::auto_block`] of the mission's photo size, with what it was taken from (the other
+    /// methods, the paper as published and the baselines, and runs with a mask take the paper's 8). Streaming runs
+    /// have no photo before the run: the size of `--scatter` or of the first water-column frame (the same camera),
+    /// or else `None`: the engine takes it from the first photo that arrives.
+    pub fn downsample(&self, opts: &Options) -> (Option<usize>, Option<String>) {
+        if let Some(k) = opts.downsample {
+            return (Some(k), None);
+        }
+        let eight = crate::method::factor::AUTO_MAX_BLOCK;
+        if opts.method != Method::Abyss {
+            return (
+                Some(eight),
+                Some(format!("the paper's 8 for --method {}", opts.method)),
+            );
+        }
+        // Overlays that change from frame to frame (counters, clocks) are partly missed by --mask-auto; a block
+        // of 8 has enough seafloor beside them to outvote the missed pixels (with blocks of 4, masked text on a
+        // 128×96 test dive came out 210–236 instead of white: tests/field.rs).
+        if opts.mask.is_some() || opts.mask_auto {
+            return (
+                Some(eight),
+                Some("the paper's 8 with a mask: overlays need the larger blocks".into()),
+            );
+        }
+        let water = || {
+            let dir = opts.water_column.as_ref()?;
+            let first = find_photos(dir).ok()?.photos.into_iter().next()?;
+            crate::io::header_size(&first.path).ok()
+        };
+        let scatter = || crate::io::header_size(opts.scatter.as_ref()?).ok();
+        let (size, from) = match self.photo_size {
+            Some(s) => (Some(s), "survey photos"),
+            None => match scatter() {
+                Some(s) => (Some(s), "scatter image"),
+                None => (water(), "water-column frames"),
+            },
+        };
+        match size {
+            Some((w, h)) => {
+                let k = crate::method::factor::auto_block(w, h);
+                (
+                    Some(k),
+                    Some(format!(
+                        "{from} {w}x{h}, about {} blocks across",
+                        w.max(h) / k
+                    )),
+                )
+            }
+            None => (
+                None,
+                Some("from the first photo's size, about 160 blocks across".into()),
+            ),
+        }
     }
 
     /// Where the output of a survey photo goes.

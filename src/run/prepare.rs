@@ -62,7 +62,9 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
     let params = Params {
         method: opts.method,
         window: plan.window.n,
-        downsample: opts.downsample,
+        // `None` here (a streaming run with nothing to read the size from): the engine takes it from the first
+        // photo.
+        downsample: opts.downsample.unwrap_or(0),
         seafloor_colour: opts.seafloor_colour,
         factor_floor: opts.factor_floor,
         transfer: opts.transfer,
@@ -83,7 +85,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
     if opts.method == Method::Mean {
         engine.set_mission_mean(mission_mean(
             &plan.found.photos,
-            opts.downsample,
+            opts.block(),
             opts.transfer,
             progress,
         )?);
