@@ -112,6 +112,48 @@ fn correct_dive(sim: &Simulation, dive: &std::path::Path, out: &std::path::Path,
     .unwrap();
 }
 
+/// A dive of the matrix rendered with its lighting truth at 320×240 into a temporary folder, for scoring as the
+/// matrix scores (on the samples with signal).
+struct MatrixDive {
+    sim: Simulation,
+    dive: abysslight::eval::simulate::Dive,
+    dir: tempfile::TempDir,
+    names: Vec<String>,
+    signal: Vec<Vec<bool>>,
+}
+
+impl MatrixDive {
+    fn render(name: &str, seed_set: u64) -> MatrixDive {
+        let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
+        let spec = &matrix::DIVES[i];
+        assert!(!spec.jpeg, "{name}: the tests read the rendered PNGs");
+        let sim = spec.simulation(matrix::seed(i, seed_set), (320, 240));
+        let dive = sim.render_with_lighting().unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        dive.write(&dir.path().join("dive")).unwrap();
+        let names = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
+        let signal = matrix::signal_mask(&dive, sim.encode, spec.bits);
+        MatrixDive {
+            sim,
+            dive,
+            dir,
+            names,
+            signal,
+        }
+    }
+
+    /// (albedo error, residual pattern) of the dive corrected with `opts` into `label`.
+    fn score(&self, label: &str, opts: Options) -> (f64, f64) {
+        let out = self.dir.path().join(label);
+        correct_dive(&self.sim, &self.dir.path().join("dive"), &out, opts);
+        let photos = matrix::load_set(&out, &self.names, self.sim.encode);
+        (
+            albedo_error_where(&photos, &self.dive.albedo, Some(&self.signal)),
+            residual_pattern_where(&photos, &self.dive.albedo, (8, 6), Some(&self.signal)),
+        )
+    }
+}
+
 /// (albedo error, residual pattern) of raw, paper as published and the default on `sim`.
 fn scores(sim: &Simulation) -> [(f64, f64); 3] {
     let d = tempfile::tempdir().unwrap();
@@ -307,35 +349,15 @@ fn sound_abyssal_dives_raise_no_flags() {
 #[test]
 fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
     for name in ["a07", "a11"] {
-        let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
-        let spec = &matrix::DIVES[i];
-        assert!(!spec.jpeg, "{name}: the test reads the rendered PNGs");
-        let sim = spec.simulation(matrix::seed(i, 1), (320, 240));
-        let dive = sim.render_with_lighting().unwrap();
-        let d = tempfile::tempdir().unwrap();
-        let root = d.path().join("dive");
-        dive.write(&root).unwrap();
-        let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
-        let signal = matrix::signal_mask(&dive, sim.encode, spec.bits);
-        let mut got = Vec::new();
-        for level_by_light in [true, false] {
-            let out = d.path().join(format!("out-{level_by_light}"));
-            correct_dive(
-                &sim,
-                &root,
-                &out,
-                Options {
-                    level_by_light,
-                    ..Options::default()
-                },
-            );
-            let photos = matrix::load_set(&out, &names, sim.encode);
-            got.push((
-                albedo_error_where(&photos, &dive.albedo, Some(&signal)),
-                residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(&signal)),
-            ));
-        }
-        let (with, without) = (got[0], got[1]);
+        let d = MatrixDive::render(name, 1);
+        let with = d.score("with", Options::default());
+        let without = d.score(
+            "without",
+            Options {
+                level_by_light: false,
+                ..Options::default()
+            },
+        );
         eprintln!("{name}: (albedo error, residual pattern) with {with:?}, without {without:?}");
         assert!(
             with.1 < 0.9 * without.1 && with.0 < 1.02 * without.0,
@@ -349,45 +371,23 @@ fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
 /// blocks of 8). Scored as the matrix scores. Fails with blocks of 8 as the default.
 #[test]
 fn blocks_from_the_photo_size_lower_the_residual_pattern_below_the_papers() {
-    let i = matrix::DIVES.iter().position(|d| d.name == "a04").unwrap();
-    let spec = &matrix::DIVES[i];
-    assert!(!spec.jpeg, "the test reads the rendered PNGs");
-    let sim = spec.simulation(matrix::seed(i, 0), (320, 240));
-    let dive = sim.render_with_lighting().unwrap();
-    let d = tempfile::tempdir().unwrap();
-    let root = d.path().join("dive");
-    dive.write(&root).unwrap();
-    let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
-    let signal = matrix::signal_mask(&dive, sim.encode, spec.bits);
-    let mut got = Vec::new();
-    for (label, opts) in [
-        ("default", Options::default()),
-        (
-            "blocks of 8",
-            Options {
-                downsample: Some(8),
-                ..Options::default()
-            },
-        ),
-        (
-            "paper",
-            Options {
-                method: abysslight::run::options::Method::Paper,
-                ..Options::default()
-            },
-        ),
-    ] {
-        let out = d.path().join(label.replace(' ', "-"));
-        correct_dive(&sim, &root, &out, opts);
-        let photos = matrix::load_set(&out, &names, sim.encode);
-        let score = (
-            albedo_error_where(&photos, &dive.albedo, Some(&signal)),
-            residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(&signal)),
-        );
-        eprintln!("a04 {label}: (albedo error, residual pattern) {score:?}");
-        got.push(score);
-    }
-    let (auto, eight, paper) = (got[0], got[1], got[2]);
+    let d = MatrixDive::render("a04", 0);
+    let auto = d.score("default", Options::default());
+    let eight = d.score(
+        "blocks-8",
+        Options {
+            downsample: Some(8),
+            ..Options::default()
+        },
+    );
+    let paper = d.score(
+        "paper",
+        Options {
+            method: Method::Paper,
+            ..Options::default()
+        },
+    );
+    eprintln!("a04 (albedo error, residual pattern): default {auto:?}, blocks of 8 {eight:?}, paper {paper:?}");
     assert!(
         auto.1 < 0.9 * eight.1 && auto.0 < 1.02 * eight.0,
         "blocks from the photo size {auto:?} against blocks of 8 {eight:?}"
