@@ -1127,19 +1127,24 @@ pub fn run() -> ExitCode {
     }
 }
 
+/// `auto` (`None`) or a value `T` parses to; `example` names one in the error.
+fn auto_or<T: std::str::FromStr>(s: &str, example: &str) -> Result<Option<T>, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(None);
+    }
+    s.trim()
+        .parse::<T>()
+        .map(Some)
+        .map_err(|_| format!("expected {example}, or auto, got {s:?}"))
+}
+
 /// `--backscatter-scale`: a number, or `None` for `auto`.
 #[derive(Debug, Clone, Copy)]
 struct ScaleArg(Option<f32>);
 
 /// `--backscatter-scale`: `auto` or a number.
 fn parse_scale(s: &str) -> Result<ScaleArg, String> {
-    if s.trim().eq_ignore_ascii_case("auto") {
-        return Ok(ScaleArg(None));
-    }
-    s.trim()
-        .parse::<f32>()
-        .map(|v| ScaleArg(Some(v)))
-        .map_err(|_| format!("expected a number such as 0.8, or auto, got {s:?}"))
+    auto_or(s, "a number such as 0.8").map(ScaleArg)
 }
 
 /// `--downsample`: a block size, or `None` for `auto`.
@@ -1148,13 +1153,7 @@ struct BlocksArg(Option<usize>);
 
 /// `--downsample`: `auto` or a whole number of pixels.
 fn parse_blocks(s: &str) -> Result<BlocksArg, String> {
-    if s.trim().eq_ignore_ascii_case("auto") {
-        return Ok(BlocksArg(None));
-    }
-    s.trim()
-        .parse::<usize>()
-        .map(|v| BlocksArg(Some(v)))
-        .map_err(|_| format!("expected a block size in pixels such as 8, or auto, got {s:?}"))
+    auto_or(s, "a block size in pixels such as 8").map(BlocksArg)
 }
 
 /// `--transfer`: a curve, or `None` for `auto`.
