@@ -115,7 +115,7 @@ pub struct Engine<T> {
     colour: Vec<f32>,
     layout: Option<Layout>,
     monitor: Monitor,
-    /// The window's block medians: sequence number, the `K`×`K` blocks, and with blocks under 5 pixels the
+    /// The window's block medians: sequence number, the `K`×`K` blocks, and for blocks of 5 pixels or fewer the
     /// same pooled to about 8 pixels for the monitor ([`pool_factor`]).
     ring: VecDeque<(usize, Raster, Option<Raster>)>,
     waiting: VecDeque<Waiting<T>>,

@@ -9,8 +9,9 @@ use crate::method::raster::Raster;
 
 /// Blocks across the photo's longer side that `--downsample auto` aims for. `F` is estimated per block and
 /// upsampled between block centres, and the blend's level is a block's, so a block that is large against the
-/// frame smooths the light cones' edges and the seafloor's detail: on the dive matrix, blocks of 4 against 8
-/// lowered the residual pattern's median by 5–10 % at 320×240 and 20 % at 640×480 (docs/evaluation.md).
+/// frame smooths the light cones' edges and the seafloor's detail: on the dive matrix (three seed sets), blocks
+/// of 4 against 8 lowered the residual pattern's median by 4–10 % at 320×240 and 8–20 % at 640×480, and the
+/// albedo error's and overlap difference's medians too (docs/evaluation.md).
 pub const AUTO_BLOCKS_ACROSS: usize = 160;
 
 /// Largest block `--downsample auto` chooses: the paper's 8 (12–24 MP photos have 500 and more blocks across).

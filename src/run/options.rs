@@ -163,7 +163,6 @@ pub struct Options {
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
     #[serde(default = "default_true")]
     pub photo_gain: bool,
-
     /// `method = abyss`: scale of the water-column `S` for the survey photos (the water column is deeper than the
     /// camera's altitude, so its backscatter can be stronger than the survey's); `None` (`auto`) estimates it per
     /// window from how the seafloor's contrast follows the light ([`crate::method::refine::backscatter_scale`]).
