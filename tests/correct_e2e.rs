@@ -212,7 +212,7 @@ fn short_mission_uses_all_photos_and_warns() {
 #[test]
 fn automatic_block_size_follows_the_photo_size_and_the_method() {
     use abysslight::run::options::Method;
-    let cases: [(usize, usize, Method, Option<usize>, usize); 7] = [
+    let cases: [(usize, usize, Method, Option<usize>, usize); 8] = [
         (96, 24, Method::Abyss, None, 4),
         (97, 24, Method::Abyss, None, 8), // with --mask-auto (below)
         (968, 16, Method::Abyss, None, 6),
@@ -220,6 +220,7 @@ fn automatic_block_size_follows_the_photo_size_and_the_method() {
         (968, 16, Method::Paper, None, 8),
         (96, 24, Method::Polynomial, None, 8),
         (96, 24, Method::Abyss, Some(3), 3),
+        (96, 24, Method::Abyss, Some(5), 5),
     ];
     for (w, h, method, given, want) in cases {
         let d = tempfile::tempdir().unwrap();
@@ -242,6 +243,14 @@ fn automatic_block_size_follows_the_photo_size_and_the_method() {
             report.options.downsample,
             Some(want),
             "{w}x{h} {method} --downsample {given:?}"
+        );
+        // The photo's detail survives (odd blocks used to turn every --method abyss photo flat grey).
+        let out = normalised(&decode(&d.path().join("out/img3.png")).unwrap());
+        let mean = out.iter().sum::<f32>() / out.len() as f32;
+        let var = out.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / out.len() as f32;
+        assert!(
+            var > 1e-4,
+            "{w}x{h} {method} K {want}: flat output (variance {var})"
         );
         // The factor images have one sample per block of that size.
         let factors = d.path().join("out/_abysslight/factors");
