@@ -471,6 +471,16 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
             downsample: Some(8),
             ..o
         }),
+        ("abyss-blocks-3", |o| Options {
+            method: Method::Abyss,
+            downsample: Some(3),
+            ..o
+        }),
+        ("abyss-blocks-6", |o| Options {
+            method: Method::Abyss,
+            downsample: Some(6),
+            ..o
+        }),
         ("abyss-blocks-4", |o| Options {
             method: Method::Abyss,
             downsample: Some(4),
