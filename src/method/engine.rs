@@ -118,6 +118,9 @@ pub struct Engine<T> {
     /// The window's block medians: sequence number, the `K`×`K` blocks, and for blocks of 5 pixels or fewer the
     /// same pooled to about 8 pixels for the monitor ([`pool_factor`]).
     ring: VecDeque<(usize, Raster, Option<Raster>)>,
+    /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
+    /// time they are needed (both stay the same for the whole mission).
+    judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
     waiting: VecDeque<Waiting<T>>,
     seq: usize,
 }
@@ -211,6 +214,7 @@ impl<T> Engine<T> {
             layout: None,
             monitor: Monitor::new(Thresholds::default()).with_window(n),
             ring: VecDeque::with_capacity(n + 1),
+            judged_fixed: None,
             waiting: VecDeque::new(),
             seq: 0,
         })
@@ -399,6 +403,13 @@ impl<T> Engine<T> {
     ) -> Corrected<T> {
         let t = Instant::now();
         let i = w.seq;
+        let p = pool_factor(self.params.downsample);
+        if p > 1 && self.judged_fixed.is_none() {
+            self.judged_fixed = Some((
+                self.scatter_low.as_ref().map(|s| pooled(s, p)),
+                self.mission_mean.as_ref().map(|m| pooled(m, p)),
+            ));
+        }
         let stack: Vec<&Raster> = self
             .ring
             .iter()
@@ -428,15 +439,16 @@ impl<T> Engine<T> {
         let mut health = match own_judged {
             None => self.monitor.observe_photo(own, &lit, s_low, &f),
             Some(own_j) => {
-                let p = pool_factor(self.params.downsample);
                 let stack_j: Vec<&Raster> = self
                     .ring
                     .iter()
                     .filter(|(s, ..)| range.contains(s))
                     .filter_map(|(.., j)| j.as_ref())
                     .collect();
-                let s_j = s_low.map(|s| pooled(s, p));
-                let mean_j = self.mission_mean.as_ref().map(|m| pooled(m, p));
+                let (s_j, mean_j) = self
+                    .judged_fixed
+                    .as_ref()
+                    .expect("made above when the ring holds pooled images");
                 let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
                 let mut f_j = factor(&m_j, s_j.as_ref(), &self.colour);
                 if self.mask.is_some() {
