@@ -27,7 +27,6 @@ use abysslight::eval::evaluate::{
 };
 use abysslight::eval::matrix::{self, load_set, signal_mask, DIVES};
 use abysslight::eval::simulate::Dive;
-use abysslight::io::{decode, write_atomic, EncodeSettings};
 use abysslight::method::raster::Raster;
 use abysslight::method::transfer::Transfer;
 use abysslight::run::options::{Method, Options};
@@ -238,22 +237,9 @@ fn main() {
         // JPEG dives: the camera wrote JPEGs (quality 92) instead of PNGs.
         let ext = if spec.jpeg { "jpg" } else { "png" };
         if spec.jpeg {
-            let settings = EncodeSettings {
-                jpeg_quality: 92,
-                ..EncodeSettings::default()
-            };
             for sub in ["survey", "water"] {
-                let (from, to) = (root.join(sub), dir.join(format!("{sub}-jpeg")));
-                for e in std::fs::read_dir(&from).unwrap() {
-                    let p = e.unwrap().path();
-                    let photo = decode(&p).unwrap();
-                    write_atomic(
-                        &photo,
-                        &to.join(p.with_extension("jpg").file_name().unwrap()),
-                        settings,
-                    )
-                    .unwrap();
-                }
+                matrix::save_as_jpeg(&root.join(sub), &dir.join(format!("{sub}-jpeg")))
+                    .expect("save the dive as JPEG");
             }
         }
         let (survey, water) = if spec.jpeg {
@@ -322,9 +308,14 @@ fn main() {
         ));
         if let Some(script) = &peer {
             let o = dir.join("numpy");
-            let window = abysslight::choose_window(spec.contamination, 0.01)
-                .map(|w| w.n)
-                .unwrap_or(7);
+            // The window the paper's column took.
+            let window = Options {
+                contamination: Some(spec.contamination),
+                ..Options::default()
+            }
+            .window_choice()
+            .map(|w| w.n)
+            .unwrap_or(7);
             let ok = Command::new(&peer_python)
                 .arg(script)
                 .arg("paper")
@@ -484,6 +475,25 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
         ("abyss-blocks-4", |o| Options {
             method: Method::Abyss,
             downsample: Some(4),
+            ..o
+        }),
+        ("abyss-no-near-window", |o| Options {
+            method: Method::Abyss,
+            near_window: Some(0),
+            ..o
+        }),
+        // Without --contamination (the window 7, its median, the near window 5), with and without the near window.
+        ("abyss-window-7", |o| Options {
+            method: Method::Abyss,
+            contamination: None,
+            window: Some(7),
+            ..o
+        }),
+        ("abyss-window-7-no-near", |o| Options {
+            method: Method::Abyss,
+            contamination: None,
+            window: Some(7),
+            near_window: Some(0),
             ..o
         }),
         ("abyss-no-level-by-light", |o| Options {

@@ -112,8 +112,8 @@ fn correct_dive(sim: &Simulation, dive: &std::path::Path, out: &std::path::Path,
     .unwrap();
 }
 
-/// A dive of the matrix rendered with its lighting truth at 320×240 into a temporary folder, for scoring as the
-/// matrix scores (on the samples with signal).
+/// A dive of the matrix rendered with its lighting truth at 320×240 into a temporary folder (saved as JPEGs where
+/// the matrix's camera writes JPEGs), for scoring as the matrix scores (on the samples with signal).
 struct MatrixDive {
     sim: Simulation,
     dive: abysslight::eval::simulate::Dive,
@@ -126,12 +126,26 @@ impl MatrixDive {
     fn render(name: &str, seed_set: u64) -> MatrixDive {
         let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
         let spec = &matrix::DIVES[i];
-        assert!(!spec.jpeg, "{name}: the tests read the rendered PNGs");
         let sim = spec.simulation(matrix::seed(i, seed_set), (320, 240));
         let dive = sim.render_with_lighting().unwrap();
         let dir = tempfile::tempdir().unwrap();
-        dive.write(&dir.path().join("dive")).unwrap();
-        let names = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
+        let root = dir.path().join("dive");
+        dive.write(&root).unwrap();
+        let mut names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
+        if spec.jpeg {
+            // The camera wrote JPEGs, as in the matrix: the dive's folders hold those instead.
+            for sub in ["survey", "water"] {
+                let png = dir.path().join(format!("{sub}-png"));
+                std::fs::rename(root.join(sub), &png).unwrap();
+                matrix::save_as_jpeg(&png, &root.join(sub)).unwrap();
+            }
+            for n in &mut names {
+                *n = std::path::Path::new(n)
+                    .with_extension("jpg")
+                    .to_string_lossy()
+                    .into_owned();
+            }
+        }
         let signal = matrix::signal_mask(&dive, sim.encode, spec.bits);
         MatrixDive {
             sim,
@@ -151,6 +165,14 @@ impl MatrixDive {
             albedo_error_where(&photos, &self.dive.albedo, Some(&self.signal)),
             residual_pattern_where(&photos, &self.dive.albedo, (8, 6), Some(&self.signal)),
         )
+    }
+}
+
+/// The paper as published, otherwise the defaults.
+fn paper() -> Options {
+    Options {
+        method: Method::Paper,
+        ..Options::default()
     }
 }
 
@@ -368,32 +390,61 @@ fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
 
 /// `--downsample auto` (blocks of 4 for 320×240 photos) against the paper's blocks of 8, on a04 of the tuning set:
 /// four narrow-ish lights from 4.5 m, whose centre is clipped (the dive whose pattern stayed 0.78× the paper's with
-/// blocks of 8). Scored as the matrix scores. Fails with blocks of 8 as the default.
+/// blocks of 8). Scored as the matrix scores. Fails with blocks of 8 as the default. The two block sizes are
+/// compared without the near window (the eighth round's lever, which lowers the albedo error of blocks of 8 on
+/// this dive, 0.33 → 0.32, and not that of blocks of 4: docs/evaluation.md).
 #[test]
 fn blocks_from_the_photo_size_lower_the_residual_pattern_below_the_papers() {
     let d = MatrixDive::render("a04", 0);
     let auto = d.score("default", Options::default());
-    let eight = d.score(
-        "blocks-8",
-        Options {
-            downsample: Some(8),
-            ..Options::default()
-        },
+    let alone = |downsample| Options {
+        downsample,
+        near_window: Some(0),
+        ..Options::default()
+    };
+    let four = d.score("blocks-auto-alone", alone(None));
+    let eight = d.score("blocks-8-alone", alone(Some(8)));
+    let paper = d.score("paper", paper());
+    eprintln!(
+        "a04 (albedo error, residual pattern): default {auto:?}; without the near window, blocks from the photo \
+         size {four:?}, blocks of 8 {eight:?}; paper {paper:?}"
     );
-    let paper = d.score(
-        "paper",
-        Options {
-            method: Method::Paper,
-            ..Options::default()
-        },
-    );
-    eprintln!("a04 (albedo error, residual pattern): default {auto:?}, blocks of 8 {eight:?}, paper {paper:?}");
     assert!(
-        auto.1 < 0.9 * eight.1 && auto.0 < 1.02 * eight.0,
-        "blocks from the photo size {auto:?} against blocks of 8 {eight:?}"
+        four.1 < 0.9 * eight.1 && four.0 < 1.02 * eight.0,
+        "blocks from the photo size {four:?} against blocks of 8 {eight:?}"
     );
     assert!(
         auto.1 <= 0.75 * paper.1 && auto.0 <= 0.9 * paper.0,
         "default {auto:?} against the paper {paper:?}"
+    );
+}
+
+/// The near window (on by default) against the window alone, on a12 of the tuning set: four 28° lights from 5 ± 0.4
+/// m, 8-bit sRGB JPEG, the dive whose residual pattern stayed 0.79× the paper's. Over its window of 9 photos the
+/// lights' footprint moves with the vehicle's altitude and roll; the near window's 5 photos follow it. Scored as
+/// the matrix scores. Fails without the near window (`near_window: Some(0)`) as the default.
+#[test]
+fn the_near_window_follows_the_lights_on_a_swinging_dive() {
+    let d = MatrixDive::render("a12", 0);
+    let default = d.score("default", Options::default());
+    let without = d.score(
+        "no-near",
+        Options {
+            near_window: Some(0),
+            ..Options::default()
+        },
+    );
+    let paper = d.score("paper", paper());
+    eprintln!(
+        "a12 (albedo error, residual pattern): default {default:?}, without the near window {without:?}, paper \
+         {paper:?}"
+    );
+    assert!(
+        default.1 <= 0.75 * paper.1 && default.0 <= 0.9 * paper.0,
+        "default {default:?} against the paper {paper:?}"
+    );
+    assert!(
+        default.1 < 0.8 * without.1 && default.0 < 1.02 * without.0,
+        "near window {default:?} against none {without:?}"
     );
 }

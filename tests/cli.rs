@@ -146,7 +146,7 @@ fn config_file_with_flag_override() {
     write_all(&dive.photos, &d.path().join("m/survey"), "img", "png");
     std::fs::write(
         d.path().join("m/mission.toml"),
-        "survey = \"survey\"\nout = \"corrected\"\nwindow = 5\nseafloor-colour = \"#8a7560\"\n",
+        "survey = \"survey\"\nout = \"corrected\"\nwindow = 5\nnear-window = \"auto\"\nseafloor-colour = \"#8a7560\"\n",
     )
     .unwrap();
     let o = abysslight(
@@ -171,6 +171,8 @@ fn config_file_with_flag_override() {
     )
     .unwrap();
     assert_eq!(report["window"]["n"], 3, "flag overrides the file");
+    // --near-window auto resolved and recorded: 5 photos are not fewer than the window's 3, so off.
+    assert_eq!(report["options"]["near-window"], 0);
     assert_eq!(
         report["options"]["seafloor-colour"],
         "0.5411765,0.45882353,0.3764706"

@@ -489,6 +489,8 @@ fn the_numeric_flags_of_issue_13_are_usage_errors() {
         ("--degree", "99", None),
         ("--jpeg-quality", "0", None),
         ("--shard", "1/99999999999", None),
+        ("--near-window", "4", None),
+        ("--near-window", "99999999", None),
     ] {
         let arg = format!("{flag}={value}");
         let o = untouched(&[&survey, &water], || {
@@ -530,6 +532,7 @@ const NUMERIC_FLAGS: &[&str] = &[
     "--contamination",
     "--risk",
     "--downsample",
+    "--near-window",
     "--factor-floor",
     "--jpeg-quality",
     "--threads",

@@ -460,6 +460,16 @@ struct CorrectArgs {
     #[arg(long, value_name = "N", conflicts_with = "contamination", help_heading = H_METHOD)]
     window: Option<usize>,
 
+    /// --method abyss: photos in the near window, or auto; 0 turns it off [default: auto].
+    ///
+    /// The window is long enough that its median almost never breaks; over that many photos the lights' footprint
+    /// moves with the vehicle's altitude and roll. The median of the nearest photos follows it, and only its smooth
+    /// shape (averaged over an eighth of the frame) bends the window's M, so its local breakdowns average out.
+    /// auto: with --contamination the smallest window with P_half <= 5 % (at least 5), else 5; used when shorter
+    /// than --window.
+    #[arg(long, value_name = "N|auto", value_parser = parse_near, help_heading = H_METHOD)]
+    near_window: Option<NearArg>,
+
     /// Expected share of non-seafloor pixels (0 to 0.5); sets --window from it.
     ///
     /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`). With --method abyss
@@ -680,6 +690,9 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if let Some(BlocksArg(v)) = args.downsample {
         o.downsample = v;
+    }
+    if let Some(NearArg(v)) = args.near_window {
+        o.near_window = v;
     }
     if let Some(v) = args.seafloor_colour {
         o.seafloor_colour = v;
@@ -1145,6 +1158,15 @@ struct ScaleArg(Option<f32>);
 /// `--backscatter-scale`: `auto` or a number.
 fn parse_scale(s: &str) -> Result<ScaleArg, String> {
     auto_or(s, "a number such as 0.8").map(ScaleArg)
+}
+
+/// `--near-window`: a number of photos, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct NearArg(Option<usize>);
+
+/// `--near-window`: `auto` or a whole number of photos (0: off).
+fn parse_near(s: &str) -> Result<NearArg, String> {
+    auto_or(s, "a number of photos such as 5 (0: off)").map(NearArg)
 }
 
 /// `--downsample`: a block size, or `None` for `auto`.

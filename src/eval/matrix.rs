@@ -6,6 +6,7 @@ use std::path::Path;
 
 use crate::eval::evaluate::load_linear;
 use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
+use crate::io::{decode, write_atomic, EncodeSettings};
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
 
@@ -117,6 +118,33 @@ impl DiveSpec {
             ..Simulation::default()
         }
     }
+}
+
+/// JPEG quality of the matrix's JPEG dives (the camera's own files).
+pub const JPEG_QUALITY: u8 = 92;
+
+/// The photos of `from` (a rendered dive's `survey` or `water` folder) saved as the camera of a JPEG dive would
+/// have saved them: quality [`JPEG_QUALITY`], the same names with `.jpg`, into `to`.
+pub fn save_as_jpeg(from: &Path, to: &Path) -> crate::Result<()> {
+    let settings = EncodeSettings {
+        jpeg_quality: JPEG_QUALITY,
+        ..EncodeSettings::default()
+    };
+    let mut paths: Vec<_> = std::fs::read_dir(from)
+        .map_err(|e| crate::Error::io(from, e))?
+        .map(|e| e.map(|e| e.path()).map_err(|e| crate::Error::io(from, e)))
+        .collect::<crate::Result<_>>()?;
+    paths.sort();
+    for p in paths {
+        let photo = decode(&p)?;
+        let name = p.with_extension("jpg");
+        write_atomic(
+            &photo,
+            &to.join(name.file_name().unwrap_or_default()),
+            settings,
+        )?;
+    }
+    Ok(())
 }
 
 /// The dive of the matrix called `name` (`a01` … `a12`).

@@ -34,10 +34,10 @@ use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresho
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
-use crate::method::refine::{backscatter_scale, refine_factor, scaled};
+use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::transfer::{Curve, Transfer};
-use crate::method::window::window_range;
+use crate::method::window::{near_range, window_range};
 
 /// What the engine does with a photo it is given.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -410,12 +410,7 @@ impl<T> Engine<T> {
                 self.mission_mean.as_ref().map(|m| pooled(m, p)),
             ));
         }
-        let stack: Vec<&Raster> = self
-            .ring
-            .iter()
-            .filter(|(s, ..)| range.contains(s))
-            .map(|(_, r, _)| r)
-            .collect();
+        let stack = low_in(&self.ring, &range);
         debug_assert_eq!(
             stack.len(),
             range.len(),
@@ -428,7 +423,7 @@ impl<T> Engine<T> {
             .map(|(_, r, j)| (r, j.as_ref()))
             .expect("a photo's own low-resolution image is in its window");
         let s_low = self.scatter_low.as_ref();
-        let m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
+        let mut m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
         let mut f = factor(&m, s_low, &self.colour);
         if self.mask.is_some() {
             fill_missing(&mut f);
@@ -459,6 +454,18 @@ impl<T> Engine<T> {
                     .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
             }
         };
+        let near = self.params.near_window;
+        if self.params.method == Method::Abyss && near > 0 && near < stack.len() {
+            // The window's M bent to the smooth shape of the near window's around the same photo (the monitor
+            // above judged the window's own).
+            let near_stack = low_in(&self.ring, &near_range(i, near, &range));
+            let m_near = self.window_m(own, &near_stack, s_low, None);
+            m = near_shape(&m, &m_near, s_low);
+            f = factor(&m, s_low, &self.colour);
+            if self.mask.is_some() {
+                fill_missing(&mut f);
+            }
+        }
         if eof && self.seq < self.params.window {
             health.flags.push(Flag::ShortMission {
                 photos: self.seq,
@@ -579,6 +586,17 @@ fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
         }
     }
     out
+}
+
+/// The block medians of the ring's photos in `range`, in order.
+fn low_in<'a>(
+    ring: &'a VecDeque<(usize, Raster, Option<Raster>)>,
+    range: &Range<usize>,
+) -> Vec<&'a Raster> {
+    ring.iter()
+        .filter(|(s, ..)| range.contains(s))
+        .map(|(_, r, _)| r)
+        .collect()
 }
 
 #[cfg(test)]

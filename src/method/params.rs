@@ -144,6 +144,10 @@ pub struct Params {
     /// With a contamination rate `c` of dark objects (nodules, shadows) the seafloor's own median is the
     /// `(1 + c)/2` quantile; `correct` sets that when `--contamination` is given. Default: 0.5.
     pub window_quantile: f32,
+    /// [`Method::Abyss`]: photos in the near window whose `M`'s smooth shape bends the window's
+    /// ([`crate::method::refine::near_shape`]); 0, or not shorter than `window`: off. `correct` sets
+    /// [`crate::method::window::near_window`]. Default: 0.
+    pub near_window: usize,
 }
 
 impl Default for Params {
@@ -162,6 +166,7 @@ impl Default for Params {
             denoise: true,
             level_by_light: true,
             window_quantile: 0.5,
+            near_window: 0,
         }
     }
 }

@@ -90,9 +90,86 @@ pub fn window_range(i: usize, n: usize, total: usize) -> std::ops::Range<usize> 
     s..(s + n).min(total)
 }
 
+/// Breakdown risk accepted for the near window: the paper's own example (`c = 0.2`, `n = 7`: `P_half` = 3.3 %).
+pub const NEAR_RISK: f64 = 0.05;
+
+/// Fewest photos in the near window (with 3, a dense nodule field broke it: a03's pattern 1.8× on the matrix).
+pub const NEAR_MIN: usize = 5;
+
+/// The near window of `--method abyss` for a mission whose window is `n`: with a contamination rate `c`, the
+/// smallest odd window with `P_half ≤` [`NEAR_RISK`], at least [`NEAR_MIN`]; without one, [`NEAR_MIN`]. `None`
+/// when that is not shorter than `n` (nothing to follow that the window does not already follow).
+///
+/// The window's `n` is chosen so that its median almost never breaks; over that many photos the lights'
+/// footprint moves with the vehicle's altitude and roll. The near window's `M` follows it, and only its smooth
+/// shape is taken ([`crate::method::refine::near_shape`]), so its more frequent local breakdowns are averaged out.
+pub fn near_window(n: usize, contamination: Option<f64>) -> Option<usize> {
+    let near = match contamination {
+        Some(c) => choose_window(c, NEAR_RISK).map_or(n, |w| w.n.max(NEAR_MIN)),
+        None => NEAR_MIN,
+    };
+    (near < n).then_some(near)
+}
+
+/// The near window's photos `[start, end)` for photo `i`, inside its window `window` (as the engine ranges them:
+/// centred where possible, shifted at the mission's ends).
+pub fn near_range(
+    i: usize,
+    near: usize,
+    window: &std::ops::Range<usize>,
+) -> std::ops::Range<usize> {
+    let s = i.saturating_sub(near / 2).clamp(
+        window.start,
+        window.end.saturating_sub(near).max(window.start),
+    );
+    s..(s + near).min(window.end)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn near_window_is_shorter_than_the_window_or_none() {
+        // c = 0.2: the 1 % window is 13, the near one the 5 % window, 7 (P_half 3.3 %).
+        assert_eq!(choose_window(0.2, 0.01).unwrap().n, 13);
+        assert_eq!(near_window(13, Some(0.2)), Some(7));
+        // c = 0.1: 5 % allows 3, the near window keeps 5; a window of 5 has no shorter one.
+        assert_eq!(choose_window(0.1, NEAR_RISK).unwrap().n, 3);
+        assert_eq!(near_window(9, Some(0.1)), Some(5));
+        assert_eq!(near_window(5, Some(0.1)), None);
+        // c = 0.35: 29 inside the 1 % window's 57.
+        assert_eq!(near_window(57, Some(0.35)), Some(29));
+        assert!(p_half(29, 0.35) <= NEAR_RISK && p_half(27, 0.35) > NEAR_RISK);
+        // Without a contamination rate: 5 inside the default 7, none inside 3 or 5.
+        assert_eq!(near_window(7, None), Some(5));
+        assert_eq!(near_window(5, None), None);
+        assert_eq!(near_window(3, None), None);
+    }
+
+    #[test]
+    fn near_range_is_centred_and_inside_the_window() {
+        for total in [3usize, 7, 9, 30] {
+            for n in [5usize, 7, 9, 13] {
+                for near in (3..n).step_by(2) {
+                    for i in 0..total {
+                        let w = window_range(i, n, total);
+                        let r = near_range(i, near, &w);
+                        assert!(
+                            r.start >= w.start && r.end <= w.end,
+                            "{i} {near} {w:?} {r:?}"
+                        );
+                        assert!(r.contains(&i), "photo {i} not in its near window {r:?}");
+                        assert_eq!(r.len(), near.min(w.len()), "{i} {near} {w:?} {r:?}");
+                        // Centred on i wherever the window leaves room.
+                        if i >= near / 2 + w.start && i + near / 2 < w.end {
+                            assert_eq!(r, i - near / 2..i + near / 2 + 1);
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     /// Independent check: enumerate all 2^n contamination patterns and add up the probability of those in which
     /// at least half of the samples are contaminated.

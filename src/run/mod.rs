@@ -55,8 +55,10 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let (resolved, transfer_assumed) = resolve_transfer(opts, &plan)?;
     // --downsample auto: blocks from the mission's photo size.
     let (k, blocks_why) = plan.downsample(&resolved);
+    // --near-window auto: resolved from the window (0: off), so the report and the lock record what ran.
     let resolved = Options {
         downsample: k,
+        near_window: Some(resolved.near_window_for(plan.window.n).unwrap_or(0)),
         ..resolved
     };
     let blocks = k.map_or_else(|| "auto".to_string(), |k| format!("{k}x{k}"));

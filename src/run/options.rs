@@ -89,6 +89,13 @@ pub struct Options {
     /// mask (`mask`, `mask_auto`). Default: `None` (auto). In a TOML file a number or `"auto"`.
     #[serde(default, deserialize_with = "number_or_auto")]
     pub downsample: Option<usize>,
+    /// `method = abyss`: photos in the near window, whose `M`'s smooth shape bends the window's so `F` follows the
+    /// lights as the vehicle's altitude and roll change ([`crate::method::refine::near_shape`]); 0 turns it off, and
+    /// a near window not shorter than the window is not used. `None` (`auto`):
+    /// [`crate::method::window::near_window`] (the 5 % window of `contamination`, at least 5; 5 without one).
+    /// Default: `None` (auto). In a TOML file a number or `"auto"`.
+    #[serde(default, deserialize_with = "number_or_auto")]
+    pub near_window: Option<usize>,
     /// Seafloor colour `C`. Default: grey 0.4.
     #[serde(alias = "seafloor-color")]
     pub seafloor_colour: SeafloorColour,
@@ -200,7 +207,7 @@ fn number_or_auto<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<usize
         Value::Number(n) => Ok(Some(n)),
         Value::Text(t) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
         Value::Text(t) => Err(serde::de::Error::custom(format!(
-            "expected a whole number of pixels or \"auto\", got {t:?}"
+            "expected a whole number or \"auto\", got {t:?}"
         ))),
     }
 }
@@ -220,6 +227,7 @@ impl Default for Options {
             contamination: None,
             risk: 0.01,
             downsample: None,
+            near_window: None,
             seafloor_colour: SeafloorColour::default(),
             factor_floor: 0.05,
             save_scatter: false,
@@ -418,6 +426,18 @@ impl Options {
             .unwrap_or(crate::method::factor::AUTO_MAX_BLOCK)
     }
 
+    /// The near window in effect for a window of `n` photos (`None`: off): `near_window`, or for `auto`
+    /// [`crate::method::window::near_window`]; only with `method = abyss`, and only when shorter than `n`.
+    pub fn near_window_for(&self, n: usize) -> Option<usize> {
+        if self.method != Method::Abyss {
+            return None;
+        }
+        match self.near_window {
+            None => crate::method::window::near_window(n, self.contamination),
+            Some(k) => (k > 0 && k < n).then_some(k),
+        }
+    }
+
     /// Range checks of every numeric option, each error naming its flag. Part of [`Options::validate`].
     pub fn check_ranges(&self) -> Result<(), Error> {
         let usage = |m: String| Err(Error::Usage(m));
@@ -444,6 +464,15 @@ impl Options {
                     limits::DOWNSAMPLE
                 ));
             }
+        }
+        if let Some(k) = self
+            .near_window
+            .filter(|&k| k != 0 && (k % 2 == 0 || k > limits::WINDOW))
+        {
+            return usage(format!(
+                "--near-window must be auto, 0 (off) or an odd number of photos up to {}, got {k}",
+                limits::WINDOW
+            ));
         }
         if !(self.factor_floor > 0.0 && self.factor_floor <= limits::FACTOR_FLOOR) {
             return usage(format!(

@@ -242,7 +242,10 @@ impl Plan {
                 opts.contamination.unwrap_or_default()
             )
         };
-        line(window);
+        line(match opts.near_window_for(self.window.n) {
+            Some(k) => format!("{window}, near window {k} (--near-window)"),
+            None => window,
+        });
         line(format!(
             "S: {}",
             match (&opts.scatter, &opts.water_column) {

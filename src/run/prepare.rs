@@ -79,6 +79,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
             (Method::Abyss, Some(c)) => ((1.0 + c) / 2.0) as f32,
             _ => 0.5,
         },
+        near_window: opts.near_window_for(plan.window.n).unwrap_or(0),
     };
     let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
     drop(scatter);
