@@ -464,7 +464,8 @@ struct CorrectArgs {
     ///
     /// The window is long enough that its median almost never breaks; over that many photos the lights' footprint
     /// moves with the vehicle's altitude and roll. The median of the nearest photos follows it, and only its smooth
-    /// shape (averaged over an eighth of the frame) bends the window's M, so its local breakdowns average out.
+    /// shape (the median ratio over squares an eighth of the frame across) bends the window's M, so its local
+    /// breakdowns are outvoted.
     /// auto: with --contamination the smallest window with P_half <= 5 % (at least 5), else 5; used when shorter
     /// than --window.
     #[arg(long, value_name = "N|auto", value_parser = parse_near, help_heading = H_METHOD)]

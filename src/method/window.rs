@@ -102,7 +102,7 @@ pub const NEAR_MIN: usize = 5;
 ///
 /// The window's `n` is chosen so that its median almost never breaks; over that many photos the lights'
 /// footprint moves with the vehicle's altitude and roll. The near window's `M` follows it, and only its smooth
-/// shape is taken ([`crate::method::refine::near_shape`]), so its more frequent local breakdowns are averaged out.
+/// shape is taken ([`crate::method::refine::near_shape`]), so its more frequent local breakdowns are outvoted.
 pub fn near_window(n: usize, contamination: Option<f64>) -> Option<usize> {
     let near = match contamination {
         Some(c) => choose_window(c, NEAR_RISK).map_or(n, |w| w.n.max(NEAR_MIN)),
