@@ -108,15 +108,19 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         })
         .collect();
     let n = plan.window.n;
+    let near = match opts.near_window_for(n) {
+        Some(k) => format!(", near window {k}"),
+        None => String::new(),
+    };
     if plan.streaming {
         progress.stage(&format!(
-            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in; \
+            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in{near}; \
              blocks {blocks})",
             n / 2
         ));
     } else {
         progress.stage(&format!(
-            "correcting {} survey photos (window n = {n}, blocks {blocks})",
+            "correcting {} survey photos (window n = {n}{near}, blocks {blocks})",
             plan.chunk.len() - plan.skipped_existing
         ));
     }
