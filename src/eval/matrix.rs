@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::eval::evaluate::load_linear;
 use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
-use crate::io::{decode, write_atomic, EncodeSettings};
+use crate::io::{decode, find_photos, write_atomic, EncodeSettings};
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
 
@@ -130,17 +130,10 @@ pub fn save_as_jpeg(from: &Path, to: &Path) -> crate::Result<()> {
         jpeg_quality: JPEG_QUALITY,
         ..EncodeSettings::default()
     };
-    let mut paths: Vec<_> = std::fs::read_dir(from)
-        .map_err(|e| crate::Error::io(from, e))?
-        .map(|e| e.map(|e| e.path()).map_err(|e| crate::Error::io(from, e)))
-        .collect::<crate::Result<_>>()?;
-    paths.sort();
-    for p in paths {
-        let photo = decode(&p)?;
-        let name = p.with_extension("jpg");
+    for e in find_photos(from)?.photos {
         write_atomic(
-            &photo,
-            &to.join(name.file_name().unwrap_or_default()),
+            &decode(&e.path)?,
+            &to.join(e.relative.with_extension("jpg")),
             settings,
         )?;
     }

@@ -348,6 +348,15 @@ impl<T> Engine<T> {
         }
     }
 
+    /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
+    fn factor_of(&self, m: &Raster, s_low: Option<&Raster>) -> Raster {
+        let mut f = factor(m, s_low, &self.colour);
+        if self.mask.is_some() {
+            fill_missing(&mut f);
+        }
+        f
+    }
+
     /// The photo's `K`×`K` block medians, in linear light (masked pixels left out).
     fn block_medians(&self, photo: &Photo) -> Raster {
         let (l, k) = (photo.layout, self.params.downsample);
@@ -424,20 +433,14 @@ impl<T> Engine<T> {
             .expect("a photo's own low-resolution image is in its window");
         let s_low = self.scatter_low.as_ref();
         let mut m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
-        let mut f = factor(&m, s_low, &self.colour);
-        if self.mask.is_some() {
-            fill_missing(&mut f);
-        }
+        let mut f = self.factor_of(&m, s_low);
         let lit = lit_seafloor(&f, &self.colour);
         // The monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set there):
         // with smaller blocks, its own M from the window's block medians pooled to that size.
         let mut health = match own_judged {
             None => self.monitor.observe_photo(own, &lit, s_low, &f),
             Some(own_j) => {
-                let stack_j: Vec<&Raster> = self
-                    .ring
-                    .iter()
-                    .filter(|(s, ..)| range.contains(s))
+                let stack_j: Vec<&Raster> = in_range(&self.ring, range.clone())
                     .filter_map(|(.., j)| j.as_ref())
                     .collect();
                 let (s_j, mean_j) = self
@@ -445,10 +448,7 @@ impl<T> Engine<T> {
                     .as_ref()
                     .expect("made above when the ring holds pooled images");
                 let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
-                let mut f_j = factor(&m_j, s_j.as_ref(), &self.colour);
-                if self.mask.is_some() {
-                    fill_missing(&mut f_j);
-                }
+                let f_j = self.factor_of(&m_j, s_j.as_ref());
                 let lit_j = lit_seafloor(&f_j, &self.colour);
                 self.monitor
                     .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
@@ -461,10 +461,7 @@ impl<T> Engine<T> {
             let near_stack = low_in(&self.ring, &near_range(i, near, &range));
             let m_near = self.window_m(own, &near_stack, s_low, None);
             m = near_shape(&m, &m_near, s_low);
-            f = factor(&m, s_low, &self.colour);
-            if self.mask.is_some() {
-                fill_missing(&mut f);
-            }
+            f = self.factor_of(&m, s_low);
         }
         if eof && self.seq < self.params.window {
             health.flags.push(Flag::ShortMission {
@@ -492,10 +489,7 @@ impl<T> Engine<T> {
             };
             let s_k = self.scatter_low.as_ref().map(|s| scaled(s, &scale));
             if scale.iter().any(|&v| v != 1.0) {
-                f = factor(&m, s_k.as_ref(), &self.colour);
-                if self.mask.is_some() {
-                    fill_missing(&mut f);
-                }
+                f = self.factor_of(&m, s_k.as_ref());
             }
             refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params);
             floor = 1e-6;
@@ -588,15 +582,20 @@ fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
     out
 }
 
+/// The ring's entries whose photos are in `range`, in order.
+fn in_range(
+    ring: &VecDeque<(usize, Raster, Option<Raster>)>,
+    range: Range<usize>,
+) -> impl Iterator<Item = &(usize, Raster, Option<Raster>)> {
+    ring.iter().filter(move |(s, ..)| range.contains(s))
+}
+
 /// The block medians of the ring's photos in `range`, in order.
 fn low_in<'a>(
     ring: &'a VecDeque<(usize, Raster, Option<Raster>)>,
     range: &Range<usize>,
 ) -> Vec<&'a Raster> {
-    ring.iter()
-        .filter(|(s, ..)| range.contains(s))
-        .map(|(_, r, _)| r)
-        .collect()
+    in_range(ring, range.clone()).map(|(_, r, _)| r).collect()
 }
 
 #[cfg(test)]
