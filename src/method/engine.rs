@@ -64,7 +64,8 @@ pub struct Corrected<T> {
     pub photo: Option<Photo>,
     /// `F` at block resolution, in linear light.
     pub factor: Raster,
-    /// `F·C = M − S`: the seafloor as the lights show it, without backscatter (what `--save-factors` writes).
+    /// `F·C = M − S` of the window's own `M` (before the near window's shape and the per-photo refinements, as the
+    /// monitor judged it): the seafloor as the lights show it, without backscatter (what `--save-factors` writes).
     pub lit: Raster,
     /// Health figures and flags of the estimate.
     pub health: Health,
