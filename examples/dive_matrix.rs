@@ -2,7 +2,7 @@
 //! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
 //!
 //! ```sh
-//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH]
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] [--held-out]
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
@@ -11,7 +11,9 @@
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
-//! camera's are 1/500; larger photos show how much of a score comes from that).
+//! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
+//! held-out dives (`matrix::HELD_OUT`, h01 … h08: outside the twelve's ranges, never used to choose a default)
+//! instead of the twelve.
 //!
 //! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
 //! difference over overlapping photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
@@ -25,7 +27,7 @@ use std::time::Instant;
 use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
-use abysslight::eval::matrix::{self, load_set, signal_mask, DIVES};
+use abysslight::eval::matrix::{self, load_set, signal_mask, DIVES, HELD_OUT};
 use abysslight::eval::simulate::Dive;
 use abysslight::method::raster::Raster;
 use abysslight::method::transfer::Transfer;
@@ -117,6 +119,7 @@ fn main() {
     let mut ablation = false;
     let mut ablation_only: Option<Vec<String>> = None;
     let mut size = (320usize, 240usize);
+    let mut held_out = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -137,6 +140,7 @@ fn main() {
                 )
             }
             "--ablation" => ablation = true,
+            "--held-out" => held_out = true,
             "--ablation-only" => {
                 ablation = true;
                 ablation_only = Some(
@@ -220,7 +224,13 @@ fn main() {
     }
     let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
     let started = Instant::now();
-    for (i, spec) in DIVES.iter().enumerate() {
+    let dives = if held_out { HELD_OUT } else { DIVES };
+    let seed = if held_out {
+        matrix::held_out_seed
+    } else {
+        matrix::seed
+    };
+    for (i, spec) in dives.iter().enumerate() {
         if only
             .as_ref()
             .is_some_and(|o| !o.iter().any(|n| n == spec.name))
@@ -228,7 +238,7 @@ fn main() {
             continue;
         }
         let t = Instant::now();
-        let sim = spec.simulation(matrix::seed(i, seed_offset), size);
+        let sim = spec.simulation(seed(i, seed_offset), size);
         let dive = sim.render_with_lighting().expect("render");
         let dir = out.join(spec.name);
         let _ = std::fs::remove_dir_all(&dir);

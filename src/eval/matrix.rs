@@ -84,6 +84,22 @@ pub const DIVES: &[DiveSpec] = &[
     d("a12", Rig::Four,  28.0, "oceanic-iii", 5.0, 0.4, 0.15, 8,  true,  true,  80.0),
 ];
 
+#[rustfmt::skip]
+/// Eight held-out dives (docs/evaluation.md, "Held-out dives"): outside the twelve's ranges on purpose — narrower
+/// beams (20–25°), farther (7.5–8 m) or lower (3.5 m), larger swings (0.8 m), narrower fields of view (60–70°), 8-bit
+/// linear coastal photos — and never used to choose a default. `dive_matrix --held-out` scores them.
+pub const HELD_OUT: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     bits srgb   jpeg   fov
+    d("h01", Rig::Three, 20.0, "oceanic-i",   6.0, 0.4, 0.20, 8,  true,  true,  80.0),
+    d("h02", Rig::Two,   30.0, "oceanic-iii", 8.0, 0.5, 0.25, 16, false, false, 90.0),
+    d("h03", Rig::Four,  25.0, "coastal",     3.5, 0.3, 0.30, 8,  true,  false, 70.0),
+    d("h04", Rig::Aft,   22.0, "oceanic-i",   7.5, 0.8, 0.15, 8,  true,  true,  85.0),
+    d("h05", Rig::Three, 36.0, "oceanic-iii", 5.0, 0.2, 0.33, 16, true,  false, 60.0),
+    d("h06", Rig::Two,   20.0, "coastal",     6.0, 0.6, 0.10, 8,  false, false, 90.0),
+    d("h07", Rig::Four,  32.0, "oceanic-i",   8.0, 0.3, 0.20, 8,  true,  true,  90.0),
+    d("h08", Rig::Aft,   28.0, "coastal",     4.0, 0.5, 0.30, 16, false, false, 75.0),
+];
+
 impl DiveSpec {
     /// The dive rendered with `seed` at `size` (width, height): 30 photos and 15 water-column frames, the camera's
     /// white balance from the two-way path (red capped at ×6) and the exposure from the brightest sediment;
@@ -140,14 +156,19 @@ pub fn save_as_jpeg(from: &Path, to: &Path) -> crate::Result<()> {
     Ok(())
 }
 
-/// The dive of the matrix called `name` (`a01` … `a12`).
+/// The dive of the matrix called `name` (`a01` … `a12`, or a held-out `h01` … `h08`).
 pub fn dive(name: &str) -> Option<&'static DiveSpec> {
-    DIVES.iter().find(|d| d.name == name)
+    DIVES.iter().chain(HELD_OUT).find(|d| d.name == name)
 }
 
 /// The seed of the matrix's `index`-th dive in seed set `offset` (0: the set the method was tuned on).
 pub fn seed(index: usize, offset: u64) -> u64 {
     1000 + offset * 100 + index as u64
+}
+
+/// The seed of the `index`-th held-out dive in seed set `offset`: never one of [`seed`]'s.
+pub fn held_out_seed(index: usize, offset: u64) -> u64 {
+    5000 + offset * 100 + index as u64
 }
 
 /// The photos `names` of `dir`, each in linear light; panics on a file that does not decode (the matrix wrote it).
@@ -183,4 +204,27 @@ pub fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
                 .collect()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn held_out_dives_are_not_the_matrix_and_use_other_seeds() {
+        for h in HELD_OUT {
+            assert!(DIVES.iter().all(|d| d.name != h.name), "{}", h.name);
+            assert_eq!(dive(h.name), Some(h));
+            // Not a copy of a matrix dive under another name.
+            assert!(DIVES.iter().all(|d| DiveSpec { name: h.name, ..*d } != *h));
+        }
+        let tuned: Vec<u64> = (0..10)
+            .flat_map(|o| (0..DIVES.len()).map(move |i| seed(i, o)))
+            .collect();
+        for o in 0..10 {
+            for i in 0..HELD_OUT.len() {
+                assert!(!tuned.contains(&held_out_seed(i, o)));
+            }
+        }
+    }
 }
