@@ -66,13 +66,13 @@ fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
     }
 }
 
-/// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`).
-fn oracle(dive: &Dive, t: Transfer) -> Vec<Raster> {
-    dive.survey
-        .iter()
+/// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`), of the
+/// photos every method was given (`raw`: on a JPEG dive the camera's JPEGs, not the rendering before it).
+fn oracle(raw: &[Raster], dive: &Dive) -> Vec<Raster> {
+    raw.iter()
         .zip(dive.factor.iter().zip(&dive.backscatter))
         .map(|(p, (f, s))| {
-            let mut r = Raster::from_photo_linear(p, t);
+            let mut r = p.clone();
             for ((v, &f), &s) in r.data.iter_mut().zip(&f.data).zip(&s.data) {
                 *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
             }
@@ -270,10 +270,8 @@ fn main() {
             .collect();
         let t_enc = sim.encode;
         let signal = signal_mask(&dive, t_enc, spec.bits);
-        let mut scores = vec![(
-            "raw".to_string(),
-            score(&load_set(&survey, &names, t_enc), &dive, &signal),
-        )];
+        let raw = load_set(&survey, &names, t_enc);
+        let mut scores = vec![("raw".to_string(), score(&raw, &dive, &signal))];
         for (label, make) in &methods {
             let o = make(Options {
                 water_column: Some(water.clone()),
@@ -312,10 +310,7 @@ fn main() {
                 let _ = std::fs::remove_dir_all(dir.join(label));
             }
         }
-        scores.push((
-            "oracle".into(),
-            score(&oracle(&dive, t_enc), &dive, &signal),
-        ));
+        scores.push(("oracle".into(), score(&oracle(&raw, &dive), &dive, &signal)));
         if let Some(script) = &peer {
             let o = dir.join("numpy");
             // The window the paper's column took.
