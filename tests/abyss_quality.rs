@@ -156,6 +156,28 @@ impl MatrixDive {
         }
     }
 
+    /// Albedo error of each channel (on its samples with signal) of the dive corrected with `opts` into `label`.
+    fn channel_errors(&self, label: &str, opts: Options) -> Vec<f64> {
+        let out = self.dir.path().join(label);
+        correct_dive(&self.sim, &self.dir.path().join("dive"), &out, opts);
+        let photos = matrix::load_set(&out, &self.names, self.sim.encode);
+        (0..3)
+            .map(|ch| {
+                let only: Vec<Vec<bool>> = self
+                    .signal
+                    .iter()
+                    .map(|m| {
+                        m.iter()
+                            .enumerate()
+                            .map(|(i, &b)| b && i % 3 == ch)
+                            .collect()
+                    })
+                    .collect();
+                albedo_error_where(&photos, &self.dive.albedo, Some(&only))
+            })
+            .collect()
+    }
+
     /// (albedo error, residual pattern) of the dive corrected with `opts` into `label`.
     fn score(&self, label: &str, opts: Options) -> (f64, f64) {
         let out = self.dir.path().join(label);
@@ -447,4 +469,26 @@ fn the_near_window_follows_the_lights_on_a_swinging_dive() {
         default.1 < 0.8 * without.1 && default.0 < 1.02 * without.0,
         "near window {default:?} against none {without:?}"
     );
+}
+
+#[test]
+fn a_starved_channels_noise_is_not_taken_for_seafloor_texture() {
+    // a08: four lights from 6.5 m in clear ocean water, 8-bit linear: red reaches the floor weakly (signal in
+    // 46 % of its samples) and its noise differs between dim and bright blocks. Read as texture, that noise made
+    // the blend keep it: red's albedo error was 2.0× green's (0.185 against 0.090); with each channel's relative
+    // texture held within three times the median channel's, red takes its detail from green and blue.
+    let d = MatrixDive::render("a08", 0);
+    let default = d.channel_errors("default", Options::default());
+    let paper = d.channel_errors("paper", paper());
+    eprintln!("a08 albedo error per channel (R, G, B): default {default:?}, paper {paper:?}");
+    assert!(
+        default[0] < 1.5 * default[1].max(default[2]),
+        "red {default:?} against green and blue"
+    );
+    for ch in 0..3 {
+        assert!(
+            default[ch] < 0.6 * paper[ch],
+            "channel {ch}: {default:?} against {paper:?}"
+        );
+    }
 }

@@ -505,7 +505,7 @@ impl<T> Engine<T> {
                 }
                 _ => Vec::new(),
             };
-            let model = NoiseModel::fit(&blocks, &f);
+            let model = NoiseModel::fit(&blocks, &f).map(|m| m.with_texture_capped(&self.colour));
             blended = model
                 .as_ref()
                 .map(|model| {

@@ -212,6 +212,32 @@ impl NoiseModel {
         })
     }
 
+    /// The model with each channel's texture `τ_c` at most [`TEXTURE_SPREAD`] times the median channel's relative
+    /// texture `τ/C` (times its own `C`), counting the channels whose texture was measured (`τ² > 0`). A channel
+    /// starved of light measures its texture as `(var − σ²)/F²` with a tiny `F`: a noise level that differs by a
+    /// few per cent between its dimmest blocks (where `σ²` is read) and its brightest (shot noise on a strong
+    /// backscatter, JPEG compression keeping noise only near edges) is then read as an albedo texture tens of times
+    /// the seafloor's, and the blend keeps the amplified noise (a red channel at 8 m: `τ/C` 1.1 where green and
+    /// blue read 0.11 and 0.10). Seafloors differ little between channels in relative texture (the real sets:
+    /// largest over smallest channel 1.1–2.0 on the median photo); one or two channels are left as measured.
+    pub fn with_texture_capped(mut self, colour: &[f32]) -> Self {
+        let mut rel: Vec<f32> = self
+            .texture_var
+            .iter()
+            .zip(colour)
+            .filter(|(t, c)| **t > 0.0 && **c > 0.0)
+            .map(|(t, c)| t / (c * c))
+            .collect();
+        if rel.len() < 3 {
+            return self;
+        }
+        let cap = TEXTURE_SPREAD * TEXTURE_SPREAD * quantile(&mut rel, 0.5);
+        for (t, c) in self.texture_var.iter_mut().zip(colour) {
+            *t = t.min(cap * c * c);
+        }
+        self
+    }
+
     /// The blend for one photo, at block resolution: from `F` (refined), the photo's block medians `own` and the
     /// backscatter `s` (both linear) and the seafloor colour `C`, the block's level `A_low = (own − S)/F` (blended
     /// towards `C·λ*` with the weight of a block median, noise variance `σ²·π/(2K²)` for `K`×`K` blocks, where `λ*`
@@ -303,6 +329,10 @@ impl NoiseModel {
         }
     }
 }
+
+/// How many times the median channel's relative texture `τ/C` a channel's may be
+/// ([`NoiseModel::with_texture_capped`]).
+pub const TEXTURE_SPREAD: f32 = 3.0;
 
 /// Bins of `F` (equal numbers of blocks) in which [`level_by_light`] measures the blocks' typical level.
 pub const LIGHT_BINS: usize = 16;
@@ -799,5 +829,46 @@ mod tests {
         let mut got = small.clone();
         level_by_light(&mut got, &small_f, &[0.4], None);
         assert_eq!(got, small);
+    }
+
+    #[test]
+    fn a_channels_texture_is_capped_at_three_times_the_median_channels_relative_texture() {
+        // Relative textures τ²/C²: red 4.0 (a starved channel's noise read as texture), green 0.04, blue 0.09.
+        let colour = [0.5f32, 0.4, 0.3];
+        let rel = [4.0f32, 0.04, 0.09];
+        let model = NoiseModel {
+            noise_var: vec![1e-4; 3],
+            texture_var: (0..3).map(|c| rel[c] * colour[c] * colour[c]).collect(),
+        };
+        let capped = model.clone().with_texture_capped(&colour);
+        // The median of 4.0, 0.04 and 0.09 is 0.09; the cap is 3² times it, in each channel's own units.
+        let cap = 9.0 * 0.09;
+        for c in 0..3 {
+            let want = rel[c].min(cap) * colour[c] * colour[c];
+            assert!(
+                (capped.texture_var[c] - want).abs() <= 1e-6 * want,
+                "channel {c}: {} against {want}",
+                capped.texture_var[c]
+            );
+        }
+        assert!(capped.texture_var[0] < model.texture_var[0]);
+        assert_eq!(capped.noise_var, model.noise_var);
+        // Within three times the median: nothing changes.
+        let even = NoiseModel {
+            noise_var: vec![1e-4; 3],
+            texture_var: vec![0.01, 0.02, 0.05],
+        };
+        assert_eq!(even.clone().with_texture_capped(&[0.4; 3]), even);
+        // Fewer than three channels with a measured texture: no median to go by.
+        let two = NoiseModel {
+            noise_var: vec![1e-4; 3],
+            texture_var: vec![1.0, 0.001, 0.0],
+        };
+        assert_eq!(two.clone().with_texture_capped(&[0.4; 3]), two);
+        let grey = NoiseModel {
+            noise_var: vec![1e-4],
+            texture_var: vec![1.0],
+        };
+        assert_eq!(grey.clone().with_texture_capped(&[0.4]), grey);
     }
 }
