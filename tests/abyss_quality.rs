@@ -389,10 +389,13 @@ fn sound_abyssal_dives_raise_no_flags() {
 /// dives of the matrix the rim used to come out 6–18 % darker than the lit centre (noise pulls a dim block's
 /// median towards its mean, the water-column `S` takes a larger share of a small signal). Two dives of seed set 1
 /// (not the set the method was tuned on), scored as the matrix scores them (on the samples with signal): the
-/// residual pattern at least 10 % lower than without it, the albedo error no more than 2 % higher.
+/// residual pattern at least 10 % lower than without it, the albedo error no more than 2 % higher. (Until the
+/// ninth round the dives were a07 and a11; since the noise is modelled as growing with the level, a07's rim is
+/// no longer darkened by it (its pattern 0.033 → 0.023) and the levels leave a07 as it is: 1.05×; a06 0.56×,
+/// a11 0.77×, a12 0.64×.)
 #[test]
 fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
-    for name in ["a07", "a11"] {
+    for name in ["a06", "a11"] {
         let d = MatrixDive::render(name, 1);
         let with = d.score("with", Options::default());
         let without = d.score(

@@ -26,10 +26,15 @@ use crate::method::transfer::Curve;
 /// Sensor noise and albedo texture of one photo, per channel, in linear light.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NoiseModel {
-    /// `σ²`: variance of the sensor noise (and quantisation), as measured in the photo's dimmest blocks.
+    /// `σ²`: variance of the sensor noise (and quantisation), as measured in the photo's dimmest blocks, at their
+    /// median level [`NoiseModel::noise_level`].
     pub noise_var: Vec<f32>,
     /// `τ²`: variance of the albedo within a block (output units: the seafloor colour `C` is the level).
     pub texture_var: Vec<f32>,
+    /// `dσ²/dL`: how the noise variance grows with the block's level `L` (linear; shot noise), at least 0.
+    pub noise_slope: Vec<f32>,
+    /// The level at which `σ²` is [`NoiseModel::noise_var`] (the dim blocks' median level).
+    pub noise_level: Vec<f32>,
 }
 
 /// Statistics of one sampled block, per channel, in linear light: the variance of its samples (`var`: texture,
@@ -45,6 +50,8 @@ pub struct BlockStats {
     pub var: Vec<f32>,
     /// Mean squared diagonal difference, per channel.
     pub diag: Vec<f32>,
+    /// Mean of the block's samples (linear), per channel.
+    pub mean: Vec<f32>,
 }
 
 /// [`BlockStats`] of every `stride`-th block in both directions (`k`×`k` blocks; blocks cut by the photo's edge
@@ -95,6 +102,7 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
                 let (px, py) = (bx * k, by * k);
                 let mut var = Vec::with_capacity(c);
                 let mut diag = Vec::with_capacity(c);
+                let mut mean = Vec::with_capacity(c);
                 for ch in 0..c {
                     let (mut sum, mut sq, mut dd) = (0.0f64, 0.0f64, 0.0f64);
                     let mut clip = false;
@@ -121,16 +129,19 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
                     if clip {
                         var.push(f32::NAN);
                         diag.push(f32::NAN);
+                        mean.push(f32::NAN);
                         continue;
                     }
                     let m = sum / n;
                     var.push(((sq / n - m * m).max(0.0) * n / (n - 1.0)) as f32);
                     diag.push((dd / cells) as f32);
+                    mean.push(m as f32);
                 }
                 BlockStats {
                     index: by * bw + bx,
                     var,
                     diag,
+                    mean,
                 }
             })
         })
@@ -138,13 +149,18 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
 }
 
 impl NoiseModel {
-    /// Fit the model per channel to block statistics (from [`block_stats`]) and `F` at block resolution: `σ²` is
-    /// the median of `diag − τ_d²F²` over the dimmest 10 % of the blocks, where `τ_d²` (the fine texture seen by
-    /// `diag`) is the median of `(diag − σ²)/F²` over the brightest 25 % (two rounds from `τ_d² = 0`); then `τ²` is
-    /// the median of `(var − σ²)/F²` over the brightest 25 %. A noise-free dim photo gets a small `σ²` and is left as
-    /// the paper corrects it. `None` with fewer than 50 blocks (too small a photo to tell noise from texture); a channel
-    /// with fewer than 20 blocks free of clipped samples gets `σ² = τ² = 0` (divided as the paper does), `None` when
-    /// no channel has them.
+    /// Fit the model per channel to block statistics (from [`block_stats`]) and `F` at block resolution. The noise
+    /// grows with the light a sample gathers (shot noise: a red channel's noise follows its backscatter across the
+    /// frame), so `σ²` is a line in the block's level `L`: over the dimmest 10 % of the blocks (by `F`), `σ²` is the
+    /// median of `diag − τ_d²F²` at their median level, and the slope is the difference between the medians of
+    /// their upper and lower halves by level over the difference of those halves' levels (at least 0); `τ_d²` (the
+    /// fine texture seen by `diag`) is the median of `(diag − σ²(L))/F²` over the brightest 25 % (two rounds from
+    /// `τ_d² = 0`); then `τ²` is the median of `(var − σ²(L))/F²` over the brightest 25 %. With one `σ²` for the
+    /// whole photo, the brightest blocks' extra shot noise was read as texture: in a starved channel, divided by a
+    /// tiny `F²`, many times the seafloor's. A noise-free dim photo gets a small `σ²` and is left as the paper corrects
+    /// it. `None` with fewer than 50 blocks (too small a photo to tell noise from texture); a channel with fewer than
+    /// 20 blocks free of clipped samples gets `σ² = τ² = 0` (divided as the paper does), `None` when no channel has
+    /// them.
     pub fn fit(blocks: &[BlockStats], f: &Raster) -> Option<NoiseModel> {
         let c = f.channels;
         if blocks.len() < 50 {
@@ -152,12 +168,17 @@ impl NoiseModel {
         }
         let mut noise_var = vec![0.0f32; c];
         let mut texture_var = vec![0.0f32; c];
+        let mut noise_slope = vec![0.0f32; c];
+        let mut noise_level = vec![0.0f32; c];
         let mut measured = 0;
         for ch in 0..c {
-            let mut pts: Vec<(f32, f32, f32)> = blocks
+            // (F, var, diag, level)
+            let mut pts: Vec<(f32, f32, f32, f32)> = blocks
                 .iter()
-                .map(|b| (f.data[b.index * c + ch], b.var[ch], b.diag[ch]))
-                .filter(|(f, v, d)| f.is_finite() && v.is_finite() && d.is_finite())
+                .map(|b| (f.data[b.index * c + ch], b.var[ch], b.diag[ch], b.mean[ch]))
+                .filter(|(f, v, d, l)| {
+                    f.is_finite() && v.is_finite() && d.is_finite() && l.is_finite()
+                })
                 .collect();
             if pts.len() < 20 {
                 // Too few blocks without clipped samples (a channel black over most of the frame): no noise or
@@ -172,7 +193,7 @@ impl NoiseModel {
             // A channel that gets no light anywhere (its brightest quarter's median F under MIN_LIT_F) has no
             // measurable texture: dividing by a near-zero F² would make one up.
             let unlit = top[top.len() / 2].0 < MIN_LIT_F;
-            let bright: Vec<(f32, f32, f32)> = top
+            let bright: Vec<(f32, f32, f32, f32)> = top
                 .iter()
                 .copied()
                 .filter(|p| p.0 > 0.0 && !unlit)
@@ -184,32 +205,84 @@ impl NoiseModel {
                     quantile(&mut v, 0.5).max(0.0)
                 }
             };
-            let (mut sigma2, mut tau_d2) = (0.0f32, 0.0f32);
+            let raw_median = |mut v: Vec<f32>| {
+                if v.is_empty() {
+                    0.0
+                } else {
+                    quantile(&mut v, 0.5)
+                }
+            };
+            // The dim blocks by level: lower and upper half.
+            let mut by_level: Vec<(f32, f32, f32, f32)> = dim.to_vec();
+            by_level.sort_by(|a, b| a.3.total_cmp(&b.3));
+            let half = by_level.len() / 2;
+            let level0 = raw_median(by_level.iter().map(|p| p.3).collect());
+            let (mut sigma2, mut slope, mut tau_d2) = (0.0f32, 0.0f32, 0.0f32);
+            let at = |s2: f32, b: f32, l: f32| (s2 + b * (l - level0)).max(0.1 * s2);
             for _ in 0..2 {
-                sigma2 = median_of(
-                    dim.iter()
-                        .map(|&(f, _, d)| d - tau_d2 * f.max(0.0).powi(2))
-                        .collect(),
+                let resid = |p: &(f32, f32, f32, f32)| p.2 - tau_d2 * p.0.max(0.0).powi(2);
+                sigma2 = median_of(dim.iter().map(resid).collect());
+                let (lo, hi) = by_level.split_at(half);
+                let (l1, l2) = (
+                    raw_median(lo.iter().map(|p| p.3).collect()),
+                    raw_median(hi.iter().map(|p| p.3).collect()),
                 );
+                let (d1, d2) = (
+                    raw_median(lo.iter().map(resid).collect()),
+                    raw_median(hi.iter().map(resid).collect()),
+                );
+                slope = if l2 - l1 > 1e-6 {
+                    ((d2 - d1) / (l2 - l1)).max(0.0)
+                } else {
+                    0.0
+                };
                 tau_d2 = median_of(
                     bright
                         .iter()
-                        .map(|&(f, _, d)| (d - sigma2) / (f * f))
+                        .map(|&(f, _, d, l)| (d - at(sigma2, slope, l)) / (f * f))
                         .collect(),
                 );
             }
             noise_var[ch] = sigma2;
+            noise_slope[ch] = slope;
+            noise_level[ch] = level0;
             texture_var[ch] = median_of(
                 bright
                     .iter()
-                    .map(|&(f, v, _)| (v - sigma2) / (f * f))
+                    .map(|&(f, v, _, l)| (v - at(sigma2, slope, l)) / (f * f))
                     .collect(),
             );
         }
         (measured > 0).then_some(NoiseModel {
             noise_var,
             texture_var,
+            noise_slope,
+            noise_level,
         })
+    }
+
+    /// A model whose noise does not depend on the level (`σ²` the same everywhere).
+    pub fn flat(noise_var: Vec<f32>, texture_var: Vec<f32>) -> NoiseModel {
+        let c = noise_var.len();
+        NoiseModel {
+            noise_var,
+            texture_var,
+            noise_slope: vec![0.0; c],
+            noise_level: vec![0.0; c],
+        }
+    }
+
+    /// `σ²` of channel `ch` at the level `l` (linear): [`NoiseModel::noise_var`] at the dim blocks' level, plus
+    /// the slope times the difference, at least a tenth of it.
+    pub fn noise_at(&self, ch: usize, l: f32) -> f32 {
+        let s2 = self.noise_var[ch];
+        let b = self.noise_slope.get(ch).copied().unwrap_or(0.0);
+        let l0 = self.noise_level.get(ch).copied().unwrap_or(0.0);
+        if b > 0.0 && l.is_finite() {
+            (s2 + b * (l - l0)).max(0.1 * s2)
+        } else {
+            s2
+        }
     }
 
     /// The model with each channel's texture `τ_c` at most [`TEXTURE_SPREAD`] times the median channel's relative
@@ -282,7 +355,7 @@ impl NoiseModel {
             let (mut num, mut den) = (prior, prior);
             for ch in 0..c {
                 let i = b * c + ch;
-                let (s2, t2) = (self.noise_var[ch], self.texture_var[ch]);
+                let (s2, t2) = (self.noise_at(ch, own.data[i]), self.texture_var[ch]);
                 let fv = f.data[i];
                 let signal = t2 * fv * fv;
                 w[ch] = wiener(signal, s2);
@@ -492,6 +565,48 @@ mod tests {
         )
     }
 
+    /// A 16-bit grey photo `A·F + S + noise` with shot noise: `σ² = a + b·I` at the clean level `I`, `S` rising from
+    /// 0.05 at the top to 0.45 at the bottom (a backscatter gradient), `F` falling off to the right.
+    fn shot_photo(w: usize, h: usize, tau: f32, a: f32, b: f32) -> (Photo, Raster) {
+        let mut r = 0x1234_5677u32;
+        let mut gauss = move || {
+            (0..12)
+                .map(|_| {
+                    r ^= r << 13;
+                    r ^= r >> 17;
+                    r ^= r << 5;
+                    r as f32 / u32::MAX as f32
+                })
+                .sum::<f32>()
+                - 6.0
+        };
+        let k = 8;
+        let f = Raster::from_fn(w / k, h / k, 1, |x, _, _| 1.0 - x as f32 / (w / k) as f32);
+        let mut v = vec![0u16; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let clean = (0.4 + tau * gauss()) * f.get(x / k, y / k, 0)
+                    + 0.05
+                    + 0.4 * y as f32 / h as f32;
+                let i = clean + (a + b * clean).sqrt() * gauss();
+                v[y * w + x] = (i.clamp(0.0, 1.0) * 65535.0).round() as u16;
+            }
+        }
+        let layout = Layout {
+            width: w,
+            height: h,
+            channels: 1,
+        };
+        (
+            Photo {
+                layout,
+                samples: Samples::U16(v),
+                alpha: None,
+            },
+            f,
+        )
+    }
+
     /// [`block_stats`] of 8×8 blocks of a linear photo, every `stride`-th block.
     fn linear_blocks(p: &Photo, stride: usize) -> Vec<BlockStats> {
         let curves = (
@@ -610,6 +725,51 @@ mod tests {
     }
 
     #[test]
+    fn shot_noise_is_not_taken_for_texture() {
+        // σ² = 1e-5 + 2e-3·I: from 1.1e-4 where only S = 0.05 is seen to 1.7e-3 at the brightest samples; the
+        // texture τ = 0.04 gives the brightest quarter about as much variance as their extra noise.
+        let (tau, a, b) = (0.04f32, 1e-5f32, 2e-3f32);
+        let (p, f) = shot_photo(640, 480, tau, a, b);
+        let blocks = linear_blocks(&p, 1);
+        let m = NoiseModel::fit(&blocks, &f).expect("enough blocks");
+        assert!(
+            (m.noise_slope[0] / b - 1.0).abs() < 0.25,
+            "slope {} against {b}",
+            m.noise_slope[0]
+        );
+        for l in [0.1f32, 0.3, 0.6] {
+            let want = a + b * l;
+            let got = m.noise_at(0, l);
+            assert!(
+                (got / want - 1.0).abs() < 0.2,
+                "σ² at {l}: {got} against {want}"
+            );
+        }
+        let t = m.texture_var[0].sqrt();
+        assert!((t / tau - 1.0).abs() < 0.15, "τ {t} against {tau}");
+        // One σ² for the photo (the dim blocks' median, as before) reads the brightest blocks' extra noise as
+        // texture: computed here directly, it is off by more than the fit's tolerance.
+        let mut pts: Vec<(f32, f32)> = blocks.iter().map(|b| (f.data[b.index], b.var[0])).collect();
+        pts.sort_by(|x, y| x.0.total_cmp(&y.0));
+        let n = pts.len();
+        let mut dim: Vec<f32> = blocks
+            .iter()
+            .filter(|bl| f.data[bl.index] <= pts[n / 10].0)
+            .map(|bl| bl.diag[0])
+            .collect();
+        let s2 = quantile(&mut dim, 0.5);
+        let mut top: Vec<f32> = pts[n - n / 4..]
+            .iter()
+            .map(|&(fv, v)| (v - s2) / (fv * fv))
+            .collect();
+        let flat = quantile(&mut top, 0.5).sqrt();
+        assert!(
+            (flat / tau - 1.0).abs() > 0.15,
+            "the flat model's τ {flat} is as good"
+        );
+    }
+
+    #[test]
     fn blocks_clipped_at_black_do_not_hide_the_noise() {
         // The dim side of the frame reads below black and is clipped there: those blocks show less noise than
         // the sensor has (an all-black block none). They are left out, and σ comes from the dim blocks that are not
@@ -641,6 +801,7 @@ mod tests {
                 index: b.index,
                 var: vec![f32::NAN, b.var[0]],
                 diag: vec![f32::NAN, b.diag[0]],
+                mean: vec![f32::NAN, b.mean[0]],
             })
             .collect();
         let f = Raster::from_fn(f1.width, f1.height, 2, |x, y, _| f1.get(x, y, 0));
@@ -658,6 +819,7 @@ mod tests {
                 index: b.index,
                 var: vec![f32::NAN; 2],
                 diag: vec![f32::NAN; 2],
+                mean: vec![f32::NAN; 2],
             })
             .collect();
         assert!(NoiseModel::fit(&none, &f).is_none());
@@ -668,10 +830,7 @@ mod tests {
         // Two blocks, three channels: channel 0 drowned in noise, 1 and 2 clean. Block 1 is a dark object (30 % of
         // the seafloor's level in every channel). The clean channels keep their own levels; the starved channel's
         // level follows them (0.3·C) instead of falling back to the seafloor colour C, which made dark objects red.
-        let m = NoiseModel {
-            noise_var: vec![1.0, 1e-6, 1e-6],
-            texture_var: vec![0.01, 0.01, 0.01],
-        };
+        let m = NoiseModel::flat(vec![1.0, 1e-6, 1e-6], vec![0.01, 0.01, 0.01]);
         let f = Raster::filled(2, 1, 3, 0.5);
         let colour = [0.4f32, 0.4, 0.4];
         let own = Raster::from_fn(2, 1, 3, |x, _, _| {
@@ -698,10 +857,7 @@ mod tests {
 
     #[test]
     fn blend_is_the_wiener_weight() {
-        let m = NoiseModel {
-            noise_var: vec![0.01],
-            texture_var: vec![0.04],
-        };
+        let m = NoiseModel::flat(vec![0.01], vec![0.04]);
         let f = Raster::from_fn(4, 1, 1, |x, _, _| [1.0, 0.5, 0.1, 0.0][x]);
         let own = Raster::from_fn(4, 1, 1, |x, _, _| 0.05 + 0.4 * [1.0, 0.5, 0.1, 0.0][x]);
         let s = Raster::filled(4, 1, 1, 0.05);
@@ -836,10 +992,10 @@ mod tests {
         // Relative textures τ²/C²: red 4.0 (a starved channel's noise read as texture), green 0.04, blue 0.09.
         let colour = [0.5f32, 0.4, 0.3];
         let rel = [4.0f32, 0.04, 0.09];
-        let model = NoiseModel {
-            noise_var: vec![1e-4; 3],
-            texture_var: (0..3).map(|c| rel[c] * colour[c] * colour[c]).collect(),
-        };
+        let model = NoiseModel::flat(
+            vec![1e-4; 3],
+            (0..3).map(|c| rel[c] * colour[c] * colour[c]).collect(),
+        );
         let capped = model.clone().with_texture_capped(&colour);
         // The median of 4.0, 0.04 and 0.09 is 0.09; the cap is 3² times it, in each channel's own units.
         let cap = 9.0 * 0.09;
@@ -854,21 +1010,12 @@ mod tests {
         assert!(capped.texture_var[0] < model.texture_var[0]);
         assert_eq!(capped.noise_var, model.noise_var);
         // Within three times the median: nothing changes.
-        let even = NoiseModel {
-            noise_var: vec![1e-4; 3],
-            texture_var: vec![0.01, 0.02, 0.05],
-        };
+        let even = NoiseModel::flat(vec![1e-4; 3], vec![0.01, 0.02, 0.05]);
         assert_eq!(even.clone().with_texture_capped(&[0.4; 3]), even);
         // Fewer than three channels with a measured texture: no median to go by.
-        let two = NoiseModel {
-            noise_var: vec![1e-4; 3],
-            texture_var: vec![1.0, 0.001, 0.0],
-        };
+        let two = NoiseModel::flat(vec![1e-4; 3], vec![1.0, 0.001, 0.0]);
         assert_eq!(two.clone().with_texture_capped(&[0.4; 3]), two);
-        let grey = NoiseModel {
-            noise_var: vec![1e-4],
-            texture_var: vec![1.0],
-        };
+        let grey = NoiseModel::flat(vec![1e-4], vec![1.0]);
         assert_eq!(grey.clone().with_texture_capped(&[0.4]), grey);
     }
 }
