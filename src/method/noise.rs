@@ -526,7 +526,29 @@ mod tests {
 
     /// [`photo`] with another additive offset (negative: the dim side is clipped at black).
     fn photo_with_offset(w: usize, h: usize, sigma: f32, tau: f32, offset: f32) -> (Photo, Raster) {
-        let mut r = 0x2545_F491u32;
+        synthetic(w, h, 0x2545_F491, |_, fv, g| {
+            (0.4 + tau * g()) * fv + offset + sigma * g()
+        })
+    }
+
+    /// A 16-bit grey photo `A·F + S + noise` with shot noise: `σ² = a + b·I` at the clean level `I`, `S` rising from
+    /// 0.05 at the top to 0.45 at the bottom (a backscatter gradient), `F` falling off to the right.
+    fn shot_photo(w: usize, h: usize, tau: f32, a: f32, b: f32) -> (Photo, Raster) {
+        synthetic(w, h, 0x1234_5677, |y, fv, g| {
+            let clean = (0.4 + tau * g()) * fv + 0.05 + 0.4 * y as f32 / h as f32;
+            clean + (a + b * clean).sqrt() * g()
+        })
+    }
+
+    /// A 16-bit grey `w`×`h` photo whose sample in row `y` is `value(y, F, gauss)` (clamped to `[0, 1]`), with `F`
+    /// on 8-pixel blocks falling off to the right, and that `F`; `gauss` draws unit normal noise from `seed`.
+    fn synthetic(
+        w: usize,
+        h: usize,
+        seed: u32,
+        mut value: impl FnMut(usize, f32, &mut dyn FnMut() -> f32) -> f32,
+    ) -> (Photo, Raster) {
+        let mut r = seed;
         let mut gauss = move || {
             // Irwin–Hall: sum of 12 uniforms minus 6, unit variance.
             (0..12)
@@ -544,51 +566,7 @@ mod tests {
         let mut v = vec![0u16; w * h];
         for y in 0..h {
             for x in 0..w {
-                let fv = f.get(x / k, y / k, 0);
-                let a = 0.4 + tau * gauss();
-                let i = a * fv + offset + sigma * gauss();
-                v[y * w + x] = (i.clamp(0.0, 1.0) * 65535.0).round() as u16;
-            }
-        }
-        let layout = Layout {
-            width: w,
-            height: h,
-            channels: 1,
-        };
-        (
-            Photo {
-                layout,
-                samples: Samples::U16(v),
-                alpha: None,
-            },
-            f,
-        )
-    }
-
-    /// A 16-bit grey photo `A·F + S + noise` with shot noise: `σ² = a + b·I` at the clean level `I`, `S` rising from
-    /// 0.05 at the top to 0.45 at the bottom (a backscatter gradient), `F` falling off to the right.
-    fn shot_photo(w: usize, h: usize, tau: f32, a: f32, b: f32) -> (Photo, Raster) {
-        let mut r = 0x1234_5677u32;
-        let mut gauss = move || {
-            (0..12)
-                .map(|_| {
-                    r ^= r << 13;
-                    r ^= r >> 17;
-                    r ^= r << 5;
-                    r as f32 / u32::MAX as f32
-                })
-                .sum::<f32>()
-                - 6.0
-        };
-        let k = 8;
-        let f = Raster::from_fn(w / k, h / k, 1, |x, _, _| 1.0 - x as f32 / (w / k) as f32);
-        let mut v = vec![0u16; w * h];
-        for y in 0..h {
-            for x in 0..w {
-                let clean = (0.4 + tau * gauss()) * f.get(x / k, y / k, 0)
-                    + 0.05
-                    + 0.4 * y as f32 / h as f32;
-                let i = clean + (a + b * clean).sqrt() * gauss();
+                let i = value(y, f.get(x / k, y / k, 0), &mut gauss);
                 v[y * w + x] = (i.clamp(0.0, 1.0) * 65535.0).round() as u16;
             }
         }
