@@ -92,10 +92,12 @@ pub struct FrameReport {
     /// `--backscatter-scale` fixed it); empty otherwise.
     pub backscatter_scale: Vec<f32>,
     /// `--method abyss`: the sensor noise measured on the photo, standard deviation per channel in linear light
-    /// (`[0, 1]` = black to white); empty without `denoise`.
+    /// (`[0, 1]` = black to white) at the level of its dimmest blocks (the noise grows with the level: the blend
+    /// uses it at each block's); empty without `denoise`.
     pub noise_sigma: Vec<f32>,
     /// `--method abyss`: the seafloor texture measured on the photo, standard deviation of the albedo within a
-    /// block per channel, in the units of the seafloor colour; empty without `denoise`.
+    /// block per channel, in the units of the seafloor colour (at most three times the median channel's relative
+    /// texture); empty without `denoise`.
     pub texture_sigma: Vec<f32>,
 }
 
