@@ -292,7 +292,8 @@ impl NoiseModel {
     /// backscatter, JPEG compression keeping noise only near edges) is then read as an albedo texture tens of times
     /// the seafloor's, and the blend keeps the amplified noise (a red channel at 8 m: `τ/C` 1.1 where green and
     /// blue read 0.11 and 0.10). Seafloors differ little between channels in relative texture (the real sets:
-    /// largest over smallest channel 1.1–2.0 on the median photo); one or two channels are left as measured.
+    /// largest over smallest channel 1.1–1.8 on the median photo, 2.0 on the most uneven); one or two channels are
+    /// left as measured.
     pub fn with_texture_capped(mut self, colour: &[f32]) -> Self {
         let mut rel: Vec<f32> = self
             .texture_var
