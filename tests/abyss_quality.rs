@@ -124,9 +124,18 @@ struct MatrixDive {
 
 impl MatrixDive {
     fn render(name: &str, seed_set: u64) -> MatrixDive {
-        let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
-        let spec = &matrix::DIVES[i];
-        let sim = spec.simulation(matrix::seed(i, seed_set), (320, 240));
+        // A dive of the matrix, or a held-out one (with the held-out seeds).
+        let (spec, seed) = match matrix::DIVES.iter().position(|d| d.name == name) {
+            Some(i) => (&matrix::DIVES[i], matrix::seed(i, seed_set)),
+            None => {
+                let i = matrix::HELD_OUT
+                    .iter()
+                    .position(|d| d.name == name)
+                    .unwrap();
+                (&matrix::HELD_OUT[i], matrix::held_out_seed(i, seed_set))
+            }
+        };
+        let sim = spec.simulation(seed, (320, 240));
         let dive = sim.render_with_lighting().unwrap();
         let dir = tempfile::tempdir().unwrap();
         let root = dir.path().join("dive");
@@ -494,4 +503,20 @@ fn a_starved_channels_noise_is_not_taken_for_seafloor_texture() {
             "channel {ch}: {default:?} against {paper:?}"
         );
     }
+}
+
+/// The held-out dive the eighth round's default failed on (h07: four lights from 8 m in clear ocean water, red
+/// signal in 18 % of its samples, JPEG), on a seed set the change was not found on: albedo error ≥ 10 % below the
+/// paper's (0.94× before the texture cap and the level-dependent noise, 0.76× after) and residual pattern ≥ 25 %
+/// below.
+#[test]
+fn a_far_red_starved_held_out_dive_beats_the_paper() {
+    let d = MatrixDive::render("h07", 1);
+    let default = d.score("default", Options::default());
+    let paper = d.score("paper", paper());
+    eprintln!("h07 (albedo error, residual pattern): default {default:?}, paper {paper:?}");
+    assert!(
+        default.0 <= 0.9 * paper.0 && default.1 <= 0.75 * paper.1,
+        "default {default:?} against the paper {paper:?}"
+    );
 }
