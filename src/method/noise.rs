@@ -749,6 +749,33 @@ mod tests {
     }
 
     #[test]
+    fn noise_at_a_level_follows_the_line_and_stays_positive() {
+        let m = NoiseModel {
+            noise_var: vec![1e-4, 2e-4],
+            texture_var: vec![0.01, 0.01],
+            noise_slope: vec![1e-3, 0.0],
+            noise_level: vec![0.2, 0.2],
+        };
+        // On the line through (0.2, 1e-4) with slope 1e-3.
+        for l in [0.2f32, 0.3, 0.8] {
+            let want = 1e-4 + 1e-3 * (l - 0.2);
+            assert!(
+                (m.noise_at(0, l) - want).abs() < 1e-9,
+                "{l}: {}",
+                m.noise_at(0, l)
+            );
+        }
+        // Far below the dim blocks' level the line would go negative: at least a tenth of σ².
+        assert!((m.noise_at(0, 0.0) - 1e-5).abs() < 1e-12);
+        // A block without a level (masked: NaN) and a channel without slope take the dim blocks' σ².
+        assert_eq!(m.noise_at(0, f32::NAN), 1e-4);
+        assert_eq!(m.noise_at(1, 0.9), 2e-4);
+        // A flat model is flat.
+        let flat = NoiseModel::flat(vec![3e-4], vec![0.01]);
+        assert_eq!(flat.noise_at(0, 0.9), 3e-4);
+    }
+
+    #[test]
     fn blocks_clipped_at_black_do_not_hide_the_noise() {
         // The dim side of the frame reads below black and is clipped there: those blocks show less noise than
         // the sensor has (an all-black block none). They are left out, and σ comes from the dim blocks that are not
