@@ -198,13 +198,6 @@ impl NoiseModel {
                 .copied()
                 .filter(|p| p.0 > 0.0 && !unlit)
                 .collect();
-            let median_of = |mut v: Vec<f32>| {
-                if v.is_empty() {
-                    0.0
-                } else {
-                    quantile(&mut v, 0.5).max(0.0)
-                }
-            };
             let raw_median = |mut v: Vec<f32>| {
                 if v.is_empty() {
                     0.0
@@ -212,13 +205,14 @@ impl NoiseModel {
                     quantile(&mut v, 0.5)
                 }
             };
+            let median_of = |v: Vec<f32>| raw_median(v).max(0.0);
             // The dim blocks by level: lower and upper half.
             let mut by_level: Vec<(f32, f32, f32, f32)> = dim.to_vec();
             by_level.sort_by(|a, b| a.3.total_cmp(&b.3));
             let half = by_level.len() / 2;
             let level0 = raw_median(by_level.iter().map(|p| p.3).collect());
             let (mut sigma2, mut slope, mut tau_d2) = (0.0f32, 0.0f32, 0.0f32);
-            let at = |s2: f32, b: f32, l: f32| (s2 + b * (l - level0)).max(0.1 * s2);
+            let at = |s2: f32, b: f32, l: f32| noise_line(s2, b, level0, l);
             for _ in 0..2 {
                 let resid = |p: &(f32, f32, f32, f32)| p.2 - tau_d2 * p.0.max(0.0).powi(2);
                 sigma2 = median_of(dim.iter().map(resid).collect());
@@ -278,11 +272,7 @@ impl NoiseModel {
         let s2 = self.noise_var[ch];
         let b = self.noise_slope.get(ch).copied().unwrap_or(0.0);
         let l0 = self.noise_level.get(ch).copied().unwrap_or(0.0);
-        if b > 0.0 && l.is_finite() {
-            (s2 + b * (l - l0)).max(0.1 * s2)
-        } else {
-            s2
-        }
+        noise_line(s2, b, l0, l)
     }
 
     /// The model with each channel's texture `τ_c` at most [`TEXTURE_SPREAD`] times the median channel's relative
@@ -401,6 +391,16 @@ impl NoiseModel {
                 .collect(),
             prior_precision: prior,
         }
+    }
+}
+
+/// `σ²` at the level `l` on the line through `(l0, s2)` with slope `b`, at least a tenth of `s2`; `s2` itself where
+/// there is no slope or no level (a masked block).
+fn noise_line(s2: f32, b: f32, l0: f32, l: f32) -> f32 {
+    if b > 0.0 && l.is_finite() {
+        (s2 + b * (l - l0)).max(0.1 * s2)
+    } else {
+        s2
     }
 }
 
