@@ -432,22 +432,21 @@ mod tests {
                 logs.sort_by(f32::total_cmp);
                 logs[((logs.len() - 1) as f64 * 0.5).round() as usize]
             };
-            for y in 0..h {
-                let j = ny.iter().rposition(|&n| n <= y).unwrap();
-                let (y0, y1) = (ny[j], ny[(j + 1).min(ny.len() - 1)]);
-                let ty = if y1 > y0 {
-                    (y - y0) as f32 / (y1 - y0) as f32
+            // The nodes around `v` and how far along between them it lies.
+            let around = |nodes: &[usize], v: usize| {
+                let j = nodes.iter().rposition(|&n| n <= v).unwrap();
+                let (a, b) = (nodes[j], nodes[(j + 1).min(nodes.len() - 1)]);
+                let t = if b > a {
+                    (v - a) as f32 / (b - a) as f32
                 } else {
                     0.0
                 };
+                (a, b, t)
+            };
+            for y in 0..h {
+                let (y0, y1, ty) = around(&ny, y);
                 for x in 0..w {
-                    let k = nx.iter().rposition(|&n| n <= x).unwrap();
-                    let (x0, x1) = (nx[k], nx[(k + 1).min(nx.len() - 1)]);
-                    let tx = if x1 > x0 {
-                        (x - x0) as f32 / (x1 - x0) as f32
-                    } else {
-                        0.0
-                    };
+                    let (x0, x1, tx) = around(&nx, x);
                     let g = node(x0, y0) * (1.0 - tx) * (1.0 - ty)
                         + node(x1, y0) * tx * (1.0 - ty)
                         + node(x0, y1) * (1.0 - tx) * ty
