@@ -125,16 +125,7 @@ struct MatrixDive {
 impl MatrixDive {
     fn render(name: &str, seed_set: u64) -> MatrixDive {
         // A dive of the matrix, or a held-out one (with the held-out seeds).
-        let (spec, seed) = match matrix::DIVES.iter().position(|d| d.name == name) {
-            Some(i) => (&matrix::DIVES[i], matrix::seed(i, seed_set)),
-            None => {
-                let i = matrix::HELD_OUT
-                    .iter()
-                    .position(|d| d.name == name)
-                    .unwrap();
-                (&matrix::HELD_OUT[i], matrix::held_out_seed(i, seed_set))
-            }
-        };
+        let (spec, seed) = matrix::dive_and_seed(name, seed_set).unwrap();
         let sim = spec.simulation(seed, (320, 240));
         let dive = sim.render_with_lighting().unwrap();
         let dir = tempfile::tempdir().unwrap();
@@ -354,9 +345,8 @@ fn default_stays_well_below_raw_on_an_srgb_jpeg_like_dive() {
 fn sound_abyssal_dives_raise_no_flags() {
     // (dive, seed set): a04 and a01 from the tuning set, a02 from seed set 1.
     for (name, set) in [("a04", 0), ("a02", 1), ("a01", 0)] {
-        let i = matrix::DIVES.iter().position(|d| d.name == name).unwrap();
-        let seed = matrix::seed(i, set);
-        let sim = matrix::DIVES[i].simulation(seed, (320, 240));
+        let (spec, seed) = matrix::dive_and_seed(name, set).unwrap();
+        let sim = spec.simulation(seed, (320, 240));
         let d = tempfile::tempdir().unwrap();
         let dive = d.path().join("dive");
         sim.write(&dive).unwrap();

@@ -158,7 +158,16 @@ pub fn save_as_jpeg(from: &Path, to: &Path) -> crate::Result<()> {
 
 /// The dive of the matrix called `name` (`a01` … `a12`, or a held-out `h01` … `h08`).
 pub fn dive(name: &str) -> Option<&'static DiveSpec> {
-    DIVES.iter().chain(HELD_OUT).find(|d| d.name == name)
+    dive_and_seed(name, 0).map(|(d, _)| d)
+}
+
+/// The dive called `name` and its seed in seed set `offset` ([`seed`] for the twelve, [`held_out_seed`] for the
+/// held-out dives).
+pub fn dive_and_seed(name: &str, offset: u64) -> Option<(&'static DiveSpec, u64)> {
+    let find = |dives: &'static [DiveSpec]| dives.iter().enumerate().find(|(_, d)| d.name == name);
+    find(DIVES)
+        .map(|(i, d)| (d, seed(i, offset)))
+        .or_else(|| find(HELD_OUT).map(|(i, d)| (d, held_out_seed(i, offset))))
 }
 
 /// The seed of the matrix's `index`-th dive in seed set `offset` (0: the set the method was tuned on).
@@ -215,9 +224,13 @@ mod tests {
         for h in HELD_OUT {
             assert!(DIVES.iter().all(|d| d.name != h.name), "{}", h.name);
             assert_eq!(dive(h.name), Some(h));
+            let i = HELD_OUT.iter().position(|d| d == h).unwrap();
+            assert_eq!(dive_and_seed(h.name, 2), Some((h, held_out_seed(i, 2))));
             // Not a copy of a matrix dive under another name.
             assert!(DIVES.iter().all(|d| DiveSpec { name: h.name, ..*d } != *h));
         }
+        assert_eq!(dive_and_seed("a03", 1), Some((&DIVES[2], seed(2, 1))));
+        assert_eq!(dive_and_seed("x01", 0), None);
         let tuned: Vec<u64> = (0..10)
             .flat_map(|o| (0..DIVES.len()).map(move |i| seed(i, o)))
             .collect();
