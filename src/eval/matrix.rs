@@ -7,8 +7,11 @@ use std::path::Path;
 use crate::eval::evaluate::load_linear;
 use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
 use crate::io::{decode, find_photos, write_atomic, EncodeSettings};
+use crate::method::factor::upsample;
+use crate::method::median::{median_of_f32, stack_quantile};
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
+use crate::method::window::window_range;
 
 /// One dive of the matrix: its light rig, water, altitude, contamination and how the camera stores it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -215,9 +218,137 @@ pub fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
         .collect()
 }
 
+/// The window method's floor on a dive (the `window-floor` column of `examples/dive_matrix.rs`): its `M` made from
+/// the photos' true albedo alone (no lights, water or noise) — the
+/// per-block medians of each photo's albedo, the `(1 + c)/2` quantile over the photos of its window, upsampled
+/// as the correction upsamples `F` — and each photo's albedo divided by it. What this leaves is the part of the
+/// seafloor that a window over a straight track takes into `F`, whatever the lights do: the mean albedo of the
+/// strip each image column sees (the paper's stated limit, "a seafloor colour change is absorbed into F"), the
+/// nodule field's density along it, and the blocks' coarseness. A method that estimates `F` from the photos has
+/// this in its residual pattern as well; the oracle, which is given `F`, does not.
+pub fn window_floor(albedo: &[Raster], window: usize, q: f64, block: usize) -> Vec<Raster> {
+    let lows: Vec<Raster> = albedo.iter().map(|a| block_median_f32(a, block)).collect();
+    let total = lows.len();
+    albedo
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let stack: Vec<&Raster> = lows[window_range(i, window, total)].iter().collect();
+            let m = upsample(&stack_quantile(&stack, q), block, a.width, a.height);
+            let mut r = a.clone();
+            for (v, &m) in r.data.iter_mut().zip(&m.data) {
+                *v = (*v / m.max(1e-4)).clamp(0.0, 2.5);
+            }
+            r
+        })
+        .collect()
+}
+
+/// Per-channel median of every `k`×`k` block of a float raster (partial blocks at the border included), as the
+/// method's block median does on photo codes.
+pub fn block_median_f32(r: &Raster, k: usize) -> Raster {
+    let (bw, bh, c) = (r.width.div_ceil(k), r.height.div_ceil(k), r.channels);
+    let mut v = Vec::with_capacity(k * k);
+    Raster::from_fn(bw, bh, c, |bx, by, ch| {
+        v.clear();
+        for y in by * k..((by + 1) * k).min(r.height) {
+            for x in bx * k..((bx + 1) * k).min(r.width) {
+                v.push(r.get(x, y, ch));
+            }
+        }
+        median_of_f32(&mut v)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `n` photos of `w`×`h` whose albedo is `f(photo, x, y)` in every channel.
+    fn photos(n: usize, w: usize, h: usize, f: impl Fn(usize, usize, usize) -> f32) -> Vec<Raster> {
+        (0..n)
+            .map(|i| Raster::from_fn(w, h, 3, |x, y, _| f(i, x, y)))
+            .collect()
+    }
+
+    #[test]
+    fn block_median_f32_matches_brute_force() {
+        // 10×7 with blocks of 3: partial blocks at the right and the bottom.
+        let r = Raster::from_fn(10, 7, 3, |x, y, c| {
+            ((x * 37 + y * 11 + c * 5) % 17) as f32 / 16.0
+        });
+        let low = block_median_f32(&r, 3);
+        let samples: Vec<f64> = r.data.iter().map(|&v| v as f64).collect();
+        let want = crate::method::median::reference::block_median(&samples, 10, 7, 3, 3, 1.0);
+        assert_eq!((low.width, low.height), (4, 3));
+        for (a, b) in low.data.iter().zip(&want) {
+            assert!((*a as f64 - b).abs() < 1e-6, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn window_floor_is_one_on_a_uniform_seafloor_and_outvotes_a_nodule() {
+        // A nodule (albedo 0.05 on 0.3) over one block of photo 1 only: in the windows of the other photos it is
+        // one sample of five and the median outvotes it; photo 1 itself keeps it, darker by the nodule's contrast.
+        let nodule = |i: usize, x: usize, y: usize| {
+            if i == 1 && (8..12).contains(&x) && (4..8).contains(&y) {
+                0.05
+            } else {
+                0.3
+            }
+        };
+        let a = photos(9, 20, 16, nodule);
+        let out = window_floor(&a, 5, 0.5, 4);
+        for (i, o) in out.iter().enumerate() {
+            for y in 0..16 {
+                for x in 0..20 {
+                    let want = nodule(i, x, y) / 0.3;
+                    assert!((o.get(x, y, 1) - want).abs() < 1e-5, "photo {i} ({x}, {y})");
+                }
+            }
+        }
+        // The window and its quantile count: at q = 0 the nodule is the window's `M` wherever the window holds
+        // photo 1 (photos 0 to 3: windows 0..5, 0..5, 0..5, 1..6) and the seafloor around comes out bright; photo
+        // 4's window is 2..7, without it.
+        let low = window_floor(&a, 5, 0.0, 4);
+        for i in [0, 2, 3] {
+            assert!(
+                low[i].get(9, 5, 0) > 2.0,
+                "photo {i}: {}",
+                low[i].get(9, 5, 0)
+            );
+        }
+        assert!(
+            low[1].get(9, 5, 0) < 1.0,
+            "photo 1's own nodule stays darker than its window"
+        );
+        assert!((low[4].get(9, 5, 0) - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn window_floor_takes_a_strip_seen_in_every_photo_into_f() {
+        // The seafloor brightens from left to right in every photo (a straight track over a strip): the window's
+        // `M` holds the same ramp, so the floor's output is flat — the ramp is gone from the "corrected" photo and
+        // is left as residual pattern against the truth, which is what the column measures.
+        let ramp = |_: usize, x: usize, _: usize| 0.2 + 0.01 * x as f32;
+        let a = photos(9, 32, 16, ramp);
+        let out = window_floor(&a, 7, 0.6, 4);
+        // Between the first and the last block centre (x = 1.5 … 29.5) bilinear interpolation of the block
+        // medians (each the ramp at its block's centre) is the ramp itself.
+        for o in &out {
+            for y in 0..16 {
+                for x in 2..30 {
+                    assert!(
+                        (o.get(x, y, 2) - 1.0).abs() < 1e-4,
+                        "({x}, {y}): {}",
+                        o.get(x, y, 2)
+                    );
+                }
+            }
+        }
+        let pattern = crate::eval::evaluate::residual_pattern(&out, &a, (8, 2));
+        assert!(pattern > 0.1, "the strip is left as pattern: {pattern}");
+    }
 
     #[test]
     fn held_out_dives_are_not_the_matrix_and_use_other_seeds() {
