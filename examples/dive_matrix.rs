@@ -7,7 +7,9 @@
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
 //! with `--factor-floor 0.001`), `default` (`Options::default()`, i.e. `--method abyss`), `oracle` (`(I − S)/F` with
-//! the simulator's true `F` and `S`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
+//! the simulator's true `F` and `S`), `window-floor` (the window's `M` made from the true albedo alone:
+//! what a window over a straight track takes into `F` from the seafloor itself, whatever the lights do —
+//! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
