@@ -1130,7 +1130,14 @@ impl Simulation {
         let mut survey = Vec::with_capacity(self.frames);
         let mut albedo = Vec::with_capacity(self.frames);
         let (mut factors, mut scatters) = (Vec::new(), Vec::new());
-        let particles = (self.width * self.height / 2500).max(3);
+        // One particle per 2500 pixels of a 320×240 frame. Particles grow with the frame (`add_particles` scales
+        // their radius by width / 320), so above 320 pixels across their number stays that of 320×240: the same
+        // water seen at a higher resolution, not more of it (before, a 640×480 dive had four times the particle
+        // cover: a red channel under ×6 white balance read 6e-4 brighter everywhere, and the oracle's residual
+        // pattern tripled).
+        let above = (self.width as f32 / 320.0).max(1.0);
+        let particles =
+            ((self.width * self.height) as f32 / 2500.0 / (above * above)).max(3.0) as usize;
         let with_wb = |mut r: Raster| {
             for (i, v) in r.data.iter_mut().enumerate() {
                 *v *= wb[i % 3];
