@@ -797,6 +797,16 @@ fn render(view: &View, exposure: f32, lighting: bool) -> Rendered {
     }
 }
 
+/// Particles in a frame of `width`×`height`: one per 2500 pixels of a 320×240 frame (at least 3). [`add_particles`]
+/// grows their radius with the frame above 320 pixels across, so there their number stays that of 320×240: the
+/// same water seen at a higher resolution, not more of it. (Before, it grew with the pixel count too: a 640×480
+/// dive had four times the particle cover, its red channel under ×6 white balance read 6e-4 brighter everywhere,
+/// and the oracle's residual pattern on the matrix tripled.)
+fn particle_count(width: usize, height: usize) -> usize {
+    let above = (width as f32 / 320.0).max(1.0);
+    ((width * height) as f32 / 2500.0 / (above * above)).max(3.0) as usize
+}
+
 /// Floating particles: small bright blobs lit by the lights.
 fn add_particles(img: &mut Raster, rng: &mut Rng, count: usize) {
     let (w, h) = (img.width, img.height);
@@ -1130,14 +1140,7 @@ impl Simulation {
         let mut survey = Vec::with_capacity(self.frames);
         let mut albedo = Vec::with_capacity(self.frames);
         let (mut factors, mut scatters) = (Vec::new(), Vec::new());
-        // One particle per 2500 pixels of a 320×240 frame. Particles grow with the frame (`add_particles` scales
-        // their radius by width / 320), so above 320 pixels across their number stays that of 320×240: the same
-        // water seen at a higher resolution, not more of it (before, a 640×480 dive had four times the particle
-        // cover: a red channel under ×6 white balance read 6e-4 brighter everywhere, and the oracle's residual
-        // pattern tripled).
-        let above = (self.width as f32 / 320.0).max(1.0);
-        let particles =
-            ((self.width * self.height) as f32 / 2500.0 / (above * above)).max(3.0) as usize;
+        let particles = particle_count(self.width, self.height);
         let with_wb = |mut r: Raster| {
             for (i, v) in r.data.iter_mut().enumerate() {
                 *v *= wb[i % 3];
@@ -1365,6 +1368,37 @@ mod tests {
             let share = dark as f64 / (n * n) as f64;
             assert!((share - c).abs() < 0.05, "contamination {c}: {share}");
         }
+    }
+
+    #[test]
+    fn particle_cover_does_not_grow_with_the_resolution() {
+        // The share of a frame that particles cover, at 320×240 and at twice and four times that: the same seed
+        // puts the same particles at the same place in the frame, scaled, so the shares agree closely (with the
+        // count growing with the pixel count too they were 4× and 16× apart).
+        let cover = |w: usize, h: usize| {
+            let mut img = Raster::filled(w, h, 3, 0.0);
+            add_particles(&mut img, &mut Rng(mix(7)), particle_count(w, h));
+            img.data
+                .iter()
+                .skip(1)
+                .step_by(3)
+                .filter(|&&v| v > 0.01)
+                .count() as f64
+                / (w * h) as f64
+        };
+        let base = cover(320, 240);
+        assert!(base > 0.002, "particles cover {base} of the frame");
+        for (w, h) in [(640, 480), (1280, 960)] {
+            let r = cover(w, h) / base;
+            assert!(
+                (0.85..1.15).contains(&r),
+                "{w}x{h}: cover {r}× that of 320x240"
+            );
+        }
+        // Below 320 pixels across nothing changed: one per 2500 pixels, at least 3.
+        assert_eq!(particle_count(320, 240), 30);
+        assert_eq!(particle_count(96, 64), 3);
+        assert_eq!(particle_count(200, 150), 12);
     }
 
     #[test]
