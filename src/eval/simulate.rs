@@ -801,7 +801,7 @@ fn render(view: &View, exposure: f32, lighting: bool) -> Rendered {
 /// grows their radius with the frame above 320 pixels across, so there their number stays that of 320×240: the
 /// same water seen at a higher resolution, not more of it. (Before, it grew with the pixel count too: a 640×480
 /// dive had four times the particle cover, its red channel under ×6 white balance read 6e-4 brighter everywhere,
-/// and the oracle's residual pattern on the matrix tripled.)
+/// and the oracle's residual pattern on the median matrix dive was 2.5× that at 320×240.)
 fn particle_count(width: usize, height: usize) -> usize {
     let above = (width as f32 / 320.0).max(1.0);
     ((width * height) as f32 / 2500.0 / (above * above)).max(3.0) as usize
