@@ -314,27 +314,21 @@ fn main() {
             }
         }
         scores.push(("oracle".into(), score(&oracle(&raw, &dive), &dive, &signal)));
+        // The default's window and quantile (the paper's column and the numpy peer take the same window).
         let default = Options {
             contamination: Some(spec.contamination),
             ..Options::default()
         };
+        let window = default.window_choice().map_or(7, |w| w.n);
         let floor = window_floor(
             &dive.albedo,
-            default.window_choice().map_or(7, |w| w.n),
-            (1.0 + spec.contamination) / 2.0,
+            window,
+            default.window_quantile(),
             auto_block(sim.width, sim.height),
         );
         scores.push(("window-floor".into(), score(&floor, &dive, &signal)));
         if let Some(script) = &peer {
             let o = dir.join("numpy");
-            // The window the paper's column took.
-            let window = Options {
-                contamination: Some(spec.contamination),
-                ..Options::default()
-            }
-            .window_choice()
-            .map(|w| w.n)
-            .unwrap_or(7);
             let ok = Command::new(&peer_python)
                 .arg(script)
                 .arg("paper")

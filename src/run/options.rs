@@ -426,6 +426,16 @@ impl Options {
             .unwrap_or(crate::method::factor::AUTO_MAX_BLOCK)
     }
 
+    /// The quantile the window takes over its photos: with `method = abyss` and a contamination rate `c`, the
+    /// `(1 + c)/2` quantile (abyssal contamination is dark — nodules, shadows — so that is the seafloor's own
+    /// median); otherwise the median.
+    pub fn window_quantile(&self) -> f64 {
+        match (self.method, self.contamination) {
+            (Method::Abyss, Some(c)) => (1.0 + c) / 2.0,
+            _ => 0.5,
+        }
+    }
+
     /// The near window in effect for a window of `n` photos (`None`: off): `near_window`, or for `auto`
     /// [`crate::method::window::near_window`]; only with `method = abyss`, and only when shorter than `n`.
     pub fn near_window_for(&self, n: usize) -> Option<usize> {

@@ -74,11 +74,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         backscatter_scale: opts.backscatter_scale,
         denoise: opts.denoise,
         level_by_light: opts.level_by_light,
-        // Abyssal contamination is dark (nodules, shadows): the seafloor's median is the (1 + c)/2 quantile.
-        window_quantile: match (opts.method, opts.contamination) {
-            (Method::Abyss, Some(c)) => ((1.0 + c) / 2.0) as f32,
-            _ => 0.5,
-        },
+        window_quantile: opts.window_quantile() as f32,
         near_window: opts.near_window_for(plan.window.n).unwrap_or(0),
     };
     let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
