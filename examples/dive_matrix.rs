@@ -510,6 +510,11 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
             near_window: Some(0),
             ..o
         }),
+        ("abyss-bright-spots", |o| Options {
+            method: Method::Abyss,
+            bright_spots: true,
+            ..o
+        }),
         ("abyss-no-level-by-light", |o| Options {
             method: Method::Abyss,
             level_by_light: false,

@@ -453,6 +453,18 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_METHOD)]
     no_level_by_light: bool,
 
+    /// --method abyss: fill F where laser dots or highlights that move held the window's median (off by default).
+    ///
+    /// Laser dots move in the frame with the altitude, so over a window they can sit on the same few blocks in
+    /// most photos, and the window's median takes them into F: a coloured stain (teal beside a red laser) in the
+    /// photos where the dot is not. With this flag each photo's blocks at least twice as bright as the seafloor
+    /// around them, in small groups, count as spots, and where spots held more than half of the window F is
+    /// filled from the blocks around (--mask-auto covers only what never moves). The dots themselves then keep
+    /// their full brightness, which raises the overlap difference (docs/evaluation.md); a --mask over the dots'
+    /// path does both.
+    #[arg(long, help_heading = H_METHOD)]
+    bright_spots: bool,
+
     /// Photos in the sliding window whose median gives F (odd) [default: 7].
     ///
     /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
@@ -667,6 +679,9 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
     }
     if args.no_level_by_light {
         o.level_by_light = false;
+    }
+    if args.bright_spots {
+        o.bright_spots = true;
     }
     if args.no_denoise {
         o.denoise = false;

@@ -32,6 +32,7 @@ use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
+use crate::method::outliers::{bright_spots, without};
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
@@ -118,7 +119,7 @@ pub struct Engine<T> {
     monitor: Monitor,
     /// The window's block medians: sequence number, the `K`×`K` blocks, and for blocks of 5 pixels or fewer the
     /// same pooled to about 8 pixels for the monitor ([`pool_factor`]).
-    ring: VecDeque<(usize, Raster, Option<Raster>)>,
+    ring: VecDeque<RingEntry>,
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
@@ -264,7 +265,12 @@ impl<T> Engine<T> {
             1 => None,
             p => Some(pooled(&low, p)),
         };
-        self.ring.push_back((self.seq, low, judged));
+        // Bright spots that move (laser dots, highlights) left out of this photo's image for the window.
+        let spotless = (self.params.method == Method::Abyss && self.params.bright_spots)
+            .then(|| bright_spots(&low))
+            .filter(|s| !s.is_empty())
+            .map(|s| without(&low, &s));
+        self.ring.push_back((self.seq, low, judged, spotless));
         if self.ring.len() > n {
             self.ring.pop_front();
         }
@@ -349,6 +355,37 @@ impl<T> Engine<T> {
         }
     }
 
+    /// `m` (the window's `M` over the photos in `range`) with the blocks where bright spots held more than half
+    /// of the window ([`crate::method::outliers`]: NaN in the photos' spot-free images) filled from the blocks
+    /// around them, as under a mask. Elsewhere `m` stands: the quantile outvoted the spots. (Two ways that also
+    /// changed the blocks where spots were fewer were measured and dropped: leaving them out of the quantile's
+    /// count moved the `(1 + c)/2` quantile down wherever the simulator's bright particles were frequent, and
+    /// ranking them above every value moved it up; both raised the residual pattern of high-contamination matrix
+    /// dives, a09 by 1.15–1.75×: docs/evaluation.md, "Bright spots that move".)
+    fn without_spots(&self, m: &mut Raster, range: &Range<usize>) {
+        let entries: Vec<&RingEntry> = in_range(&self.ring, range.clone()).collect();
+        if entries.iter().all(|(.., s)| s.is_none()) {
+            return;
+        }
+        let n = entries.len();
+        let mut holes = false;
+        for (i, v) in m.data.iter_mut().enumerate() {
+            let out = entries
+                .iter()
+                .filter(|(_, low, _, s)| {
+                    s.as_ref().is_some_and(|s| s.data[i].is_nan()) && !low.data[i].is_nan()
+                })
+                .count();
+            if 2 * out > n {
+                *v = f32::NAN;
+                holes = true;
+            }
+        }
+        if holes {
+            fill_missing(m);
+        }
+    }
+
     /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
     fn factor_of(&self, m: &Raster, s_low: Option<&Raster>) -> Raster {
         let mut f = factor(m, s_low, &self.colour);
@@ -430,10 +467,13 @@ impl<T> Engine<T> {
             .ring
             .iter()
             .find(|(s, ..)| *s == i)
-            .map(|(_, r, j)| (r, j.as_ref()))
+            .map(|(_, r, j, _)| (r, j.as_ref()))
             .expect("a photo's own low-resolution image is in its window");
         let s_low = self.scatter_low.as_ref();
         let mut m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
+        if self.params.method == Method::Abyss {
+            self.without_spots(&mut m, &range);
+        }
         let mut f = self.factor_of(&m, s_low);
         let lit = lit_seafloor(&f, &self.colour);
         // The monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set there):
@@ -442,7 +482,7 @@ impl<T> Engine<T> {
             None => self.monitor.observe_photo(own, &lit, s_low, &f),
             Some(own_j) => {
                 let stack_j: Vec<&Raster> = in_range(&self.ring, range.clone())
-                    .filter_map(|(.., j)| j.as_ref())
+                    .filter_map(|(_, _, j, _)| j.as_ref())
                     .collect();
                 let (s_j, mean_j) = self
                     .judged_fixed
@@ -459,8 +499,10 @@ impl<T> Engine<T> {
         if self.params.method == Method::Abyss && near > 0 && near < stack.len() {
             // The window's M bent to the smooth shape of the near window's around the same photo (the monitor
             // above judged the window's own).
-            let near_stack = low_in(&self.ring, &near_range(i, near, &range));
-            let m_near = self.window_m(own, &near_stack, s_low, None);
+            let near_r = near_range(i, near, &range);
+            let near_stack = low_in(&self.ring, &near_r);
+            let mut m_near = self.window_m(own, &near_stack, s_low, None);
+            self.without_spots(&mut m_near, &near_r);
             m = near_shape(&m, &m_near, s_low);
             f = self.factor_of(&m, s_low);
         }
@@ -584,20 +626,19 @@ fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
 }
 
 /// The ring's entries whose photos are in `range`, in order.
-fn in_range(
-    ring: &VecDeque<(usize, Raster, Option<Raster>)>,
-    range: Range<usize>,
-) -> impl Iterator<Item = &(usize, Raster, Option<Raster>)> {
+fn in_range(ring: &VecDeque<RingEntry>, range: Range<usize>) -> impl Iterator<Item = &RingEntry> {
     ring.iter().filter(move |(s, ..)| range.contains(s))
 }
 
 /// The block medians of the ring's photos in `range`, in order.
-fn low_in<'a>(
-    ring: &'a VecDeque<(usize, Raster, Option<Raster>)>,
-    range: &Range<usize>,
-) -> Vec<&'a Raster> {
-    in_range(ring, range.clone()).map(|(_, r, _)| r).collect()
+fn low_in<'a>(ring: &'a VecDeque<RingEntry>, range: &Range<usize>) -> Vec<&'a Raster> {
+    in_range(ring, range.clone()).map(|(_, r, ..)| r).collect()
 }
+
+/// One photo in the ring: its sequence number, block medians (linear light), the block medians pooled for the
+/// monitor (when the blocks are smaller than 8 pixels) and, when it had bright spots, the block medians without
+/// them ([`crate::method::outliers`]).
+type RingEntry = (usize, Raster, Option<Raster>, Option<Raster>);
 
 #[cfg(test)]
 mod tests {

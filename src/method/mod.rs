@@ -10,6 +10,7 @@
 //! - [`engine`]: all of it over a stream of photos, in order, with memory bounded by the window;
 //! - [`params`]: the method's parameters;
 //! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
+//! - [`outliers`]: bright spots that move (laser dots, highlights), left out of the window per photo;
 //! - [`monitor`]: health figures that say where the method's assumptions fail;
 //! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
 //! - [`raster`] and [`transfer`]: photos, low-resolution images and camera curves.
@@ -25,6 +26,7 @@ pub mod matching;
 pub mod median;
 pub mod monitor;
 pub mod noise;
+pub mod outliers;
 pub mod params;
 pub mod raster;
 pub mod refine;

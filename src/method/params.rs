@@ -148,6 +148,9 @@ pub struct Params {
     /// ([`crate::method::refine::near_shape`]); 0, or not shorter than `window`: off. `correct` sets
     /// [`crate::method::window::near_window`]. Default: 0.
     pub near_window: usize,
+    /// [`Method::Abyss`]: fill the window's `M` where bright spots that move — laser dots, highlights — held more
+    /// than half of the window at a block ([`crate::method::outliers`]). Default: false.
+    pub bright_spots: bool,
 }
 
 impl Default for Params {
@@ -167,6 +170,7 @@ impl Default for Params {
             level_by_light: true,
             window_quantile: 0.5,
             near_window: 0,
+            bright_spots: false,
         }
     }
 }

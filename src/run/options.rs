@@ -185,6 +185,11 @@ pub struct Options {
     /// come out as bright as lit ones ([`crate::method::noise::level_by_light`]). Default: true.
     #[serde(default = "default_true")]
     pub level_by_light: bool,
+    /// `method = abyss`: fill the window's `M` where bright spots that move — laser dots, specular highlights —
+    /// held more than half of the window at a block ([`crate::method::outliers`]). Default: false (it keeps the
+    /// dots at their full brightness, which raises the overlap difference: docs/evaluation.md).
+    #[serde(default)]
+    pub bright_spots: bool,
 }
 
 fn default_relative_floor() -> f32 {
@@ -254,6 +259,7 @@ impl Default for Options {
             backscatter_scale: default_scale(),
             denoise: true,
             level_by_light: true,
+            bright_spots: false,
             transfer_auto: false,
         }
     }

@@ -74,6 +74,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         backscatter_scale: opts.backscatter_scale,
         denoise: opts.denoise,
         level_by_light: opts.level_by_light,
+        bright_spots: opts.bright_spots,
         window_quantile: opts.window_quantile() as f32,
         near_window: opts.near_window_for(plan.window.n).unwrap_or(0),
     };

@@ -1,0 +1,272 @@
+//! Bright spots that move from photo to photo — laser dots whose place in the frame changes with the altitude,
+//! specular highlights, glints — and the window's `M` where they held it (`--bright-spots`, off by default).
+//!
+//! The window's `M` is a median (or the `(1 + c)/2` quantile) over photos, so it outvotes objects that are at
+//! another place in most photos of the window. A laser dot may not be: its place in the frame changes only with the
+//! altitude, so over a window it can sit on the same few blocks in most photos, and the window's `M` takes it into
+//! `F` there — on the real Nephrops runs a red blob in `F` beside each dot, and the corrected photos show a teal
+//! stain (red divided by too much) wherever the dot is not. `--mask-auto` finds only what never moves.
+//!
+//! [`bright_spots`] marks, per photo, the blocks of its block-median image that stand far above the seafloor
+//! around them in some channel (twice the local level, and by a tenth of the brightest channel's lit level, so noise
+//! in dark regions never qualifies), in compact groups (a long bright edge of a narrow beam is lighting, not a
+//! spot), and the blocks around them (glare). The engine fills `M` from the blocks around wherever such blocks held
+//! more than half of the window, and leaves it alone elsewhere. The dots themselves then keep their full brightness
+//! (before, `F` held part of them and dimmed them), which raises the overlap difference of the Nephrops runs; that
+//! is why it is not the default (docs/evaluation.md, "Bright spots that move").
+
+use crate::method::raster::Raster;
+use crate::method::refine::quantile;
+
+/// A block is bright when one of its channels is at least this many times the channel's local level.
+pub const SPOT_RATIO: f32 = 2.0;
+
+/// … and above the local level by at least this share of the channel's lit level (its 99th percentile over the
+/// frame): sensor noise in a dark corner can double a block's value, never by a tenth of the lit level.
+pub const SPOT_MARGIN: f32 = 0.1;
+
+/// A group of bright blocks (8-connected) larger than this share of the frame's blocks is left alone: not a spot.
+pub const SPOT_MAX_SHARE: f32 = 0.005;
+
+/// Blocks around a spot left out with it (the glare).
+pub const SPOT_GROW: usize = 2;
+
+/// The blocks of `low` (a photo's block medians, linear light) that are bright spots, with their 8 neighbours; an
+/// empty vector when there are none. The local level is the median over a square of blocks a sixteenth of the
+/// longer side across around grid nodes that far apart, interpolated bilinearly (as
+/// [`crate::method::refine::near_shape`] does); NaN blocks (a mask) are never spots and do not vote.
+pub fn bright_spots(low: &Raster) -> Vec<bool> {
+    let (w, h, c) = (low.width, low.height, low.channels);
+    if w < 8 || h < 8 {
+        return Vec::new();
+    }
+    let r = ((w.max(h) as f64 / 32.0).round() as usize).max(2);
+    let local = local_level(low, r);
+    let lit: Vec<f32> = (0..c)
+        .map(|ch| {
+            let mut v: Vec<f32> = low.data[ch..]
+                .iter()
+                .step_by(c)
+                .copied()
+                .filter(|v| v.is_finite())
+                .collect();
+            if v.is_empty() {
+                0.0
+            } else {
+                quantile(&mut v, 0.99)
+            }
+        })
+        .collect();
+    // The margin against the brightest channel's lit level: a channel starved of light (red at depth) has noise
+    // that doubles its dim blocks and rises by a tenth of its own small lit level.
+    let top = lit.iter().copied().fold(0.0f32, f32::max);
+    let bright: Vec<bool> = (0..w * h)
+        .map(|b| {
+            (0..c).any(|ch| {
+                let (v, l) = (low.data[b * c + ch], local[b * c + ch]);
+                v.is_finite() && l.is_finite() && v >= SPOT_RATIO * l && v - l >= SPOT_MARGIN * top
+            })
+        })
+        .collect();
+
+    if !bright.contains(&true) {
+        return Vec::new();
+    }
+    // Compact groups only.
+    let max_blocks = ((w * h) as f32 * SPOT_MAX_SHARE).ceil() as usize;
+    let mut group = vec![usize::MAX; w * h];
+    let mut spots = vec![false; w * h];
+    let mut stack = Vec::new();
+    let mut members = Vec::new();
+    for start in 0..w * h {
+        if !bright[start] || group[start] != usize::MAX {
+            continue;
+        }
+        members.clear();
+        stack.push(start);
+        group[start] = start;
+        while let Some(b) = stack.pop() {
+            members.push(b);
+            let (x, y) = (b % w, b / w);
+            for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let n = ny * w + nx;
+                    if bright[n] && group[n] == usize::MAX {
+                        group[n] = start;
+                        stack.push(n);
+                    }
+                }
+            }
+        }
+        if members.len() <= max_blocks {
+            for &b in &members {
+                spots[b] = true;
+            }
+        }
+    }
+    if !spots.contains(&true) {
+        return Vec::new();
+    }
+    // With the blocks around them: the glare around a dot lifts them by less than the ratio.
+    let g = SPOT_GROW;
+    let mut out = vec![false; w * h];
+    for b in (0..w * h).filter(|&b| spots[b]) {
+        let (x, y) = (b % w, b / w);
+        for ny in y.saturating_sub(g)..(y + g + 1).min(h) {
+            for nx in x.saturating_sub(g)..(x + g + 1).min(w) {
+                out[ny * w + nx] = true;
+            }
+        }
+    }
+    out
+}
+
+/// `low` with the blocks of `spots` set to NaN in every channel (unchanged when `spots` is empty).
+pub fn without(low: &Raster, spots: &[bool]) -> Raster {
+    let mut out = low.clone();
+    if spots.is_empty() {
+        return out;
+    }
+    let c = low.channels;
+    for (px, &s) in out.data.chunks_exact_mut(c).zip(spots) {
+        if s {
+            px.fill(f32::NAN);
+        }
+    }
+    out
+}
+
+/// The local level of each block and channel: the median over the `(2r + 1)`² square around grid nodes `r` blocks
+/// apart (and the last row and column), interpolated bilinearly between the nodes.
+fn local_level(low: &Raster, r: usize) -> Vec<f32> {
+    let (w, h, c) = (low.width, low.height, low.channels);
+    let nodes = |len: usize| {
+        let mut v: Vec<usize> = (0..len).step_by(r).collect();
+        if v.last() != Some(&(len - 1)) {
+            v.push(len - 1);
+        }
+        v
+    };
+    let (gx, gy) = (nodes(w), nodes(h));
+    let mut node = vec![f32::NAN; gx.len() * gy.len() * c];
+    let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
+    for (j, &ny) in gy.iter().enumerate() {
+        for (k, &nx) in gx.iter().enumerate() {
+            for ch in 0..c {
+                votes.clear();
+                for y in ny.saturating_sub(r)..(ny + r + 1).min(h) {
+                    for x in nx.saturating_sub(r)..(nx + r + 1).min(w) {
+                        let v = low.data[(y * w + x) * c + ch];
+                        if v.is_finite() {
+                            votes.push(v);
+                        }
+                    }
+                }
+                if !votes.is_empty() {
+                    node[(j * gx.len() + k) * c + ch] = quantile(&mut votes, 0.5);
+                }
+            }
+        }
+    }
+    let between = |nodes: &[usize], p: usize| {
+        let j = nodes.partition_point(|&n| n <= p).saturating_sub(1);
+        match nodes.get(j + 1) {
+            Some(&next) => (j, (p - nodes[j]) as f32 / (next - nodes[j]) as f32),
+            None => (j, 0.0),
+        }
+    };
+    let mut out = vec![f32::NAN; w * h * c];
+    for y in 0..h {
+        let (j, ty) = between(&gy, y);
+        let j1 = (j + 1).min(gy.len() - 1);
+        for x in 0..w {
+            let (k, tx) = between(&gx, x);
+            let k1 = (k + 1).min(gx.len() - 1);
+            for ch in 0..c {
+                let at = |jj: usize, kk: usize| node[(jj * gx.len() + kk) * c + ch];
+                let corners = [
+                    (at(j, k), (1.0 - tx) * (1.0 - ty)),
+                    (at(j, k1), tx * (1.0 - ty)),
+                    (at(j1, k), (1.0 - tx) * ty),
+                    (at(j1, k1), tx * ty),
+                ];
+                let (mut sum, mut weight) = (0.0f32, 0.0f32);
+                for (v, wt) in corners {
+                    if v.is_finite() && wt > 0.0 {
+                        sum += v * wt;
+                        weight += wt;
+                    }
+                }
+                if weight > 0.0 {
+                    out[(y * w + x) * c + ch] = sum / weight;
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A light cone over grey seafloor (block medians), with: a 2×2 red dot (4× the red around it), a long bright
+    /// band down the right edge (a narrow beam's lit edge: 2.5× the level, far more blocks than a spot), and blocks
+    /// tripled by noise in the dark corner (a tenth of the lit level is more than they rise).
+    fn scene() -> Raster {
+        let (w, h) = (64, 48);
+        Raster::from_fn(w, h, 3, |x, y, ch| {
+            let (fx, fy) = (x as f32 - 32.0, y as f32 - 24.0);
+            let mut v = 0.4 * (-(fx * fx + fy * fy) / (2.0 * 12.0f32.powi(2))).exp();
+            if x >= 56 {
+                v *= 2.5;
+            }
+            if (20..22).contains(&x) && (20..22).contains(&y) && ch == 0 {
+                v *= 4.0;
+            }
+            if x < 4 && y < 4 && (x + y) % 2 == 0 {
+                v *= 3.0;
+            }
+            v
+        })
+    }
+
+    #[test]
+    fn a_dot_is_found_with_the_blocks_around_it_a_lit_band_and_dark_noise_are_not() {
+        let low = scene();
+        let spots = bright_spots(&low);
+        assert_eq!(spots.len(), 64 * 48);
+        for y in 0..48 {
+            for x in 0..64 {
+                let around = 20 - SPOT_GROW..22 + SPOT_GROW;
+                let want = around.contains(&x) && around.contains(&y);
+                assert_eq!(spots[y * 64 + x], want, "block ({x}, {y})");
+            }
+        }
+        let out = without(&low, &spots);
+        assert!(out.get(20, 20, 1).is_nan() && out.get(18, 18, 2).is_nan());
+        assert_eq!(out.get(30, 30, 0), low.get(30, 30, 0));
+    }
+
+    #[test]
+    fn nothing_bright_gives_an_empty_vector_and_leaves_the_image() {
+        let low = Raster::from_fn(40, 30, 3, |x, y, _| 0.2 + 0.001 * (x + y) as f32);
+        assert!(bright_spots(&low).is_empty());
+        assert_eq!(without(&low, &[]).data, low.data);
+        // Too small to tell a spot from the scene.
+        assert!(bright_spots(&Raster::filled(7, 7, 3, 0.5)).is_empty());
+    }
+
+    #[test]
+    fn a_spot_in_a_masked_frame_is_found_and_nan_blocks_are_never_spots() {
+        let mut low = scene();
+        for x in 0..10 {
+            for ch in 0..3 {
+                low.data[(40 * 64 + x) * 3 + ch] = f32::NAN;
+            }
+        }
+        let spots = bright_spots(&low);
+        assert!(spots[20 * 64 + 20]);
+        assert!((0..10).all(|x| !spots[40 * 64 + x]));
+    }
+}
