@@ -265,7 +265,7 @@ impl<T> Engine<T> {
             1 => None,
             p => Some(pooled(&low, p)),
         };
-        // Bright spots that move (laser dots, highlights) left out of this photo's image for the window.
+        // With `--bright-spots`: this photo's bright spots that move (laser dots, highlights) marked (NaN) in a copy.
         let spotless = (self.params.method == Method::Abyss && self.params.bright_spots)
             .then(|| bright_spots(&low))
             .filter(|s| !s.is_empty())

@@ -10,7 +10,7 @@
 //! - [`engine`]: all of it over a stream of photos, in order, with memory bounded by the window;
 //! - [`params`]: the method's parameters;
 //! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
-//! - [`outliers`]: bright spots that move (laser dots, highlights), left out of the window per photo;
+//! - [`outliers`]: bright spots that move (laser dots, highlights), and `M` where they held the window;
 //! - [`monitor`]: health figures that say where the method's assumptions fail;
 //! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
 //! - [`raster`] and [`transfer`]: photos, low-resolution images and camera curves.
