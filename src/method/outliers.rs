@@ -16,7 +16,7 @@
 //! is why it is not the default (docs/evaluation.md, "Bright spots that move").
 
 use crate::method::raster::Raster;
-use crate::method::refine::quantile;
+use crate::method::refine::{between_nodes, near_nodes, quantile};
 
 /// A block is bright when one of its channels is at least this many times the channel's local level.
 pub const SPOT_RATIO: f32 = 2.0;
@@ -140,14 +140,7 @@ pub fn without(low: &Raster, spots: &[bool]) -> Raster {
 /// apart (and the last row and column), interpolated bilinearly between the nodes.
 fn local_level(low: &Raster, r: usize) -> Vec<f32> {
     let (w, h, c) = (low.width, low.height, low.channels);
-    let nodes = |len: usize| {
-        let mut v: Vec<usize> = (0..len).step_by(r).collect();
-        if v.last() != Some(&(len - 1)) {
-            v.push(len - 1);
-        }
-        v
-    };
-    let (gx, gy) = (nodes(w), nodes(h));
+    let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
     let mut node = vec![f32::NAN; gx.len() * gy.len() * c];
     let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
     for (j, &ny) in gy.iter().enumerate() {
@@ -168,37 +161,13 @@ fn local_level(low: &Raster, r: usize) -> Vec<f32> {
             }
         }
     }
-    let between = |nodes: &[usize], p: usize| {
-        let j = nodes.partition_point(|&n| n <= p).saturating_sub(1);
-        match nodes.get(j + 1) {
-            Some(&next) => (j, (p - nodes[j]) as f32 / (next - nodes[j]) as f32),
-            None => (j, 0.0),
-        }
-    };
     let mut out = vec![f32::NAN; w * h * c];
     for y in 0..h {
-        let (j, ty) = between(&gy, y);
-        let j1 = (j + 1).min(gy.len() - 1);
         for x in 0..w {
-            let (k, tx) = between(&gx, x);
-            let k1 = (k + 1).min(gx.len() - 1);
             for ch in 0..c {
-                let at = |jj: usize, kk: usize| node[(jj * gx.len() + kk) * c + ch];
-                let corners = [
-                    (at(j, k), (1.0 - tx) * (1.0 - ty)),
-                    (at(j, k1), tx * (1.0 - ty)),
-                    (at(j1, k), (1.0 - tx) * ty),
-                    (at(j1, k1), tx * ty),
-                ];
-                let (mut sum, mut weight) = (0.0f32, 0.0f32);
-                for (v, wt) in corners {
-                    if v.is_finite() && wt > 0.0 {
-                        sum += v * wt;
-                        weight += wt;
-                    }
-                }
-                if weight > 0.0 {
-                    out[(y * w + x) * c + ch] = sum / weight;
+                let at = |j: usize, k: usize| node[(j * gx.len() + k) * c + ch];
+                if let Some(v) = between_nodes(at, &gx, &gy, x, y) {
+                    out[(y * w + x) * c + ch] = v;
                 }
             }
         }

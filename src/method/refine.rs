@@ -325,34 +325,10 @@ pub fn near_shape(m: &Raster, near: &Raster, s: Option<&Raster>) -> Raster {
             }
         }
         for y in 0..h {
-            let (j, ty) = between(&gy, y);
             for x in 0..w {
-                let (k, tx) = between(&gx, x);
-                let corners = [
-                    (node[j * gx.len() + k], (1.0 - tx) * (1.0 - ty)),
-                    (
-                        node[j * gx.len() + (k + 1).min(gx.len() - 1)],
-                        tx * (1.0 - ty),
-                    ),
-                    (
-                        node[(j + 1).min(gy.len() - 1) * gx.len() + k],
-                        (1.0 - tx) * ty,
-                    ),
-                    (
-                        node[(j + 1).min(gy.len() - 1) * gx.len() + (k + 1).min(gx.len() - 1)],
-                        tx * ty,
-                    ),
-                ];
-                let (mut sum, mut weight) = (0.0f32, 0.0f32);
-                for (v, wt) in corners {
-                    if v.is_finite() && wt > 0.0 {
-                        sum += v * wt;
-                        weight += wt;
-                    }
-                }
-                if weight > 0.0 {
+                if let Some(g) = between_nodes(|j, k| node[j * gx.len() + k], &gx, &gy, x, y) {
                     let i = (y * w + x) * c + ch;
-                    out.data[i] = sv(i) + (m.data[i] - sv(i)) * (sum / weight).exp();
+                    out.data[i] = sv(i) + (m.data[i] - sv(i)) * g.exp();
                 }
             }
         }
@@ -366,12 +342,40 @@ fn near_radius(w: usize, h: usize) -> usize {
 }
 
 /// Grid nodes along a side of `len` blocks: every `r`, and the last block.
-fn near_nodes(len: usize, r: usize) -> Vec<usize> {
+pub(crate) fn near_nodes(len: usize, r: usize) -> Vec<usize> {
     let mut v: Vec<usize> = (0..len).step_by(r).collect();
     if v.last() != Some(&(len - 1)) {
         v.push(len - 1);
     }
     v
+}
+
+/// The value at block `(x, y)` interpolated bilinearly between the values `at(j, k)` of the grid nodes
+/// `(gx[k], gy[j])` around it; NaN nodes are left out (their weight with them); `None` when all four are NaN.
+pub(crate) fn between_nodes(
+    at: impl Fn(usize, usize) -> f32,
+    gx: &[usize],
+    gy: &[usize],
+    x: usize,
+    y: usize,
+) -> Option<f32> {
+    let (j, ty) = between(gy, y);
+    let (k, tx) = between(gx, x);
+    let (j1, k1) = ((j + 1).min(gy.len() - 1), (k + 1).min(gx.len() - 1));
+    let corners = [
+        (at(j, k), (1.0 - tx) * (1.0 - ty)),
+        (at(j, k1), tx * (1.0 - ty)),
+        (at(j1, k), (1.0 - tx) * ty),
+        (at(j1, k1), tx * ty),
+    ];
+    let (mut sum, mut weight) = (0.0f32, 0.0f32);
+    for (v, wt) in corners {
+        if v.is_finite() && wt > 0.0 {
+            sum += v * wt;
+            weight += wt;
+        }
+    }
+    (weight > 0.0).then(|| sum / weight)
 }
 
 /// The node at or before `p` and the share of the way to the next one.
