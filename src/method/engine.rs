@@ -32,7 +32,7 @@ use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
-use crate::method::outliers::{bright_spots, without};
+use crate::method::outliers::bright_spots;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
@@ -117,8 +117,9 @@ pub struct Engine<T> {
     colour: Vec<f32>,
     layout: Option<Layout>,
     monitor: Monitor,
-    /// The window's block medians: sequence number, the `K`×`K` blocks, and for blocks of 5 pixels or fewer the
-    /// same pooled to about 8 pixels for the monitor ([`pool_factor`]).
+    /// The window's block medians: sequence number, the `K`×`K` blocks, for blocks of 5 pixels or fewer the
+    /// same pooled to about 8 pixels for the monitor ([`pool_factor`]), and with `--bright-spots` the photo's
+    /// blocks of bright spots (one flag per block).
     ring: VecDeque<RingEntry>,
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
@@ -265,12 +266,11 @@ impl<T> Engine<T> {
             1 => None,
             p => Some(pooled(&low, p)),
         };
-        // With `--bright-spots`: this photo's bright spots that move (laser dots, highlights) marked (NaN) in a copy.
-        let spotless = (self.params.method == Method::Abyss && self.params.bright_spots)
+        // With `--bright-spots`: this photo's blocks of bright spots that move (laser dots, highlights).
+        let spots = (self.params.method == Method::Abyss && self.params.bright_spots)
             .then(|| bright_spots(&low))
-            .filter(|s| !s.is_empty())
-            .map(|s| without(&low, &s));
-        self.ring.push_back((self.seq, low, judged, spotless));
+            .filter(|s| !s.is_empty());
+        self.ring.push_back((self.seq, low, judged, spots));
         if self.ring.len() > n {
             self.ring.pop_front();
         }
@@ -356,7 +356,7 @@ impl<T> Engine<T> {
     }
 
     /// `m` (the window's `M` over the photos in `range`) with the blocks where bright spots held more than half
-    /// of the window ([`crate::method::outliers`]: NaN in the photos' spot-free images) filled from the blocks
+    /// of the window ([`crate::method::outliers`]) filled from the blocks
     /// around them, as under a mask. Elsewhere `m` stands: the quantile outvoted the spots. (Two ways that also
     /// changed the blocks where spots were fewer were measured and dropped: leaving them out of the quantile's
     /// count moved the `(1 + c)/2` quantile down wherever the simulator's bright particles were frequent, and
@@ -367,13 +367,13 @@ impl<T> Engine<T> {
         if entries.iter().all(|(.., s)| s.is_none()) {
             return;
         }
-        let n = entries.len();
+        let (n, c) = (entries.len(), m.channels);
         let mut holes = false;
         for (i, v) in m.data.iter_mut().enumerate() {
             let out = entries
                 .iter()
                 .filter(|(_, low, _, s)| {
-                    s.as_ref().is_some_and(|s| s.data[i].is_nan()) && !low.data[i].is_nan()
+                    s.as_ref().is_some_and(|s| s[i / c]) && !low.data[i].is_nan()
                 })
                 .count();
             if 2 * out > n {
@@ -636,9 +636,9 @@ fn low_in<'a>(ring: &'a VecDeque<RingEntry>, range: &Range<usize>) -> Vec<&'a Ra
 }
 
 /// One photo in the ring: its sequence number, block medians (linear light), the block medians pooled for the
-/// monitor (when the blocks are smaller than 8 pixels) and, when it had bright spots, the block medians without
-/// them ([`crate::method::outliers`]).
-type RingEntry = (usize, Raster, Option<Raster>, Option<Raster>);
+/// monitor (when the blocks are smaller than 8 pixels) and, with `--bright-spots` when it had any, its blocks of
+/// bright spots ([`crate::method::outliers::bright_spots`]).
+type RingEntry = (usize, Raster, Option<Raster>, Option<Vec<bool>>);
 
 #[cfg(test)]
 mod tests {

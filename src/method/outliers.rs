@@ -121,21 +121,6 @@ pub fn bright_spots(low: &Raster) -> Vec<bool> {
     out
 }
 
-/// `low` with the blocks of `spots` set to NaN in every channel (unchanged when `spots` is empty).
-pub fn without(low: &Raster, spots: &[bool]) -> Raster {
-    let mut out = low.clone();
-    if spots.is_empty() {
-        return out;
-    }
-    let c = low.channels;
-    for (px, &s) in out.data.chunks_exact_mut(c).zip(spots) {
-        if s {
-            px.fill(f32::NAN);
-        }
-    }
-    out
-}
-
 /// The local level of each block and channel: the median over the `(2r + 1)`² square around grid nodes `r` blocks
 /// apart (and the last row and column), interpolated bilinearly between the nodes.
 fn local_level(low: &Raster, r: usize) -> Vec<f32> {
@@ -212,16 +197,12 @@ mod tests {
                 assert_eq!(spots[y * 64 + x], want, "block ({x}, {y})");
             }
         }
-        let out = without(&low, &spots);
-        assert!(out.get(20, 20, 1).is_nan() && out.get(18, 18, 2).is_nan());
-        assert_eq!(out.get(30, 30, 0), low.get(30, 30, 0));
     }
 
     #[test]
-    fn nothing_bright_gives_an_empty_vector_and_leaves_the_image() {
+    fn nothing_bright_gives_an_empty_vector() {
         let low = Raster::from_fn(40, 30, 3, |x, y, _| 0.2 + 0.001 * (x + y) as f32);
         assert!(bright_spots(&low).is_empty());
-        assert_eq!(without(&low, &[]).data, low.data);
         // Too small to tell a spot from the scene.
         assert!(bright_spots(&Raster::filled(7, 7, 3, 0.5)).is_empty());
     }
