@@ -363,6 +363,9 @@ impl<T> Engine<T> {
     /// ranking them above every value moved it up; both raised the residual pattern of high-contamination matrix
     /// dives, a09 by 1.15–1.75×: docs/evaluation.md, "Bright spots that move".)
     fn without_spots(&self, m: &mut Raster, range: &Range<usize>) {
+        if !self.params.bright_spots {
+            return;
+        }
         let entries: Vec<&RingEntry> = in_range(&self.ring, range.clone()).collect();
         if entries.iter().all(|(.., s)| s.is_none()) {
             return;
@@ -471,9 +474,7 @@ impl<T> Engine<T> {
             .expect("a photo's own low-resolution image is in its window");
         let s_low = self.scatter_low.as_ref();
         let mut m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
-        if self.params.method == Method::Abyss {
-            self.without_spots(&mut m, &range);
-        }
+        self.without_spots(&mut m, &range);
         let mut f = self.factor_of(&m, s_low);
         let lit = lit_seafloor(&f, &self.colour);
         // The monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set there):

@@ -16,23 +16,24 @@
 //! is why it is not the default (docs/evaluation.md, "Bright spots that move").
 
 use crate::method::raster::Raster;
-use crate::method::refine::{between_nodes, near_nodes, quantile};
+use crate::method::refine::{between_nodes, near_nodes, node_medians, quantile};
 
 /// A block is bright when one of its channels is at least this many times the channel's local level.
 pub const SPOT_RATIO: f32 = 2.0;
 
-/// … and above the local level by at least this share of the channel's lit level (its 99th percentile over the
-/// frame): sensor noise in a dark corner can double a block's value, never by a tenth of the lit level.
+/// … and above the local level by at least this share of the brightest channel's lit level (its 99th percentile
+/// over the frame): sensor noise in a dark corner, or in a channel starved of light, can double a block's value,
+/// never by a tenth of that.
 pub const SPOT_MARGIN: f32 = 0.1;
 
 /// A group of bright blocks (8-connected) larger than this share of the frame's blocks is left alone: not a spot.
 pub const SPOT_MAX_SHARE: f32 = 0.005;
 
-/// Blocks around a spot left out with it (the glare).
+/// Blocks around a spot marked with it (the glare).
 pub const SPOT_GROW: usize = 2;
 
-/// The blocks of `low` (a photo's block medians, linear light) that are bright spots, with their 8 neighbours; an
-/// empty vector when there are none. The local level is the median over a square of blocks a sixteenth of the
+/// The blocks of `low` (a photo's block medians, linear light) that are bright spots, with the blocks within
+/// [`SPOT_GROW`] of them; an empty vector when there are none. The local level is the median over a square of blocks a sixteenth of the
 /// longer side across around grid nodes that far apart, interpolated bilinearly (as
 /// [`crate::method::refine::near_shape`] does); NaN blocks (a mask) are never spots and do not vote.
 pub fn bright_spots(low: &Raster) -> Vec<bool> {
@@ -74,25 +75,25 @@ pub fn bright_spots(low: &Raster) -> Vec<bool> {
     }
     // Compact groups only.
     let max_blocks = ((w * h) as f32 * SPOT_MAX_SHARE).ceil() as usize;
-    let mut group = vec![usize::MAX; w * h];
+    let mut seen = vec![false; w * h];
     let mut spots = vec![false; w * h];
     let mut stack = Vec::new();
     let mut members = Vec::new();
     for start in 0..w * h {
-        if !bright[start] || group[start] != usize::MAX {
+        if !bright[start] || seen[start] {
             continue;
         }
         members.clear();
         stack.push(start);
-        group[start] = start;
+        seen[start] = true;
         while let Some(b) = stack.pop() {
             members.push(b);
             let (x, y) = (b % w, b / w);
             for ny in y.saturating_sub(1)..(y + 2).min(h) {
                 for nx in x.saturating_sub(1)..(x + 2).min(w) {
                     let n = ny * w + nx;
-                    if bright[n] && group[n] == usize::MAX {
-                        group[n] = start;
+                    if bright[n] && !seen[n] {
+                        seen[n] = true;
                         stack.push(n);
                     }
                 }
@@ -126,32 +127,18 @@ pub fn bright_spots(low: &Raster) -> Vec<bool> {
 fn local_level(low: &Raster, r: usize) -> Vec<f32> {
     let (w, h, c) = (low.width, low.height, low.channels);
     let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
-    let mut node = vec![f32::NAN; gx.len() * gy.len() * c];
-    let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
-    for (j, &ny) in gy.iter().enumerate() {
-        for (k, &nx) in gx.iter().enumerate() {
-            for ch in 0..c {
-                votes.clear();
-                for y in ny.saturating_sub(r)..(ny + r + 1).min(h) {
-                    for x in nx.saturating_sub(r)..(nx + r + 1).min(w) {
-                        let v = low.data[(y * w + x) * c + ch];
-                        if v.is_finite() {
-                            votes.push(v);
-                        }
-                    }
-                }
-                if !votes.is_empty() {
-                    node[(j * gx.len() + k) * c + ch] = quantile(&mut votes, 0.5);
-                }
-            }
-        }
-    }
+    let nodes: Vec<Vec<f32>> = (0..c)
+        .map(|ch| {
+            node_medians(&gx, &gy, r, (w, h), |x, y| {
+                Some(low.data[(y * w + x) * c + ch]).filter(|v| v.is_finite())
+            })
+        })
+        .collect();
     let mut out = vec![f32::NAN; w * h * c];
     for y in 0..h {
         for x in 0..w {
-            for ch in 0..c {
-                let at = |j: usize, k: usize| node[(j * gx.len() + k) * c + ch];
-                if let Some(v) = between_nodes(at, &gx, &gy, x, y) {
+            for (ch, node) in nodes.iter().enumerate() {
+                if let Some(v) = between_nodes(|j, k| node[j * gx.len() + k], &gx, &gy, x, y) {
                     out[(y * w + x) * c + ch] = v;
                 }
             }

@@ -304,7 +304,6 @@ pub fn near_shape(m: &Raster, near: &Raster, s: Option<&Raster>) -> Raster {
     let sv = |i: usize| s.map_or(0.0, |s| s.data[i]);
     let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
     let mut out = m.clone();
-    let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
     for ch in 0..c {
         let log_ratio = |x: usize, y: usize| {
             let i = (y * w + x) * c + ch;
@@ -312,18 +311,7 @@ pub fn near_shape(m: &Raster, near: &Raster, s: Option<&Raster>) -> Raster {
             (a > NEAR_MIN_LIT && b > NEAR_MIN_LIT && (b / a).is_finite()).then(|| (b / a).ln())
         };
         // The median log ratio around each node (NaN without votes).
-        let mut node = vec![f32::NAN; gx.len() * gy.len()];
-        for (j, &ny) in gy.iter().enumerate() {
-            for (k, &nx) in gx.iter().enumerate() {
-                votes.clear();
-                for y in ny.saturating_sub(r)..(ny + r + 1).min(h) {
-                    for x in nx.saturating_sub(r)..(nx + r + 1).min(w) {
-                        votes.extend(log_ratio(x, y));
-                    }
-                }
-                node[j * gx.len() + k] = quantile(&mut votes, 0.5);
-            }
-        }
+        let node = node_medians(&gx, &gy, r, (w, h), log_ratio);
         for y in 0..h {
             for x in 0..w {
                 if let Some(g) = between_nodes(|j, k| node[j * gx.len() + k], &gx, &gy, x, y) {
@@ -348,6 +336,31 @@ pub(crate) fn near_nodes(len: usize, r: usize) -> Vec<usize> {
         v.push(len - 1);
     }
     v
+}
+
+/// The median of `value(x, y)` over the `(2r + 1)`² square (cut at the edges of the `w`×`h` blocks) around each
+/// grid node `(gx[k], gy[j])`, at `j · gx.len() + k`; `None` values do not vote, NaN where none does.
+pub(crate) fn node_medians(
+    gx: &[usize],
+    gy: &[usize],
+    r: usize,
+    (w, h): (usize, usize),
+    value: impl Fn(usize, usize) -> Option<f32>,
+) -> Vec<f32> {
+    let mut node = vec![f32::NAN; gx.len() * gy.len()];
+    let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
+    for (j, &ny) in gy.iter().enumerate() {
+        for (k, &nx) in gx.iter().enumerate() {
+            votes.clear();
+            for y in ny.saturating_sub(r)..(ny + r + 1).min(h) {
+                for x in nx.saturating_sub(r)..(nx + r + 1).min(w) {
+                    votes.extend(value(x, y));
+                }
+            }
+            node[j * gx.len() + k] = quantile(&mut votes, 0.5);
+        }
+    }
+    node
 }
 
 /// The value at block `(x, y)` interpolated bilinearly between the values `at(j, k)` of the grid nodes
