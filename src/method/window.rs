@@ -17,13 +17,21 @@ pub fn p_half(n: usize, c: f64) -> f64 {
     if n == 0 {
         return 1.0;
     }
-    if c <= 0.0 {
+    binomial_tail(n, n.div_ceil(2), c)
+}
+
+/// Probability that at least `u_min` of `n` independent events of probability `c` happen:
+/// `Σ_{u = u_min}^{n} C(n, u) c^u (1 − c)^(n − u)`.
+pub fn binomial_tail(n: usize, u_min: usize, c: f64) -> f64 {
+    if u_min == 0 {
+        return 1.0;
+    }
+    if c <= 0.0 || u_min > n {
         return 0.0;
     }
     if c >= 1.0 {
         return 1.0;
     }
-    let u_min = n.div_ceil(2);
     let (ln_c, ln_q) = (c.ln(), (1.0 - c).ln());
     // ln C(n, u) built up incrementally; terms summed in linear space (they are all ≤ 1).
     let mut ln_binom = 0.0f64; // ln C(n, 0)
@@ -182,6 +190,28 @@ mod tests {
             }
         }
         total
+    }
+
+    #[test]
+    fn binomial_tail_matches_enumeration() {
+        for n in 1..=14usize {
+            for u_min in 0..=n + 1 {
+                for &c in &[0.0f64, 0.02, 0.2, 0.5, 0.9, 1.0] {
+                    let mut want = 0.0;
+                    for pattern in 0u32..(1 << n) {
+                        let u = pattern.count_ones() as usize;
+                        if u >= u_min {
+                            want += c.powi(u as i32) * (1.0 - c).powi((n - u) as i32);
+                        }
+                    }
+                    let got = binomial_tail(n, u_min, c);
+                    assert!(
+                        (got - want).abs() < 1e-12,
+                        "n={n} u_min={u_min} c={c}: {got} vs {want}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
