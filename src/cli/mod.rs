@@ -293,6 +293,10 @@ struct EvaluateArgs {
     /// Mosaic cell size of the consistency metric, in mosaic units.
     #[arg(long, value_name = "UNITS", default_value_t = 8.0)]
     cell: f64,
+    /// Mask image the size of the photos, white = not seafloor (overlays, laser dots; e.g. a run's
+    /// _abysslight/mask-auto.png): its pixels are left out of the consistency metric in every set.
+    #[arg(long, value_name = "FILE")]
+    mask: Option<PathBuf>,
     /// How the photos' values relate to light [default: the simulated dive's encoding, else linear].
     #[arg(long, value_name = "CURVE")]
     transfer: Option<Transfer>,
@@ -1049,6 +1053,7 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         register: a.register.clone(),
         save_placements: a.save_placements.clone(),
         downsample: a.eval_downsample.max(1),
+        mask: a.mask.clone(),
         ..Default::default()
     };
     if !(a.cell > 0.0 && a.cell.is_finite()) {

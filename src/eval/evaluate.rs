@@ -25,6 +25,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::eval::simulate::{apply_h, invert3, load_truth, Truth};
 use crate::io::decode;
+use crate::method::mask::Mask;
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
 
@@ -319,7 +320,10 @@ pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option
                     for m in &mut mean {
                         *m /= (CELL_SAMPLES * CELL_SAMPLES) as f64;
                     }
-                    out.push(((cx, cy), mean));
+                    // A cell touching a masked pixel (NaN) is not observed.
+                    if mean.iter().all(|m| m.is_finite()) {
+                        out.push(((cx, cy), mean));
+                    }
                 }
             }
             out
@@ -350,7 +354,11 @@ pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option
     // Standard deviation of all observed pixels, per channel.
     let (mut s1, mut s2, mut m) = (vec![0.0f64; c], vec![0.0f64; c], 0usize);
     for p in photos {
-        for px in p.data.chunks_exact(c) {
+        for px in p
+            .data
+            .chunks_exact(c)
+            .filter(|px| px.iter().all(|v| v.is_finite()))
+        {
             for ch in 0..c {
                 s1[ch] += px[ch] as f64;
                 s2[ch] += (px[ch] as f64).powi(2);
@@ -386,6 +394,9 @@ pub struct EvalSettings {
     /// Box-average photos by this factor before the consistency metric (memory: every photo of a set is held);
     /// placements stay in full-resolution units. Default: 1.
     pub downsample: usize,
+    /// A mask the size of the photos (white = not seafloor: overlays, laser dots, e.g. a run's `mask-auto.png`):
+    /// its pixels are left out of the consistency metric in every photo. Default: none.
+    pub mask: Option<PathBuf>,
 }
 
 impl Default for EvalSettings {
@@ -397,6 +408,7 @@ impl Default for EvalSettings {
             register: None,
             save_placements: None,
             downsample: 1,
+            mask: None,
         }
     }
 }
@@ -480,6 +492,28 @@ fn truth_file(p: &Path) -> PathBuf {
     } else {
         p.to_owned()
     }
+}
+
+/// Set the pixels `mask` ignores to NaN in every channel: the consistency metric leaves out every mosaic cell
+/// observation that touches one, and them from the photos' mean and standard deviation. A mask of another size than
+/// the photo is an error naming the mask (`path`).
+pub fn leave_out(r: &mut Raster, mask: &Mask, path: &Path) -> Result<()> {
+    if (mask.width, mask.height) != (r.width, r.height) {
+        return Err(Error::Mismatch {
+            path: path.to_owned(),
+            reason: format!(
+                "the mask is {}x{}, the photos are {}x{}",
+                mask.width, mask.height, r.width, r.height
+            ),
+        });
+    }
+    let c = r.channels;
+    for (px, &ignore) in r.data.chunks_exact_mut(c).zip(&mask.ignore) {
+        if ignore {
+            px.fill(f32::NAN);
+        }
+    }
+    Ok(())
 }
 
 /// Decode a photo and undo its transfer curve.
@@ -576,21 +610,35 @@ struct ScoreSet<'a> {
     placed: Option<&'a [Placement]>,
     /// Curve from photo values to linear light.
     transfer: Transfer,
+    /// Pixels left out of the consistency metric, with the mask's path (for errors).
+    mask: Option<(&'a Mask, &'a Path)>,
 }
 
 impl ScoreSet<'_> {
     /// Load the set's photos from `folder` and score them.
     fn score(&self, label: &str, folder: &Path, settings: &EvalSettings) -> Result<Scores> {
-        let (names, albedo, placed, transfer) =
-            (self.names, self.albedo, self.placed, self.transfer);
+        let (names, albedo, placed, transfer, mask) = (
+            self.names,
+            self.albedo,
+            self.placed,
+            self.transfer,
+            self.mask,
+        );
         let k = if albedo.is_some() {
             1
         } else {
             settings.downsample.max(1)
         };
+        // Without a truth the photos serve the consistency metric only, and are masked as they load.
         let photos: Vec<Raster> = names
             .par_iter()
-            .map(|n| load_linear(&folder.join(n), transfer).map(|r| reduce(&r, k)))
+            .map(|n| {
+                let mut r = load_linear(&folder.join(n), transfer)?;
+                if let (Some((m, path)), None) = (mask, albedo) {
+                    leave_out(&mut r, m, path)?;
+                }
+                Ok(reduce(&r, k))
+            })
             .collect::<Result<_>>()?;
         if let Some(a) = &albedo {
             for (p, (t, n)) in photos.iter().zip(a.iter().zip(names)) {
@@ -606,12 +654,24 @@ impl ScoreSet<'_> {
                 }
             }
         }
+        let masked: Option<Vec<Raster>> = match (mask, albedo, placed) {
+            (Some((m, path)), Some(_), Some(_)) => Some(
+                photos
+                    .iter()
+                    .map(|p| {
+                        let mut p = p.clone();
+                        leave_out(&mut p, m, path).map(|()| p)
+                    })
+                    .collect::<Result<_>>()?,
+            ),
+            _ => None,
+        };
         let parts = placed.as_ref().and_then(|pl| {
             let hs: Vec<[f64; 9]> = names
                 .iter()
                 .map(|n| pl.iter().find(|p| &p.name == n).map(|p| scale_h(&p.h, k)))
                 .collect::<Option<_>>()?;
-            consistency_parts(&photos, &hs, settings.cell)
+            consistency_parts(masked.as_deref().unwrap_or(&photos), &hs, settings.cell)
         });
         Ok(Scores {
             label: label.to_string(),
@@ -668,11 +728,13 @@ pub fn evaluate(
         }
         _ => None,
     };
+    let mask = settings.mask.as_deref().map(Mask::load).transpose()?;
     let set = ScoreSet {
         names: &names,
         albedo: albedo.as_deref(),
         placed: placed.as_deref(),
         transfer,
+        mask: mask.as_ref().zip(settings.mask.as_deref()),
     };
     let mut scores = Vec::new();
     for (label, folder) in sets {
@@ -737,6 +799,50 @@ mod tests {
         let (c, d) = consistency_parts(&[a, b], &[ID; 2], 4.0).unwrap();
         assert!((c - 1.0).abs() < 1e-6, "{c}");
         assert!((d - 0.1 / 0.3).abs() < 1e-6, "{d}");
+    }
+
+    /// Two photos of the same seafloor 8 pixels apart, one with a laser dot: the dot alone makes them differ; with
+    /// the dot's pixels left out (`--mask`) they agree exactly, and the score equals that of the photos without
+    /// the dot and without the masked pixels' cells, computed directly.
+    #[test]
+    fn masked_pixels_are_left_out_of_the_overlap_difference() {
+        let floor = |x: usize, y: usize| 0.3 + 0.1 * (((x * 7 + y * 3) % 11) as f32 / 11.0);
+        let a = Raster::from_fn(40, 24, 3, |x, y, _| floor(x, y));
+        let mut b = Raster::from_fn(40, 24, 3, |x, y, _| floor(x + 8, y));
+        let dot = |x: usize, y: usize| x.abs_diff(20) <= 2 && y.abs_diff(12) <= 2;
+        for y in 0..24 {
+            for x in 0..40 {
+                if dot(x, y) {
+                    b.data[(y * 40 + x) * 3] = 1.0;
+                }
+            }
+        }
+        let h = [ID, [1.0, 0.0, 8.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]];
+        let (_, with_dot) = consistency_parts(&[a.clone(), b.clone()], &h, 4.0).unwrap();
+        assert!(with_dot > 0.01, "{with_dot}");
+        let mut mask = Mask::empty(40, 24);
+        for y in 0..24 {
+            for x in 0..40 {
+                mask.ignore[y * 40 + x] = dot(x, y);
+            }
+        }
+        let (mut ma, mut mb) = (a.clone(), b.clone());
+        leave_out(&mut ma, &mask, Path::new("m.png")).unwrap();
+        leave_out(&mut mb, &mask, Path::new("m.png")).unwrap();
+        let (_, masked) = consistency_parts(&[ma, mb], &h, 4.0).unwrap();
+        assert!(masked.abs() < 1e-9, "{masked}");
+        // The cells left are still compared: the second photo made 10 % brighter outside the dot differs again.
+        let mut brighter = b.clone();
+        for v in &mut brighter.data {
+            *v *= 1.1;
+        }
+        leave_out(&mut brighter, &mask, Path::new("m.png")).unwrap();
+        let mut ma = a.clone();
+        leave_out(&mut ma, &mask, Path::new("m.png")).unwrap();
+        assert!(consistency_parts(&[ma, brighter], &h, 4.0).unwrap().1 > 0.02);
+        // A mask of another size names itself.
+        let err = leave_out(&mut a.clone(), &Mask::empty(8, 8), Path::new("m.png")).unwrap_err();
+        assert!(err.to_string().contains("m.png"), "{err}");
     }
 
     #[test]
