@@ -240,6 +240,42 @@ mod tests {
         }
     }
 
+    /// Masked blocks (NaN: laser dots' paths under `--mask-auto`) sit at the same place in every photo. The texture
+    /// image takes the local level around them from the unmasked pixels and gives them no texture; filled with the
+    /// photo's mean grey level instead, the bright cone around them left a ring fixed in the frame, and the match
+    /// locked onto it (checked: no shift found).
+    #[test]
+    fn masked_pixels_fixed_in_the_frame_do_not_hold_the_match() {
+        let (w, h) = (320, 200);
+        let (mx, my) = (23.0, -41.0);
+        let blank = |mut r: Raster| {
+            for y in 0..h {
+                for x in 0..w {
+                    for (cx, cy) in [(120.0, 100.0), (200.0, 100.0), (160.0, 70.0)] {
+                        if (x as f64 - cx).hypot(y as f64 - cy) < 14.0 {
+                            for c in 0..3 {
+                                r.data[(y * w + x) * 3 + c] = f32::NAN;
+                            }
+                        }
+                    }
+                }
+            }
+            r
+        };
+        let (a, b) = (
+            blank(photo(7, 0.0, 0.0, w, h)),
+            blank(photo(7, mx, my, w, h)),
+        );
+        let (ta, tb) = (texture(&a, 1), texture(&b, 1));
+        assert!(ta.data.iter().all(|v| v.is_finite()));
+        let m = match_pair(&ta, &tb);
+        assert!(m.accepted, "{m:?}");
+        assert!(
+            (m.shift.0 + mx).abs() < 0.6 && (m.shift.1 + my).abs() < 0.6,
+            "{m:?}"
+        );
+    }
+
     #[test]
     fn recovers_a_known_shift_and_rejects_unrelated_photos() {
         let (w, h) = (320, 200);

@@ -75,7 +75,9 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
             *g = s / (scale * scale * c) as f32;
         }
     }
-    // Masked (NaN) pixels take the mean grey level: no texture there.
+    // Masked (NaN) pixels take the mean grey level for the floor below, and no texture.
+    let valid: Vec<bool> = grey.iter().map(|v| v.is_finite()).collect();
+    let masked = valid.contains(&false);
     let (sum, count) = grey
         .iter()
         .filter(|v| v.is_finite())
@@ -99,12 +101,30 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
     };
     let log: Vec<f32> = grey.iter().map(|&v| v.max(floor).ln()).collect();
     let r = (w.max(h) / 32).max(2);
-    let smooth = box_blur(&log, w, h, r);
+    let smooth = if masked {
+        // The local level from the unmasked pixels alone (a normalised box average): a fill level that differs from
+        // the seafloor around it would leave a ring at the mask's edge, fixed in the frame like the mask, and the
+        // match would lock onto it (laser dots' paths on Nephrops: camera-still flags on a moving sledge).
+        let weight: Vec<f32> = valid.iter().map(|&ok| f32::from(u8::from(ok))).collect();
+        let weighted: Vec<f32> = log.iter().zip(&weight).map(|(l, k)| l * k).collect();
+        let (num, den) = (box_blur(&weighted, w, h, r), box_blur(&weight, w, h, r));
+        num.iter()
+            .zip(&den)
+            .map(|(n, d)| if *d > 1e-3 { n / d } else { 0.0 })
+            .collect()
+    } else {
+        box_blur(&log, w, h, r)
+    };
     Texture {
         width: w,
         height: h,
         scale,
-        data: log.iter().zip(&smooth).map(|(a, b)| a - b).collect(),
+        data: log
+            .iter()
+            .zip(&smooth)
+            .zip(&valid)
+            .map(|((a, b), &ok)| if ok { a - b } else { 0.0 })
+            .collect(),
     }
 }
 
