@@ -194,6 +194,126 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
     assert!(red_none < 0.3, "{red_none}");
 }
 
+/// A laser dot that wanders with the altitude (the real Nephrops runs), 12 pixels across: at A in three photos of
+/// every five and at B, 32 pixels to the right, in the other two. A holds most of every window and B fewer than
+/// half of it, so without a mask the window's median takes the dot into `F` at A (a dark stain there in the photos
+/// whose dot is at B) and, more faintly, at B. `--mask-auto` finds A as a static pixel (it is there in most
+/// photos of every third of the mission) and B as a place bright spots come back to more often than chance
+/// ([`abysslight::method::outliers::SpotPath`]; without it B keeps its stain, checked), leaves both out of every
+/// median, and no stain is left at either.
+#[test]
+fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
+    let d = tempfile::tempdir().unwrap();
+    let frames = 25;
+    let (a, b, y0) = (40usize, 72usize, 56usize);
+    let at = |f: usize| if f % 5 < 3 { a } else { b };
+    let mut dive = dive(W, H, frames, 7, 0.2, false, 29);
+    for (f, p) in dive.photos.iter_mut().enumerate() {
+        let Samples::U8(v) = &mut p.samples else {
+            unreachable!()
+        };
+        for y in 0..H {
+            for x in 0..W {
+                if (x as i32 - at(f) as i32).pow(2) + (y as i32 - y0 as i32).pow(2) <= 36 {
+                    v[(y * W + x) * 3..(y * W + x) * 3 + 3].copy_from_slice(&[255, 40, 30]);
+                }
+            }
+        }
+    }
+    write_all(&dive.water, &d.path().join("water"), "w", "png");
+    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    // Corrected red over albedo red in a disc at `x` (the dot and its edge), against the same in a ring around it:
+    // 1 where the correction leaves no stain.
+    let stain = |c: &[f32], t: &[f32], x: usize| {
+        let (mut disc, mut ring) = ([0.0f64; 2], [0.0f64; 2]);
+        for yy in 0..H {
+            for xx in 0..W {
+                let r2 = (xx as i32 - x as i32).pow(2) + (yy as i32 - y0 as i32).pow(2);
+                let i = (yy * W + xx) * 3;
+                let sum = if r2 <= 49 {
+                    &mut disc
+                } else if (121..=225).contains(&r2) {
+                    &mut ring
+                } else {
+                    continue;
+                };
+                sum[0] += c[i] as f64;
+                sum[1] += t[i] as f64;
+            }
+        }
+        (disc[0] / disc[1]) / (ring[0] / ring[1])
+    };
+    let mut worst = Vec::new();
+    for auto in [false, true] {
+        let out = d.path().join(format!("out_{auto}"));
+        let r = correct_mission(
+            &Options {
+                water_column: Some(d.path().join("water")),
+                survey: Some(d.path().join("survey")),
+                out: Some(out.clone()),
+                mask_auto: auto,
+                ..Options::default()
+            },
+            &Silent,
+        )
+        .unwrap();
+        assert_eq!(r.corrected, frames);
+        // Each photo at the place its dot is not; the median over the photos (a nodule may sit under one disc).
+        let mut off: Vec<f64> = (0..frames)
+            .map(|f| {
+                let p = normalised(&decode(&out.join(format!("img{}.png", f + 1))).unwrap());
+                let missing = if at(f) == a { b } else { a };
+                stain(&p, &dive.albedo[f], missing)
+            })
+            .collect();
+        off.sort_by(f64::total_cmp);
+        let (at_a, at_b): (Vec<f64>, Vec<f64>) = {
+            let at_place = |place: usize| -> Vec<f64> {
+                (0..frames)
+                    .filter(|&f| at(f) != place)
+                    .map(|f| {
+                        let p =
+                            normalised(&decode(&out.join(format!("img{}.png", f + 1))).unwrap());
+                        stain(&p, &dive.albedo[f], place)
+                    })
+                    .collect()
+            };
+            (at_place(a), at_place(b))
+        };
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (sa, sb) = (median(at_a), median(at_b));
+        eprintln!("mask-auto {auto}: red where the dot is not, against the ring around: at A {sa:.3}, at B {sb:.3}");
+        worst.push((sa, sb));
+        if auto {
+            let found = Mask::load(&out.join("_abysslight/mask-auto.png")).unwrap();
+            for x in [a, b] {
+                assert!(
+                    found.ignore[y0 * W + x],
+                    "the dot's place ({x}, {y0}) is not masked"
+                );
+            }
+            // Nothing else: a spot's blocks (8 pixels) and the two around it.
+            let k = 8 * (1 + abysslight::method::outliers::SPOT_GROW);
+            for i in (0..W * H).filter(|&i| found.ignore[i]) {
+                let (x, y) = (i % W, i / W);
+                assert!(
+                    y.abs_diff(y0) < k && x + k > a && x < b + k,
+                    "({x}, {y}) masked, far from the dot"
+                );
+            }
+        }
+    }
+    let ((none_a, none_b), (auto_a, auto_b)) = (worst[0], worst[1]);
+    assert!(none_a < 0.8, "no stain at A without a mask? {none_a}");
+    assert!(none_b < 0.97, "no stain at B without a mask? {none_b}");
+    for s in [auto_a, auto_b] {
+        assert!((s - 1.0).abs() < 0.05, "stain with --mask-auto: {s}");
+    }
+}
+
 #[test]
 fn seafloor_colour_change_half_way_is_flagged() {
     let d = tempfile::tempdir().unwrap();

@@ -44,6 +44,21 @@ impl Mask {
         }
     }
 
+    /// The pixels of the `k`×`k` blocks flagged in `blocks` (row by row, `blocks(width, k)` per row; the last
+    /// row and column of blocks cut at the frame) in a `width`×`height` frame.
+    pub fn from_blocks(blocks: &[bool], k: usize, width: usize, height: usize) -> Mask {
+        let bw = crate::method::median::blocks(width, k);
+        assert_eq!(blocks.len(), bw * crate::method::median::blocks(height, k));
+        let ignore = (0..width * height)
+            .map(|i| blocks[(i / width / k) * bw + (i % width) / k])
+            .collect();
+        Mask {
+            width,
+            height,
+            ignore,
+        }
+    }
+
     /// Grow the ignored region by `r` pixels (square neighbourhood).
     pub fn dilate(&self, r: usize) -> Mask {
         let (w, h) = (self.width, self.height);
@@ -276,6 +291,28 @@ fn sharp_structure(median: &Raster, settings: DetectSettings) -> Mask {
 mod tests {
     use super::*;
     use crate::method::median::{block_median, reference};
+
+    #[test]
+    fn a_mask_from_blocks_covers_their_pixels_and_nothing_else() {
+        // 21×13 pixels in blocks of 4: 6×4 blocks, the last column and row cut at the frame.
+        let flagged = [(0usize, 0usize), (5, 1), (2, 3), (5, 3)];
+        let mut blocks = vec![false; 6 * 4];
+        for &(bx, by) in &flagged {
+            blocks[by * 6 + bx] = true;
+        }
+        let m = Mask::from_blocks(&blocks, 4, 21, 13);
+        assert_eq!((m.width, m.height), (21, 13));
+        for y in 0..13 {
+            for x in 0..21 {
+                let want = flagged.iter().any(|&(bx, by)| {
+                    (bx * 4..bx * 4 + 4).contains(&x) && (by * 4..by * 4 + 4).contains(&y)
+                });
+                assert_eq!(m.ignore[y * 21 + x], want, "({x}, {y})");
+            }
+        }
+        // 16 + 4·4 (block (5, 1): one column) + 4·1 (block (2, 3): one row) + 1·1 (block (5, 3)).
+        assert_eq!(m.count(), 16 + 4 + 4 + 1);
+    }
 
     #[test]
     fn masked_block_median_matches_brute_force() {

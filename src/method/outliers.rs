@@ -17,6 +17,7 @@
 
 use crate::method::raster::Raster;
 use crate::method::refine::{between_nodes, near_nodes, node_medians, quantile};
+use crate::method::window::binomial_tail;
 
 /// A block is bright when one of its channels is at least this many times the channel's local level.
 pub const SPOT_RATIO: f32 = 2.0;
@@ -37,6 +38,11 @@ pub const SPOT_GROW: usize = 2;
 /// longer side across around grid nodes that far apart, interpolated bilinearly (as
 /// [`crate::method::refine::near_shape`] does); NaN blocks (a mask) are never spots and do not vote.
 pub fn bright_spots(low: &Raster) -> Vec<bool> {
+    spots_where(low, |_, _| true)
+}
+
+/// [`bright_spots`] whose blocks pass `keep(block, local level of its channels)` before the glare is added.
+fn spots_where(low: &Raster, keep: impl Fn(usize, &[f32]) -> bool) -> Vec<bool> {
     let (w, h, c) = (low.width, low.height, low.channels);
     if w < 8 || h < 8 {
         return Vec::new();
@@ -101,7 +107,7 @@ pub fn bright_spots(low: &Raster) -> Vec<bool> {
         }
         if members.len() <= max_blocks {
             for &b in &members {
-                spots[b] = true;
+                spots[b] = keep(b, &local[b * c..(b + 1) * c]);
             }
         }
     }
@@ -120,6 +126,115 @@ pub fn bright_spots(low: &Raster) -> Vec<bool> {
         }
     }
     out
+}
+
+/// A bright spot counts for a spot path only when a channel's share of its colour is at least this many times that
+/// channel's share of the seafloor's around it: lasers are red or green; bright stones, shells and glints are the
+/// colour of the light. Grey photos have no colour to tell them by, and no spot paths: on the AQUALOC frames (grey,
+/// a camera drifting slowly over amphorae) the bright amphorae came back to the same blocks in every third of the
+/// clip, 7 % of the frame.
+pub const LASER_CHROMA: f32 = 1.5;
+
+/// [`bright_spots`] that have a laser's colour ([`LASER_CHROMA`]); none in a photo of fewer than 3 channels.
+pub fn laser_spots(low: &Raster) -> Vec<bool> {
+    let c = low.channels;
+    if c < 3 {
+        return Vec::new();
+    }
+    spots_where(low, |b, local| {
+        let v = &low.data[b * c..(b + 1) * c];
+        let (sv, sl) = (v.iter().sum::<f32>(), local.iter().sum::<f32>());
+        sv > 0.0
+            && sl > 0.0
+            && v.iter()
+                .zip(local)
+                .any(|(&v, &l)| v / sv >= LASER_CHROMA * l / sl)
+    })
+}
+
+/// A block is on a spot path when it was a bright spot in more of the photos counted than chance would give any
+/// block of the frame with this probability: with `q` the share of all blocks of all photos that were spots and `B`
+/// blocks, the smallest count `t` (at least 2) with `B · P(Binom(photos, q) ≥ t) ≤ PATH_CHANCE`. Objects on the
+/// seafloor pass through the frame, so a block holds them in a photo now and then, by chance; a laser dot moves
+/// only with the altitude and comes back to the same few blocks all mission long.
+pub const PATH_CHANCE: f64 = 0.01;
+
+/// Where bright spots come back to through a mission: the path of laser dots that wander with the altitude
+/// (`--mask-auto`). Counts, per block, the photos whose [`laser_spots`] held it; [`SpotPath::blocks`] keeps the
+/// blocks held in more of them than chance explains ([`PATH_CHANCE`]). (A camera hovering over a red sponge finds
+/// it too: the window's median would have taken it into `F` there, and `F` filled from around it is better.) Left out of every median like a fixed overlay, they leave no
+/// stain where the dot is not, however few photos of a window it held there (`--bright-spots` handles only the
+/// blocks it held in more than half of the window).
+#[derive(Debug, Clone, Default)]
+pub struct SpotPath {
+    width: usize,
+    height: usize,
+    photos: usize,
+    count: Vec<u32>,
+}
+
+impl SpotPath {
+    /// Nothing counted yet.
+    pub fn new() -> SpotPath {
+        SpotPath::default()
+    }
+
+    /// Count the laser-coloured bright spots of one photo's block medians (linear light). A raster of another size
+    /// than the first one counted is passed over (returns `false`).
+    pub fn add(&mut self, low: &Raster) -> bool {
+        if self.photos == 0 {
+            (self.width, self.height) = (low.width, low.height);
+            self.count = vec![0; low.width * low.height];
+        } else if (low.width, low.height) != (self.width, self.height) {
+            return false;
+        }
+        self.photos += 1;
+        for (n, spot) in self.count.iter_mut().zip(laser_spots(low)) {
+            *n += u32::from(spot);
+        }
+        true
+    }
+
+    /// The counts of `self` and `other` together (counted from photos of one size; an empty one takes the other's).
+    pub fn merge(mut self, other: SpotPath) -> SpotPath {
+        if self.photos == 0 {
+            return other;
+        }
+        if other.photos > 0 {
+            assert_eq!(
+                (self.width, self.height),
+                (other.width, other.height),
+                "spot counts of photos of different sizes"
+            );
+            self.photos += other.photos;
+            for (a, b) in self.count.iter_mut().zip(other.count) {
+                *a += b;
+            }
+        }
+        self
+    }
+
+    /// Photos counted.
+    pub fn photos(&self) -> usize {
+        self.photos
+    }
+
+    /// The fewest photos a block must have been a spot in to be on a path ([`PATH_CHANCE`]).
+    pub fn least(&self) -> usize {
+        let spots: u64 = self.count.iter().map(|&n| u64::from(n)).sum();
+        let cells = (self.count.len() * self.photos).max(1);
+        let q = spots as f64 / cells as f64;
+        let blocks = self.count.len() as f64;
+        (2..=self.photos)
+            .find(|&t| blocks * binomial_tail(self.photos, t, q) <= PATH_CHANCE)
+            .unwrap_or(self.photos + 1)
+    }
+
+    /// The blocks on a spot path (row by row; empty before any photo was counted).
+    pub fn blocks(&self) -> Vec<bool> {
+        let least = self.least();
+        self.count.iter().map(|&n| n as usize >= least).collect()
+    }
 }
 
 /// The local level of each block and channel: the median over the `(2r + 1)`² square around grid nodes `r` blocks
@@ -184,6 +299,91 @@ mod tests {
                 assert_eq!(spots[y * 64 + x], want, "block ({x}, {y})");
             }
         }
+    }
+
+    /// 30 photos of the cone of [`scene`] (without its dot), with: a red laser dot at A in two photos of every three
+    /// and at B in the third; a white spot four times the light at one place in every photo (a glint: the light's
+    /// colour); a red spot at a new place in every photo (a red animal passing through); a red spot at one place in
+    /// the first two photos only.
+    #[test]
+    fn a_spot_path_is_where_a_laser_comes_back_all_mission_long() {
+        let (w, h, n) = (64usize, 48usize, 30usize);
+        let (a, b, glint, twice) = ((20usize, 30usize), (30, 30), (44, 14), (12, 12));
+        let photos: Vec<Raster> = (0..n)
+            .map(|i| {
+                let passing = (8 + (i * 7) % 48, 6 + (i * 5) % 36);
+                let dot = if i % 3 == 2 { b } else { a };
+                Raster::from_fn(w, h, 3, |x, y, ch| {
+                    let (fx, fy) = (x as f32 - 32.0, y as f32 - 24.0);
+                    let v = 0.4 * (-(fx * fx + fy * fy) / (2.0 * 12.0f32.powi(2))).exp() + 0.05;
+                    let red = [(dot, true), (passing, true), (twice, i < 2)]
+                        .iter()
+                        .any(|&((px, py), on)| on && (px, py) == (x, y));
+                    if red && ch == 0 {
+                        6.0 * v
+                    } else if (x, y) == glint {
+                        4.0 * v
+                    } else {
+                        v
+                    }
+                })
+            })
+            .collect();
+        let mut path = SpotPath::new();
+        for p in &photos {
+            assert!(path.add(p));
+        }
+        assert_eq!(path.photos(), n);
+        // Counted in two parts and merged: the same.
+        let (mut first, mut second) = (SpotPath::new(), SpotPath::new());
+        for (i, p) in photos.iter().enumerate() {
+            assert!(if i < 11 { first.add(p) } else { second.add(p) });
+        }
+        let merged = SpotPath::new().merge(first).merge(second);
+        assert_eq!((merged.photos(), &merged.count), (n, &path.count));
+        let blocks = path.blocks();
+        let at = |(x, y): (usize, usize)| blocks[y * w + x];
+        assert!(at(a) && at(b), "the laser's places");
+        assert!(!at(glint), "a glint the colour of the light");
+        assert!(!at(twice), "a red spot in two photos");
+        // The passing spots are never on a path, and nothing else is far from the laser.
+        for y in 0..h {
+            for x in 0..w {
+                if at((x, y)) {
+                    assert!(
+                        y.abs_diff(30) <= SPOT_GROW && (18..=32).contains(&x),
+                        "({x}, {y}) on a path"
+                    );
+                }
+            }
+        }
+        // The threshold, directly: the smallest t ≥ 2 with B · P(Binom(n, q) ≥ t) ≤ PATH_CHANCE.
+        let spots: u32 = photos
+            .iter()
+            .map(|p| laser_spots(p).iter().filter(|&&s| s).count() as u32)
+            .sum();
+        let q = spots as f64 / (w * h * n) as f64;
+        let tail = |t: usize| -> f64 {
+            let mut sum = 0.0;
+            for u in t..=n {
+                let mut ln_choose = 0.0f64;
+                for j in 0..u {
+                    ln_choose += ((n - j) as f64).ln() - ((j + 1) as f64).ln();
+                }
+                sum += (ln_choose + u as f64 * q.ln() + (n - u) as f64 * (1.0 - q).ln()).exp();
+            }
+            sum
+        };
+        let want = (2..=n)
+            .find(|&t| (w * h) as f64 * tail(t) <= PATH_CHANCE)
+            .unwrap();
+        assert_eq!(path.least(), want);
+        assert!(want > 2 && want <= 10, "{want}");
+        // A raster of another size is passed over; grey photos have no laser colour.
+        assert!(!path.add(&Raster::filled(8, 8, 3, 0.5)));
+        assert!(
+            laser_spots(&Raster::from_fn(w, h, 1, |x, y, _| photos[0].get(x, y, 0))).is_empty()
+        );
     }
 
     #[test]

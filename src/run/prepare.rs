@@ -9,8 +9,9 @@ use crate::error::{Error, Result};
 use crate::io::{decode, Entry};
 use crate::method::baseline::{block_mean, Method};
 use crate::method::engine::{Engine, Params};
-use crate::method::mask::{detect_static, DetectSettings, Mask};
-use crate::method::raster::{Layout, Raster};
+use crate::method::mask::{block_median_masked, detect_static, DetectSettings, Mask};
+use crate::method::outliers::SpotPath;
+use crate::method::raster::{Layout, Raster, Samples};
 use crate::method::scatter::Scatter;
 use crate::method::transfer::Transfer;
 use crate::run::options::Options;
@@ -211,7 +212,20 @@ fn mask(
     if medians.is_empty() || medians.iter().any(|m| m.layout() != medians[0].layout()) {
         return Ok(mask);
     }
-    let found = detect_static(&medians, DetectSettings::default());
+    let mut found = detect_static(&medians, DetectSettings::default());
+    let fixed = found.count();
+    let many: Vec<Entry> = spread_indices(plan.found.photos.len(), PATH_PHOTOS)
+        .into_iter()
+        .map(|i| plan.found.photos[i].clone())
+        .collect();
+    progress.stage(&format!(
+        "looking for the paths of laser dots in {} photos spread over the mission",
+        many.len()
+    ));
+    let path = spot_path(&many, &found, opts.block(), opts.transfer);
+    if let Some(p) = &path {
+        found.union(p);
+    }
     let p = plan
         .work_dir
         .as_deref()
@@ -220,10 +234,11 @@ fn mask(
     if plan.work_dir.is_some() {
         found.save(&p)?;
     }
-    let share = found.count() as f64 / found.ignore.len().max(1) as f64;
+    let share = |n: usize| 100.0 * n as f64 / found.ignore.len().max(1) as f64;
     progress.stage(&format!(
-        "static pixels found: {:.2} % of the frame, written to {}",
-        100.0 * share,
+        "static pixels found: {:.2} % of the frame, laser dots' paths {:.2} %; mask written to {}",
+        share(fixed),
+        share(found.count() - fixed),
         p.display()
     ));
     match &mut mask {
@@ -232,6 +247,50 @@ fn mask(
         None => mask = Some(found),
     }
     Ok(mask)
+}
+
+/// Photos (spread over the mission) in which [`spot_path`] looks for laser dots: every photo of a mission up to this
+/// length. On the 71-photo Nephrops run, all of them found the dots in 1.72 % of the frame where 45 found 1.38 %,
+/// and the stains left went down by another 2–7 %. The cost is one more decode of these photos (the Nephrops runs:
+/// +25 % of the run's time; a long mission of 12 MP photos: 400 decodes, well under 1 % of its time).
+const PATH_PHOTOS: usize = 400;
+
+/// The blocks where laser-coloured bright spots came back to over the photos of `sample` ([`SpotPath`]: laser dots
+/// that wander with the altitude), as a pixel mask; `None` when there are none. Block medians of `k` pixels, leaving out what
+/// `fixed` (the static pixels) ignores, in linear light; photos that do not decode or differ in size from `fixed`
+/// are passed over (the correction stream reports them).
+fn spot_path(sample: &[Entry], fixed: &Mask, k: usize, transfer: Transfer) -> Option<Mask> {
+    let (w, h) = (fixed.width, fixed.height);
+    // Counted as the photos decode (a count per block and thread), not kept: 400 block images of 12 MP photos
+    // would take 0.9 GB.
+    let path = sample
+        .par_iter()
+        .fold(SpotPath::new, |mut path, e| {
+            let Ok(p) = decode(&e.path) else {
+                return path;
+            };
+            let l = p.layout;
+            if (l.width, l.height) != (w, h) {
+                return path;
+            }
+            let mut low = match &p.samples {
+                Samples::U8(v) => block_median_masked(v, l, k, fixed),
+                Samples::U16(v) => block_median_masked(v, l, k, fixed),
+            };
+            drop(p);
+            if !transfer.is_linear() {
+                for v in &mut low.data {
+                    *v = transfer.to_linear(*v);
+                }
+            }
+            path.add(&low);
+            path
+        })
+        .reduce(SpotPath::new, SpotPath::merge);
+    let blocks = path.blocks();
+    blocks
+        .contains(&true)
+        .then(|| Mask::from_blocks(&blocks, k, w, h))
 }
 
 /// Up to `most` indices spread evenly over `0..n` (first and last included).
