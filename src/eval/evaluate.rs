@@ -496,17 +496,9 @@ fn truth_file(p: &Path) -> PathBuf {
 
 /// Set the pixels `mask` ignores to NaN in every channel: the consistency metric leaves out every mosaic cell
 /// observation that touches one, and them from the photos' mean and standard deviation. A mask of another size than
-/// the photo is an error naming the mask (`path`).
+/// the photo, or one that ignores every pixel, is an error naming the mask (`path`), as for `correct --mask`.
 pub fn leave_out(r: &mut Raster, mask: &Mask, path: &Path) -> Result<()> {
-    if (mask.width, mask.height) != (r.width, r.height) {
-        return Err(Error::Mismatch {
-            path: path.to_owned(),
-            reason: format!(
-                "the mask is {}x{}, the photos are {}x{}",
-                mask.width, mask.height, r.width, r.height
-            ),
-        });
-    }
+    mask.check(r.layout(), path)?;
     let c = r.channels;
     for (px, &ignore) in r.data.chunks_exact_mut(c).zip(&mask.ignore) {
         if ignore {
