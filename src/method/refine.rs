@@ -305,13 +305,17 @@ pub fn near_shape(m: &Raster, near: &Raster, s: Option<&Raster>) -> Raster {
     let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
     let mut out = m.clone();
     for ch in 0..c {
-        let log_ratio = |x: usize, y: usize| {
+        let ratio = |x: usize, y: usize| {
             let i = (y * w + x) * c + ch;
             let (a, b) = (m.data[i] - sv(i), near.data[i] - sv(i));
-            (a > NEAR_MIN_LIT && b > NEAR_MIN_LIT && (b / a).is_finite()).then(|| (b / a).ln())
+            (a > NEAR_MIN_LIT && b > NEAR_MIN_LIT && (b / a).is_finite()).then_some(b / a)
         };
-        // The median log ratio around each node (NaN without votes).
-        let node = node_medians(&gx, &gy, r, (w, h), log_ratio);
+        // The median log ratio around each node (NaN without votes): the log of the median ratio, since the median
+        // picks one of the votes and the logarithm keeps their order (one logarithm per node, not per vote).
+        let mut node = node_medians(&gx, &gy, r, (w, h), ratio);
+        for v in &mut node {
+            *v = v.ln();
+        }
         for y in 0..h {
             for x in 0..w {
                 if let Some(g) = between_nodes(|j, k| node[j * gx.len() + k], &gx, &gy, x, y) {
