@@ -356,9 +356,14 @@ struct CorrectArgs {
     #[arg(long, value_name = "FILE", help_heading = H_IN)]
     mask: Option<PathBuf>,
 
-    /// Also mask pixels that stay the same through the mission (overlays, lasers).
+    /// Also mask pixels that stay the same through the mission (overlays, lasers), and where laser dots wander.
     ///
-    /// The mask found is written to <out>/_abysslight/mask-auto.png, to check and to reuse with --mask.
+    /// Static pixels are found in medians of the mission's three thirds. Laser dots that move with the altitude
+    /// are found as blocks where a red or green bright spot comes back more often than chance would bring
+    /// anything there (up to 400 photos spread over the mission are read once more for it; grey photos get no
+    /// laser paths). The masked dots are corrected like the seafloor around them, so no stain is left where they
+    /// are not; they themselves stay visible (score overlaps with `evaluate --mask`). The mask found is written to
+    /// <out>/_abysslight/mask-auto.png, to check and to reuse with --mask.
     #[arg(long, help_heading = H_IN)]
     mask_auto: bool,
 
@@ -463,9 +468,9 @@ struct CorrectArgs {
     /// most photos, and the window's median takes them into F: a coloured stain (teal beside a red laser) in the
     /// photos where the dot is not. With this flag each photo's blocks at least twice as bright as the seafloor
     /// around them, in small groups, count as spots, and where spots held more than half of the window F is
-    /// filled from the blocks around (--mask-auto covers only what never moves). The dots themselves then keep
-    /// their full brightness, which raises the overlap difference (docs/evaluation.md); a --mask over the dots'
-    /// path does both.
+    /// filled from the blocks around. The dots themselves then keep their full brightness, which raises the
+    /// overlap difference (docs/evaluation.md). For red or green laser dots --mask-auto does more: it masks their
+    /// whole path, so fainter stains go too.
     #[arg(long, help_heading = H_METHOD)]
     bright_spots: bool,
 
