@@ -14,6 +14,11 @@
 //! more than half of the window, and leaves it alone elsewhere. The dots themselves then keep their full brightness
 //! (before, `F` held part of them and dimmed them), which raises the overlap difference of the Nephrops runs; that
 //! is why it is not the default (docs/evaluation.md, "Bright spots that move").
+//!
+//! [`SpotPath`] finds, before the run (`--mask-auto`), the blocks where red or green bright spots ([`laser_spots`])
+//! come back to more often than chance over photos spread across the mission: the path a laser dot wanders along.
+//! They join the mask of static pixels, so no photo's median holds them (docs/evaluation.md, "The paths of laser
+//! dots").
 
 use crate::method::raster::Raster;
 use crate::method::refine::{between_nodes, near_nodes, node_medians, quantile};
@@ -161,10 +166,11 @@ pub const PATH_CHANCE: f64 = 0.01;
 
 /// Where bright spots come back to through a mission: the path of laser dots that wander with the altitude
 /// (`--mask-auto`). Counts, per block, the photos whose [`laser_spots`] held it; [`SpotPath::blocks`] keeps the
-/// blocks held in more of them than chance explains ([`PATH_CHANCE`]). (A camera hovering over a red sponge finds
-/// it too: the window's median would have taken it into `F` there, and `F` filled from around it is better.) Left out of every median like a fixed overlay, they leave no
-/// stain where the dot is not, however few photos of a window it held there (`--bright-spots` handles only the
-/// blocks it held in more than half of the window).
+/// blocks held in more of them than chance explains ([`PATH_CHANCE`]). Left out of every median like a fixed
+/// overlay, they leave no stain where the dot is not, however few photos of a window it held there
+/// (`--bright-spots` handles only the blocks it held in more than half of the window). A camera hovering over a red
+/// sponge finds it too: the window's median would have taken it into `F` there, and `F` filled from around it is
+/// better.
 #[derive(Debug, Clone, Default)]
 pub struct SpotPath {
     width: usize,
