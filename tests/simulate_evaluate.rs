@@ -198,6 +198,61 @@ fn simulated_truth_placements_give_consistent_albedo() {
     assert!(t < 0.15 && t < r / 3.0, "truth {t}, raw {r}");
 }
 
+/// `evaluate --mask`: with a truth the albedo scores ignore the mask and the consistency leaves its pixels out (a
+/// mask over the left half of the frame changes it); without a truth, the same consistency as with one; a mask that
+/// ignores every pixel, or of another size, is an error naming it.
+#[test]
+fn an_evaluation_mask_leaves_pixels_out_of_the_consistency_only() {
+    use abysslight::method::mask::Mask;
+    let d = tempfile::tempdir().unwrap();
+    let sim = Simulation {
+        frames: 6,
+        water_column: 0,
+        width: 96,
+        height: 72,
+        ..Simulation::default()
+    };
+    sim.write(d.path()).unwrap();
+    let mut half = Mask::empty(96, 72);
+    for (i, m) in half.ignore.iter_mut().enumerate() {
+        *m = i % 96 < 48;
+    }
+    half.save(&d.path().join("half.png")).unwrap();
+    let run = |truth: bool, mask: Option<&str>| {
+        evaluate(
+            &[("raw".into(), d.path().join("survey"))],
+            truth.then(|| d.path()),
+            Some(&d.path().join("truth/placements.txt")),
+            &EvalSettings {
+                mask: mask.map(|m| d.path().join(m)),
+                ..EvalSettings::default()
+            },
+        )
+    };
+    let plain = run(true, None).unwrap().sets.remove(0);
+    let masked = run(true, Some("half.png")).unwrap().sets.remove(0);
+    assert_eq!(plain.albedo_error, masked.albedo_error);
+    assert_eq!(plain.residual_pattern, masked.residual_pattern);
+    let (a, b) = (plain.consistency.unwrap(), masked.consistency.unwrap());
+    assert!((a - b).abs() > 1e-3 * a, "{a} {b}");
+    let no_truth = run(false, Some("half.png")).unwrap().sets.remove(0);
+    // The same up to the order of the sums (the cells are kept in a hash map).
+    assert!(
+        (no_truth.consistency.unwrap() - b).abs() < 1e-12,
+        "{no_truth:?} {b}"
+    );
+    let mut all = Mask::empty(96, 72);
+    all.ignore.fill(true);
+    all.save(&d.path().join("all.png")).unwrap();
+    Mask::empty(40, 30)
+        .save(&d.path().join("small.png"))
+        .unwrap();
+    for m in ["all.png", "small.png"] {
+        let e = run(false, Some(m)).unwrap_err().to_string();
+        assert!(e.contains(m), "{e}");
+    }
+}
+
 type Score = (f64, f64);
 
 /// Albedo error and residual pattern of raw, mean, polynomial and paper on a simulated dive.
