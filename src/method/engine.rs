@@ -372,15 +372,17 @@ impl<T> Engine<T> {
         }
         let (n, c) = (entries.len(), m.channels);
         let mut holes = false;
-        for (i, v) in m.data.iter_mut().enumerate() {
+        // Counted once per block: a block's samples are NaN in every channel or in none (a mask leaves a block
+        // without pixels in all of them).
+        for (b, px) in m.data.chunks_exact_mut(c).enumerate() {
             let out = entries
                 .iter()
                 .filter(|(_, low, _, s)| {
-                    s.as_ref().is_some_and(|s| s[i / c]) && !low.data[i].is_nan()
+                    s.as_ref().is_some_and(|s| s[b]) && !low.data[b * c].is_nan()
                 })
                 .count();
             if 2 * out > n {
-                *v = f32::NAN;
+                px.fill(f32::NAN);
                 holes = true;
             }
         }
