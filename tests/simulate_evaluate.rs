@@ -167,10 +167,8 @@ fn simulator_is_deterministic_by_seed() {
     );
 }
 
-#[test]
-fn simulated_truth_placements_give_consistent_albedo() {
-    // The true albedo of overlapping photos, placed with the simulator's homographies, is almost consistent
-    // (only resampling differences), while the raw photos are not.
+/// A simulated dive of six 96×72 photos (no water column) written to a temporary folder.
+fn six_photo_dive() -> tempfile::TempDir {
     let d = tempfile::tempdir().unwrap();
     let sim = Simulation {
         frames: 6,
@@ -180,6 +178,14 @@ fn simulated_truth_placements_give_consistent_albedo() {
         ..Simulation::default()
     };
     sim.write(d.path()).unwrap();
+    d
+}
+
+#[test]
+fn simulated_truth_placements_give_consistent_albedo() {
+    // The true albedo of overlapping photos, placed with the simulator's homographies, is almost consistent
+    // (only resampling differences), while the raw photos are not.
+    let d = six_photo_dive();
     let ev = evaluate(
         &[
             ("truth".into(), d.path().join("truth/albedo")),
@@ -204,15 +210,7 @@ fn simulated_truth_placements_give_consistent_albedo() {
 #[test]
 fn an_evaluation_mask_leaves_pixels_out_of_the_consistency_only() {
     use abysslight::method::mask::Mask;
-    let d = tempfile::tempdir().unwrap();
-    let sim = Simulation {
-        frames: 6,
-        water_column: 0,
-        width: 96,
-        height: 72,
-        ..Simulation::default()
-    };
-    sim.write(d.path()).unwrap();
+    let d = six_photo_dive();
     let mut half = Mask::empty(96, 72);
     for (i, m) in half.ignore.iter_mut().enumerate() {
         *m = i % 96 < 48;
