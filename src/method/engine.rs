@@ -130,7 +130,7 @@ pub struct Engine<T> {
 
 /// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
 /// computes it (`(a + b)·0.5·(1/255)`), with its linear light. Empty for a linear curve.
-fn median_linear_table(transfer: Transfer) -> Vec<(f32, f32)> {
+pub(crate) fn median_linear_table(transfer: Transfer) -> Vec<(f32, f32)> {
     if transfer.is_linear() {
         return Vec::new();
     }
@@ -150,6 +150,32 @@ fn median_to_linear(table: &[(f32, f32)], transfer: Transfer, v: f32) -> f32 {
         Some(&(key, lin)) if key.to_bits() == v.to_bits() => lin,
         _ => transfer.to_linear(v),
     }
+}
+
+/// A photo's `k`×`k` block medians in linear light, the pixels `mask` ignores left out (NaN where a whole block
+/// is); `table` is [`median_linear_table`]`(transfer)`.
+pub(crate) fn linear_block_medians(
+    photo: &Photo,
+    k: usize,
+    mask: Option<&Mask>,
+    transfer: Transfer,
+    table: &[(f32, f32)],
+) -> Raster {
+    let l = photo.layout;
+    let mut low = match (&photo.samples, mask) {
+        (Samples::U8(v), None) => block_median(v, l.width, l.height, l.channels, k),
+        (Samples::U16(v), None) => block_median(v, l.width, l.height, l.channels, k),
+        (Samples::U8(v), Some(m)) => block_median_masked(v, l, k, m),
+        (Samples::U16(v), Some(m)) => block_median_masked(v, l, k, m),
+    };
+    if !transfer.is_linear() {
+        // The value computed exactly as the block median computes it is looked up; any other (16-bit samples, NaN
+        // under a mask) is converted directly: the same result either way.
+        for v in &mut low.data {
+            *v = median_to_linear(table, transfer, *v);
+        }
+    }
+    low
 }
 
 impl<T> Engine<T> {
@@ -402,22 +428,13 @@ impl<T> Engine<T> {
 
     /// The photo's `K`×`K` block medians, in linear light (masked pixels left out).
     fn block_medians(&self, photo: &Photo) -> Raster {
-        let (l, k) = (photo.layout, self.params.downsample);
-        let mut low = match (&photo.samples, &self.mask) {
-            (Samples::U8(v), None) => block_median(v, l.width, l.height, l.channels, k),
-            (Samples::U16(v), None) => block_median(v, l.width, l.height, l.channels, k),
-            (Samples::U8(v), Some(m)) => block_median_masked(v, l, k, m),
-            (Samples::U16(v), Some(m)) => block_median_masked(v, l, k, m),
-        };
-        let transfer = self.params.transfer;
-        if !transfer.is_linear() {
-            // The value computed exactly as the block median computes it is looked up; any other (16-bit
-            // samples, NaN under a mask) is converted directly: the same result either way.
-            for v in &mut low.data {
-                *v = median_to_linear(&self.median_linear_8, transfer, *v);
-            }
-        }
-        low
+        linear_block_medians(
+            photo,
+            self.params.downsample,
+            self.mask.as_ref(),
+            self.params.transfer,
+            &self.median_linear_8,
+        )
     }
 
     /// Every waiting photo whose window is complete (all of them at the end of the mission).

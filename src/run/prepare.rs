@@ -8,10 +8,10 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::io::{decode, Entry};
 use crate::method::baseline::{block_mean, Method};
-use crate::method::engine::{Engine, Params};
-use crate::method::mask::{block_median_masked, detect_static, DetectSettings, Mask};
+use crate::method::engine::{linear_block_medians, median_linear_table, Engine, Params};
+use crate::method::mask::{detect_static, DetectSettings, Mask};
 use crate::method::outliers::SpotPath;
-use crate::method::raster::{Layout, Raster, Samples};
+use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
 use crate::method::transfer::Transfer;
 use crate::run::options::Options;
@@ -261,6 +261,7 @@ const PATH_PHOTOS: usize = 400;
 /// are passed over (the correction stream reports them).
 fn spot_path(sample: &[Entry], fixed: &Mask, k: usize, transfer: Transfer) -> Option<Mask> {
     let (w, h) = (fixed.width, fixed.height);
+    let table = median_linear_table(transfer);
     // Counted as the photos decode (a count per block and thread), not kept: 400 block images of 12 MP photos
     // would take 0.9 GB.
     let path = sample
@@ -269,21 +270,10 @@ fn spot_path(sample: &[Entry], fixed: &Mask, k: usize, transfer: Transfer) -> Op
             let Ok(p) = decode(&e.path) else {
                 return path;
             };
-            let l = p.layout;
-            if (l.width, l.height) != (w, h) {
+            if (p.layout.width, p.layout.height) != (w, h) {
                 return path;
             }
-            let mut low = match &p.samples {
-                Samples::U8(v) => block_median_masked(v, l, k, fixed),
-                Samples::U16(v) => block_median_masked(v, l, k, fixed),
-            };
-            drop(p);
-            if !transfer.is_linear() {
-                for v in &mut low.data {
-                    *v = transfer.to_linear(*v);
-                }
-            }
-            path.add(&low);
+            path.add(&linear_block_medians(&p, k, Some(fixed), transfer, &table));
             path
         })
         .reduce(SpotPath::new, SpotPath::merge);
