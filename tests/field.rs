@@ -258,33 +258,19 @@ fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
         )
         .unwrap();
         assert_eq!(r.corrected, frames);
-        // Each photo at the place its dot is not; the median over the photos (a nodule may sit under one disc).
-        let mut off: Vec<f64> = (0..frames)
-            .map(|f| {
-                let p = normalised(&decode(&out.join(format!("img{}.png", f + 1))).unwrap());
-                let missing = if at(f) == a { b } else { a };
-                stain(&p, &dive.albedo[f], missing)
-            })
+        // Each place in the photos whose dot is elsewhere; the median over them (a nodule may sit under one disc).
+        let photos: Vec<Vec<f32>> = (1..=frames)
+            .map(|i| normalised(&decode(&out.join(format!("img{i}.png"))).unwrap()))
             .collect();
-        off.sort_by(f64::total_cmp);
-        let (at_a, at_b): (Vec<f64>, Vec<f64>) = {
-            let at_place = |place: usize| -> Vec<f64> {
-                (0..frames)
-                    .filter(|&f| at(f) != place)
-                    .map(|f| {
-                        let p =
-                            normalised(&decode(&out.join(format!("img{}.png", f + 1))).unwrap());
-                        stain(&p, &dive.albedo[f], place)
-                    })
-                    .collect()
-            };
-            (at_place(a), at_place(b))
-        };
-        let median = |mut v: Vec<f64>| {
+        let at_place = |place: usize| {
+            let mut v: Vec<f64> = (0..frames)
+                .filter(|&f| at(f) != place)
+                .map(|f| stain(&photos[f], &dive.albedo[f], place))
+                .collect();
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
         };
-        let (sa, sb) = (median(at_a), median(at_b));
+        let (sa, sb) = (at_place(a), at_place(b));
         eprintln!("mask-auto {auto}: red where the dot is not, against the ring around: at A {sa:.3}, at B {sb:.3}");
         worst.push((sa, sb));
         if auto {
