@@ -281,7 +281,7 @@ fn main() {
                 survey: Some(survey.clone()),
                 out: Some(dir.join(label)),
                 contamination: Some(spec.contamination),
-                transfer: t_enc,
+                transfer: Some(t_enc),
                 ..Options::default()
             });
             let report = correct_mission(&o, &Silent)

@@ -138,7 +138,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             water_column: set.water_column.map(|w| data.join(w)),
             out: Some(corrected.clone()),
             window: Some(set.window),
-            transfer: Transfer::Srgb,
+            transfer: Some(Transfer::Srgb),
             mask_auto: set.mask_auto,
             save_factors: true,
             ..Options::default()

@@ -104,7 +104,7 @@ fn correct_dive(sim: &Simulation, dive: &std::path::Path, out: &std::path::Path,
             survey: Some(dive.join("survey")),
             out: Some(out.to_path_buf()),
             contamination: Some(sim.contamination),
-            transfer: sim.encode,
+            transfer: Some(sim.encode),
             ..opts
         },
         &Silent,
@@ -357,7 +357,7 @@ fn sound_abyssal_dives_raise_no_flags() {
                 survey: Some(dive.join("survey")),
                 out: Some(out),
                 contamination: Some(sim.contamination),
-                transfer: sim.encode,
+                transfer: Some(sim.encode),
                 ..Options::default()
             },
             &Silent,

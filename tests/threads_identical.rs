@@ -61,7 +61,7 @@ fn outputs_are_byte_identical_for_1_2_and_3_threads() {
                 threads: Some(threads),
                 window: Some(5),
                 downsample: Some(8),
-                transfer,
+                transfer: Some(transfer),
                 ..Options::default()
             };
             let r = correct_mission(&opts, &Silent).unwrap();

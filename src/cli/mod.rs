@@ -632,117 +632,8 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         Some(p) => Options::from_toml_file(p)?,
         None => Options::default(),
     };
-    // A config file that names the curve (`transfer` or `transfer-auto`) keeps it; otherwise the command line's
-    // default, auto, applies.
-    let transfer_in_config = args.config.as_ref().is_some_and(|p| {
-        std::fs::read_to_string(p)
-            .ok()
-            .and_then(|t| t.parse::<toml::Table>().ok())
-            .is_some_and(|t| {
-                ["transfer", "transfer-auto", "transfer_auto"]
-                    .iter()
-                    .any(|k| t.contains_key(*k))
-            })
-    });
-    macro_rules! set {
-        ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
-    }
-    set!(
-        water_column,
-        scatter,
-        survey,
-        out,
-        threads,
-        mask,
-        idle_timeout,
-        report
-    );
-    o.watch |= args.watch;
-    if let Some(v) = args.poll_interval {
-        o.poll_interval = v;
-    }
-    match args.transfer {
-        Some(TransferArg(Some(t))) => {
-            o.transfer = t;
-            o.transfer_auto = false;
-        }
-        // `auto`, or no --transfer and none in a --config file: read it from the photos.
-        Some(TransferArg(None)) => o.transfer_auto = true,
-        None if !transfer_in_config => o.transfer_auto = true,
-        None => {}
-    }
-    if let Some(m) = args.method {
-        o.method = m;
-    }
-    if let Some(d) = args.degree {
-        o.degree = d;
-    }
-    if let Some(v) = args.relative_floor {
-        o.relative_floor = v;
-    }
-    if args.no_photo_gain {
-        o.photo_gain = false;
-    }
-    if let Some(ScaleArg(k)) = args.backscatter_scale {
-        o.backscatter_scale = k;
-    }
-    if args.no_level_by_light {
-        o.level_by_light = false;
-    }
-    if args.bright_spots {
-        o.bright_spots = true;
-    }
-    if args.no_denoise {
-        o.denoise = false;
-    }
-    o.mask_auto |= args.mask_auto;
-    if args.water_column.is_some() {
-        o.scatter = None;
-    }
-    if args.scatter.is_some() {
-        o.water_column = None;
-    }
-    if let Some(n) = args.window {
-        o.window = Some(n);
-        o.contamination = None;
-    }
-    if let Some(c) = args.contamination {
-        o.contamination = Some(c);
-        o.window = None;
-    }
-    if let Some(v) = args.risk {
-        o.risk = v;
-    }
-    if let Some(BlocksArg(v)) = args.downsample {
-        o.downsample = v;
-    }
-    if let Some(NearArg(v)) = args.near_window {
-        o.near_window = v;
-    }
-    if let Some(v) = args.seafloor_colour {
-        o.seafloor_colour = v;
-    }
-    if let Some(v) = args.factor_floor {
-        o.factor_floor = v;
-    }
-    if let Some(v) = args.png_compression {
-        o.png_compression = v;
-    }
-    if let Some(v) = args.jpeg_quality {
-        o.jpeg_quality = Some(v);
-    }
-    if let Some(v) = args.jpeg_subsampling {
-        o.jpeg_subsampling = Some(v);
-    }
-    o.save_scatter |= args.save_scatter;
-    o.resume |= args.resume;
-    if let Some(v) = args.limit {
-        o.limit = Some(v);
-    }
-    if let Some(v) = args.shard {
-        o.shard = Some(v);
-    }
-    o.save_factors |= args.save_factors;
+    set_run_flags(args, &mut o);
+    set_method_flags(args, &mut o);
     if o.survey.is_none() {
         return Err(Error::Usage(
             "--survey DIR is required (or survey = \"DIR\" in --config)".into(),
@@ -766,6 +657,84 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         abysslight::io::paths::check_outputs(&outs, &[("config file", cfg)])?;
     }
     Ok(o)
+}
+
+/// The flags that say where photos come from and go to, and how the run goes.
+fn set_run_flags(args: &CorrectArgs, o: &mut Options) {
+    macro_rules! set {
+        ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = Some(v.clone()); } )*};
+    }
+    set!(
+        water_column,
+        scatter,
+        survey,
+        out,
+        threads,
+        mask,
+        idle_timeout,
+        report,
+        jpeg_quality,
+        jpeg_subsampling,
+        limit,
+        shard
+    );
+    if args.water_column.is_some() {
+        o.scatter = None;
+    }
+    if args.scatter.is_some() {
+        o.water_column = None;
+    }
+    o.watch |= args.watch;
+    o.mask_auto |= args.mask_auto;
+    o.save_scatter |= args.save_scatter;
+    o.save_factors |= args.save_factors;
+    o.resume |= args.resume;
+    if let Some(v) = args.poll_interval {
+        o.poll_interval = v;
+    }
+    if let Some(v) = args.png_compression {
+        o.png_compression = v;
+    }
+}
+
+/// The flags of the method (src/method/params.rs says what each one does).
+fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
+    macro_rules! set {
+        ($($f:ident),*) => {$( if let Some(v) = &args.$f { o.$f = v.clone(); } )*};
+    }
+    set!(
+        method,
+        degree,
+        relative_floor,
+        risk,
+        seafloor_colour,
+        factor_floor
+    );
+    // `--transfer auto` is `None`, as in a config file and by default.
+    if let Some(TransferArg(t)) = args.transfer {
+        o.transfer = t;
+    }
+    if let Some(ScaleArg(k)) = args.backscatter_scale {
+        o.backscatter_scale = k;
+    }
+    if let Some(BlocksArg(v)) = args.downsample {
+        o.downsample = v;
+    }
+    if let Some(NearArg(v)) = args.near_window {
+        o.near_window = v;
+    }
+    o.photo_gain &= !args.no_photo_gain;
+    o.denoise &= !args.no_denoise;
+    o.level_by_light &= !args.no_level_by_light;
+    o.bright_spots |= args.bright_spots;
+    if let Some(n) = args.window {
+        o.window = Some(n);
+        o.contamination = None;
+    }
+    if let Some(c) = args.contamination {
+        o.contamination = Some(c);
+        o.window = None;
+    }
 }
 
 /// Progress on stderr: a bar on a terminal, plain lines otherwise, nothing but errors with --quiet.
@@ -865,7 +834,7 @@ fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
     if args.dry_run {
         // The same checks and listing as a run, and nothing written.
         let plan = abysslight::run::plan::Plan::new(&opts, &abysslight::Silent)?;
-        print!("{}", plan.describe(&opts));
+        print!("{}", plan.describe(&opts)?);
         println!("dry run: nothing was written");
         return Ok(ExitCode::from(EXIT_OK));
     }

@@ -95,7 +95,7 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
             survey: Some(dive.join("survey")),
             out: Some(out.join(m.to_string())),
             contamination: Some(sim.contamination.max(0.01)),
-            transfer: sim.encode,
+            transfer: Some(sim.encode),
             method: m,
             ..Options::default()
         };

@@ -20,25 +20,26 @@
 //! Memory: at most `n` low-resolution images in the ring buffer and at most `n/2 + 1` full-resolution photos
 //! waiting for the photos after them (`n` at the start of a mission), whatever the mission's length.
 
-use std::collections::VecDeque;
 use std::ops::Range;
 use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::method::baseline::{polynomial_m, Method};
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats, NEGLIGIBLE_BLEND};
-use crate::method::factor::{auto_block, factor, lit_seafloor, upsample};
+use crate::method::factor::{factor, lit_seafloor, upsample};
 use crate::method::mask::{block_median_masked, fill_missing, Mask};
 use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 use crate::method::outliers::bright_spots;
+use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
+use crate::method::ring::Ring;
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::transfer::{Curve, Transfer};
-use crate::method::window::{near_range, window_range};
+use crate::method::window::near_range;
 
 /// What the engine does with a photo it is given.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,7 +85,6 @@ pub struct Corrected<T> {
 }
 
 struct Waiting<T> {
-    seq: usize,
     tag: T,
     photo: Option<Photo>,
     use_: Use,
@@ -117,15 +117,11 @@ pub struct Engine<T> {
     colour: Vec<f32>,
     layout: Option<Layout>,
     monitor: Monitor,
-    /// The window's block medians: sequence number, the `K`×`K` blocks, for blocks of 5 pixels or fewer the
-    /// same pooled to about 8 pixels for the monitor ([`pool_factor`]), and with `--bright-spots` the photo's
-    /// blocks of bright spots (one flag per block).
-    ring: VecDeque<RingEntry>,
+    /// The window's block images and the photos waiting for theirs.
+    ring: Ring<RingEntry, Waiting<T>>,
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
-    waiting: VecDeque<Waiting<T>>,
-    seq: usize,
 }
 
 /// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
@@ -188,18 +184,17 @@ impl<T> Engine<T> {
                 "the window must be an odd number of photos, got {n}"
             )));
         }
-        let mut params = params;
-        if params.downsample == 0 {
-            // From the photos' size where S or the mask knows it; else at the first photo (`accept`).
-            let size = scatter
+        // `auto` resolved (src/method/params.rs): the blocks from the photos' size where S or the mask knows it,
+        // else at the first photo (`accept`); photos in memory declare no curve.
+        let params = params.resolved(&Facts {
+            size: scatter
                 .map(|s| (s.layout.width, s.layout.height))
-                .or(mask.as_ref().map(|m| (m.width, m.height)));
-            if let Some((w, h)) = size {
-                params.downsample = auto_block(w, h);
-            }
-        }
+                .or(mask.as_ref().map(|m| (m.width, m.height))),
+            masked: mask.is_some(),
+            transfer: None,
+        });
         let k = params.downsample.max(1);
-        let transfer = params.transfer;
+        let transfer = params.curve();
         if let (Some(m), Some(s)) = (&mask, scatter) {
             if (m.width, m.height) != (s.layout.width, s.layout.height) {
                 return Err(Error::Usage(format!(
@@ -242,10 +237,8 @@ impl<T> Engine<T> {
             colour: Vec::new(),
             layout: None,
             monitor: Monitor::new(Thresholds::default()).with_window(n),
-            ring: VecDeque::with_capacity(n + 1),
+            ring: Ring::new(n),
             judged_fixed: None,
-            waiting: VecDeque::new(),
-            seq: 0,
         })
     }
 
@@ -266,12 +259,12 @@ impl<T> Engine<T> {
 
     /// Photos accepted so far.
     pub fn accepted(&self) -> usize {
-        self.seq
+        self.ring.pushed()
     }
 
     /// Photos accepted but not yet out (waiting for the photos after them).
     pub fn waiting(&self) -> usize {
-        self.waiting.len()
+        self.ring.waiting()
     }
 
     /// Give the next photo of the mission, to be corrected. Returns the photos whose window became complete, in
@@ -287,27 +280,21 @@ impl<T> Engine<T> {
         self.accept(&photo)?;
         let t = Instant::now();
         let low = self.block_medians(&photo);
-        let n = self.params.window;
         let judged = match pool_factor(self.params.downsample) {
             1 => None,
             p => Some(pooled(&low, p)),
         };
         // With `--bright-spots`: this photo's blocks of bright spots that move (laser dots, highlights).
-        let spots = (self.params.method == Method::Abyss && self.params.bright_spots)
+        let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
             .then(|| bright_spots(&low))
             .filter(|s| !s.is_empty());
-        self.ring.push_back((self.seq, low, judged, spots));
-        if self.ring.len() > n {
-            self.ring.pop_front();
-        }
-        self.waiting.push_back(Waiting {
-            seq: self.seq,
+        let waiting = Waiting {
             tag,
             photo: (use_ == Use::Correct).then_some(photo),
             use_,
             downsample_ms: ms(t),
-        });
-        self.seq += 1;
+        };
+        self.ring.push(RingEntry { low, judged, spots }, waiting);
         Ok(self.flush(false))
     }
 
@@ -347,15 +334,19 @@ impl<T> Engine<T> {
                     }
                 }
                 self.layout = Some(photo.layout);
-                if self.params.downsample == 0 {
-                    self.params.downsample = auto_block(photo.layout.width, photo.layout.height);
-                }
+                let (w, h) = (photo.layout.width, photo.layout.height);
+                self.params = self.params.resolved(&Facts {
+                    size: Some((w, h)),
+                    masked: self.mask.is_some(),
+                    transfer: None,
+                });
+                let transfer = self.params.curve();
                 self.colour = self
                     .params
                     .seafloor_colour
                     .for_channels(photo.layout.channels)
                     .into_iter()
-                    .map(|c| self.params.transfer.to_linear(c))
+                    .map(|c| transfer.to_linear(c))
                     .collect();
                 Ok(())
             }
@@ -374,8 +365,8 @@ impl<T> Engine<T> {
         match (self.params.method, mission_mean) {
             (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
             (Method::Polynomial, _) => polynomial_m(own, s_low, self.params.degree),
-            (Method::Abyss, _) if self.params.window_quantile != 0.5 => {
-                stack_quantile(stack, self.params.window_quantile as f64)
+            (Method::Abyss, _) if self.params.window_quantile() != 0.5 => {
+                stack_quantile(stack, self.params.window_quantile() as f64)
             }
             _ => stack_median(stack),
         }
@@ -389,11 +380,11 @@ impl<T> Engine<T> {
     /// ranking them above every value moved it up; both raised the residual pattern of high-contamination matrix
     /// dives, a09 by 1.15–1.75×: docs/evaluation.md, "Bright spots that move".)
     fn without_spots(&self, m: &mut Raster, range: &Range<usize>) {
-        if !self.params.bright_spots {
+        if !self.params.steps.bright_spots {
             return;
         }
-        let entries: Vec<&RingEntry> = in_range(&self.ring, range.clone()).collect();
-        if entries.iter().all(|(.., s)| s.is_none()) {
+        let entries: Vec<&RingEntry> = self.ring.in_range(range.clone()).collect();
+        if entries.iter().all(|e| e.spots.is_none()) {
             return;
         }
         let (n, c) = (entries.len(), m.channels);
@@ -403,9 +394,7 @@ impl<T> Engine<T> {
         for (b, px) in m.data.chunks_exact_mut(c).enumerate() {
             let out = entries
                 .iter()
-                .filter(|(_, low, _, s)| {
-                    s.as_ref().is_some_and(|s| s[b]) && !low.data[b * c].is_nan()
-                })
+                .filter(|e| e.spots.as_ref().is_some_and(|s| s[b]) && !e.low.data[b * c].is_nan())
                 .count();
             if 2 * out > n {
                 px.fill(f32::NAN);
@@ -432,179 +421,60 @@ impl<T> Engine<T> {
             photo,
             self.params.downsample,
             self.mask.as_ref(),
-            self.params.transfer,
+            self.params.curve(),
             &self.median_linear_8,
         )
     }
 
     /// Every waiting photo whose window is complete (all of them at the end of the mission).
     fn flush(&mut self, eof: bool) -> Vec<Corrected<T>> {
-        let n = self.params.window;
         let mut out = Vec::new();
-        while let Some(front) = self.waiting.front() {
-            let i = front.seq;
-            let range = if eof {
-                window_range(i, n, self.seq)
-            } else {
-                let s = i.saturating_sub(n / 2);
-                s..s + n
-            };
-            if !eof && self.seq < range.end {
-                break;
+        while let Some((i, w, range)) = self.ring.next_ready(eof) {
+            if w.use_ != Use::Context {
+                out.push(self.estimate_and_correct(i, w, range, eof));
             }
-            let Some(w) = self.waiting.pop_front() else {
-                break;
-            };
-            if w.use_ == Use::Context {
-                continue;
-            }
-            out.push(self.estimate_and_correct(w, range, eof));
         }
         out
     }
 
-    /// `M`, `F`, the health figures and (for [`Use::Correct`]) the correction of one photo.
+    /// One photo's estimate and correction, the method as a chain of steps:
+    ///
+    /// 1. the paper: the window's `M` (with `--bright-spots` filled where spots held it) and `F = (M − S)/C`
+    ///    ([`Engine::window_estimate`]);
+    /// 2. the monitor's health figures on that `F` ([`Engine::judge`]);
+    /// 3. with [`Method::Abyss`], the steps it adds, in order ([`Engine::abyss_steps`]);
+    /// 4. the correction `A = (I − S)/F` of the photo ([`Engine::correct`]).
     fn estimate_and_correct(
         &mut self,
+        i: usize,
         w: Waiting<T>,
         range: Range<usize>,
         eof: bool,
     ) -> Corrected<T> {
         let t = Instant::now();
-        let i = w.seq;
-        let p = pool_factor(self.params.downsample);
-        if p > 1 && self.judged_fixed.is_none() {
-            self.judged_fixed = Some((
-                self.scatter_low.as_ref().map(|s| pooled(s, p)),
-                self.mission_mean.as_ref().map(|m| pooled(m, p)),
-            ));
+        let window = self.window_estimate(i, &range);
+        let mut health = self.judge(i, &range, &window);
+        let (photos, n) = (self.ring.pushed(), self.params.window);
+        if eof && photos < n {
+            health.flags.push(Flag::ShortMission { photos, window: n });
         }
-        let stack = low_in(&self.ring, &range);
-        debug_assert_eq!(
-            stack.len(),
-            range.len(),
-            "ring buffer lost a frame of the window"
-        );
-        let (own, own_judged) = self
-            .ring
-            .iter()
-            .find(|(s, ..)| *s == i)
-            .map(|(_, r, j, _)| (r, j.as_ref()))
-            .expect("a photo's own low-resolution image is in its window");
-        let s_low = self.scatter_low.as_ref();
-        let mut m = self.window_m(own, &stack, s_low, self.mission_mean.as_ref());
-        self.without_spots(&mut m, &range);
-        let mut f = self.factor_of(&m, s_low);
-        let lit = lit_seafloor(&f, &self.colour);
-        // The monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set there):
-        // with smaller blocks, its own M from the window's block medians pooled to that size.
-        let mut health = match own_judged {
-            None => self.monitor.observe_photo(own, &lit, s_low, &f),
-            Some(own_j) => {
-                let stack_j: Vec<&Raster> = in_range(&self.ring, range.clone())
-                    .filter_map(|(_, _, j, _)| j.as_ref())
-                    .collect();
-                let (s_j, mean_j) = self
-                    .judged_fixed
-                    .as_ref()
-                    .expect("made above when the ring holds pooled images");
-                let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
-                let f_j = self.factor_of(&m_j, s_j.as_ref());
-                let lit_j = lit_seafloor(&f_j, &self.colour);
-                self.monitor
-                    .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
-            }
+        let WindowEstimate { m, f, lit } = window;
+        let estimate = match self.params.method {
+            Method::Abyss => self.abyss_steps(i, &range, m, w.photo.as_ref()),
+            _ => Estimate::of_window(f, self.params.factor_floor),
         };
-        let near = self.params.near_window;
-        if self.params.method == Method::Abyss && near > 0 && near < stack.len() {
-            // The window's M bent to the smooth shape of the near window's around the same photo (the monitor
-            // above judged the window's own).
-            let near_r = near_range(i, near, &range);
-            let near_stack = low_in(&self.ring, &near_r);
-            let mut m_near = self.window_m(own, &near_stack, s_low, None);
-            self.without_spots(&mut m_near, &near_r);
-            m = near_shape(&m, &m_near, s_low);
-            f = self.factor_of(&m, s_low);
-        }
-        if eof && self.seq < self.params.window {
-            health.flags.push(Flag::ShortMission {
-                photos: self.seq,
-                window: self.params.window,
-            });
-        }
         let estimate_ms = w.downsample_ms + ms(t);
         let t = Instant::now();
-        let mut stats = CorrectStats::default();
         let mut photo = w.photo;
-        // --method abyss: per-photo gain and a floor relative to the lit level, softly (method/refine.rs); the
-        // monitor above saw the window's F. The kernel's floor then only guards against 0.
-        let mut floor = self.params.factor_floor;
-        let mut blended: Option<Blended> = None;
-        let mut use_blend = false;
-        let mut scale = Vec::new();
-        let mut noise = None;
-        if self.params.method == Method::Abyss {
-            let c = f.channels;
-            scale = match (self.params.backscatter_scale, &self.scatter_low) {
-                (Some(v), Some(_)) => vec![v; c],
-                (None, Some(s)) => backscatter_scale(&stack, &m, s),
-                _ => vec![1.0; c],
-            };
-            let s_k = self.scatter_low.as_ref().map(|s| scaled(s, &scale));
-            if scale.iter().any(|&v| v != 1.0) {
-                f = self.factor_of(&m, s_k.as_ref());
-            }
-            refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params);
-            floor = 1e-6;
-            let k = self.params.downsample;
-            let blocks = match (&photo, self.params.denoise) {
-                (Some(p), true) => {
-                    // Every second block in both directions, fewer on large photos (about 2000 blocks sampled:
-                    // plenty for two medians, and the pass stays a small share of a 12 MP photo's time).
-                    let blocks = p.layout.width.div_ceil(k) * p.layout.height.div_ceil(k);
-                    let stride = ((blocks as f64 / 2000.0).sqrt() as usize).max(2);
-                    block_stats(p, k, stride, (&self.curves.0, &self.curves.1))
-                }
-                _ => Vec::new(),
-            };
-            let model = NoiseModel::fit(&blocks, &f).map(|m| m.with_texture_capped(&self.colour));
-            blended = model
-                .as_ref()
-                .map(|model| {
-                    let keep = self.masked_blocks.as_deref();
-                    model.blend(&f, own, s_k.as_ref(), &self.colour, k, keep)
-                })
-                // A photo whose blend changes nothing (no noise measured: most camera JPEGs) takes the plain path.
-                .filter(|b| b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND))
-                .map(|mut b| {
-                    // Only for a blend that is used (the weights do not change).
-                    if self.params.level_by_light {
-                        level_by_light(
-                            &mut b.level,
-                            &f,
-                            &self.colour,
-                            self.masked_blocks.as_deref(),
-                        );
-                    }
-                    b
-                });
-            use_blend = blended.is_some() || scale.iter().any(|&v| v != 1.0);
-            noise = model;
-        }
-        if let Some(p) = &mut photo {
-            let (l, k) = (p.layout, self.params.downsample);
-            let s = self.scatter.as_ref();
-            let blend = use_blend.then_some(Blend {
-                fields: blended.as_ref(),
-                scatter_scale: &scale,
-            });
-            stats = match &mut p.samples {
-                Samples::U8(v) => correct_with_offset(v, l, s, &f, blend, k, floor, &self.curves.0),
-                Samples::U16(v) => {
-                    correct_with_offset(v, l, s, &f, blend, k, floor, &self.curves.1)
-                }
-            };
-        }
+        let stats = photo
+            .as_mut()
+            .map_or_else(CorrectStats::default, |p| self.correct(p, &estimate));
+        let Estimate {
+            f,
+            mut scale,
+            noise,
+            ..
+        } = estimate;
         if self.scatter_low.is_none() {
             scale.clear();
         }
@@ -621,6 +491,222 @@ impl<T> Engine<T> {
             correct_ms: ms(t),
             backscatter_scale: scale,
             noise,
+        }
+    }
+
+    /// The block medians of the photos in `range`, in order.
+    fn stack(&self, range: &Range<usize>) -> Vec<&Raster> {
+        let stack: Vec<&Raster> = self.ring.in_range(range.clone()).map(|e| &e.low).collect();
+        debug_assert_eq!(stack.len(), range.len(), "ring lost a photo of the window");
+        stack
+    }
+
+    /// Photo `i`'s entry in the ring (it is in its own window).
+    fn own(&self, i: usize) -> &RingEntry {
+        self.ring
+            .get(i)
+            .expect("a photo's own block medians are in its window")
+    }
+
+    /// Step 1, the paper's: the window's `M` of photo `i` over the photos in `range` (with `--bright-spots` filled
+    /// where spots held the window), `F = (M − S)/C` and `F·C = M − S`.
+    fn window_estimate(&self, i: usize, range: &Range<usize>) -> WindowEstimate {
+        let stack = self.stack(range);
+        let s_low = self.scatter_low.as_ref();
+        let mut m = self.window_m(&self.own(i).low, &stack, s_low, self.mission_mean.as_ref());
+        self.without_spots(&mut m, range);
+        let f = self.factor_of(&m, s_low);
+        let lit = lit_seafloor(&f, &self.colour);
+        WindowEstimate { m, f, lit }
+    }
+
+    /// Step 2: the monitor's health figures of photo `i` on its window's `F`. The monitor judges blocks of about 8
+    /// pixels whatever the block size (its thresholds were set there): with smaller blocks, on its own `M` and `F`
+    /// from the window's block medians pooled to that size.
+    fn judge(&mut self, i: usize, range: &Range<usize>, window: &WindowEstimate) -> Health {
+        let p = pool_factor(self.params.downsample);
+        if p > 1 && self.judged_fixed.is_none() {
+            self.judged_fixed = Some((
+                self.scatter_low.as_ref().map(|s| pooled(s, p)),
+                self.mission_mean.as_ref().map(|m| pooled(m, p)),
+            ));
+        }
+        // The ring's entry, not `self.own`: the monitor is borrowed mutably beside it.
+        let own = self
+            .ring
+            .get(i)
+            .expect("a photo's own block medians are in its window");
+        let Some(own_j) = own.judged.as_ref() else {
+            let s_low = self.scatter_low.as_ref();
+            return self
+                .monitor
+                .observe_photo(&own.low, &window.lit, s_low, &window.f);
+        };
+        let stack_j: Vec<&Raster> = self
+            .ring
+            .in_range(range.clone())
+            .filter_map(|e| e.judged.as_ref())
+            .collect();
+        let (s_j, mean_j) = self
+            .judged_fixed
+            .as_ref()
+            .expect("made above when the ring holds pooled images");
+        let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
+        let f_j = self.factor_of(&m_j, s_j.as_ref());
+        let lit_j = lit_seafloor(&f_j, &self.colour);
+        self.monitor
+            .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
+    }
+
+    /// Step 3, what [`Method::Abyss`] adds to the paper, in order, on the window's `M` of photo `i`: the near
+    /// window's shape, the scale of `S`, `F` of both, the per-photo gain and the soft floor, then the noise model
+    /// and its blend.
+    fn abyss_steps(
+        &self,
+        i: usize,
+        range: &Range<usize>,
+        m: Raster,
+        photo: Option<&Photo>,
+    ) -> Estimate {
+        let stack = self.stack(range);
+        let own = &self.own(i).low;
+        let s_low = self.scatter_low.as_ref();
+        let m = self.near_window_shape(i, range, own, m, stack.len());
+        let scale = match (self.params.steps.backscatter_scale, s_low) {
+            (Some(v), Some(_)) => vec![v; m.channels],
+            (None, Some(s)) => backscatter_scale(&stack, &m, s),
+            _ => vec![1.0; m.channels],
+        };
+        let s_k = s_low.map(|s| scaled(s, &scale));
+        let rescaled = scale.iter().any(|&v| v != 1.0);
+        let mut f = self.factor_of(&m, if rescaled { s_k.as_ref() } else { s_low });
+        refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params.steps);
+        let noise = self.noise_model(photo, &f);
+        let blended = noise
+            .as_ref()
+            .and_then(|model| self.blend(model, &f, own, s_k.as_ref()));
+        Estimate {
+            use_blend: blended.is_some() || rescaled,
+            f,
+            // The soft floor is in `F`: the kernel's floor only guards against 0.
+            floor: 1e-6,
+            scale,
+            noise,
+            blended,
+        }
+    }
+
+    /// The window's `M` bent to the smooth shape of the near window's around the same photo
+    /// ([`near_shape`]), when the near window is on and shorter than this photo's window.
+    fn near_window_shape(
+        &self,
+        i: usize,
+        range: &Range<usize>,
+        own: &Raster,
+        m: Raster,
+        window_len: usize,
+    ) -> Raster {
+        let Some(near) = self.params.near_window().filter(|&k| k < window_len) else {
+            return m;
+        };
+        let s_low = self.scatter_low.as_ref();
+        let near_r = near_range(i, near, range);
+        let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None);
+        self.without_spots(&mut m_near, &near_r);
+        near_shape(&m, &m_near, s_low)
+    }
+
+    /// The noise and texture measured on the photo (with `denoise`), against its `F`.
+    fn noise_model(&self, photo: Option<&Photo>, f: &Raster) -> Option<NoiseModel> {
+        let k = self.params.downsample;
+        let blocks = match (photo, self.params.steps.denoise) {
+            (Some(p), true) => {
+                // Every second block in both directions, fewer on large photos (about 2000 blocks sampled: plenty
+                // for two medians, and the pass stays a small share of a 12 MP photo's time).
+                let blocks = p.layout.width.div_ceil(k) * p.layout.height.div_ceil(k);
+                let stride = ((blocks as f64 / 2000.0).sqrt() as usize).max(2);
+                block_stats(p, k, stride, (&self.curves.0, &self.curves.1))
+            }
+            _ => Vec::new(),
+        };
+        NoiseModel::fit(&blocks, f).map(|m| m.with_texture_capped(&self.colour))
+    }
+
+    /// The blend of dim regions towards their local level, with its levels evened out by light
+    /// (`level_by_light`); `None` where it changes nothing (no noise measured: most camera JPEGs), so the photo
+    /// takes the plain path.
+    fn blend(
+        &self,
+        model: &NoiseModel,
+        f: &Raster,
+        own: &Raster,
+        s_k: Option<&Raster>,
+    ) -> Option<Blended> {
+        let keep = self.masked_blocks.as_deref();
+        let k = self.params.downsample;
+        let mut b = model.blend(f, own, s_k, &self.colour, k, keep);
+        if !b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND) {
+            return None;
+        }
+        if self.params.steps.level_by_light {
+            level_by_light(&mut b.level, f, &self.colour, keep);
+        }
+        Some(b)
+    }
+
+    /// Step 4: `A = (I − S)/F` of the photo, in place, with the blend and the scale of `S` of the estimate.
+    fn correct(&self, p: &mut Photo, e: &Estimate) -> CorrectStats {
+        let (l, k) = (p.layout, self.params.downsample);
+        let s = self.scatter.as_ref();
+        let blend = e.use_blend.then_some(Blend {
+            fields: e.blended.as_ref(),
+            scatter_scale: &e.scale,
+        });
+        match &mut p.samples {
+            Samples::U8(v) => correct_with_offset(v, l, s, &e.f, blend, k, e.floor, &self.curves.0),
+            Samples::U16(v) => {
+                correct_with_offset(v, l, s, &e.f, blend, k, e.floor, &self.curves.1)
+            }
+        }
+    }
+}
+
+/// The paper's estimate of one photo ([`Engine::window_estimate`]).
+struct WindowEstimate {
+    /// The window's `M`.
+    m: Raster,
+    /// `F = (M − S)/C`.
+    f: Raster,
+    /// `F·C = M − S`.
+    lit: Raster,
+}
+
+/// What corrects one photo: `F` and how it is applied.
+struct Estimate {
+    /// `F` at block resolution.
+    f: Raster,
+    /// The smallest `F` a pixel is divided by.
+    floor: f32,
+    /// The scale of `S` per channel (empty: none).
+    scale: Vec<f32>,
+    /// The noise and texture measured on the photo.
+    noise: Option<NoiseModel>,
+    /// The blend of dim regions.
+    blended: Option<Blended>,
+    /// Correct with the blend and the scale of `S` (else the plain `(I − S)/F`).
+    use_blend: bool,
+}
+
+impl Estimate {
+    /// The window's own `F`, applied plainly with the absolute floor (every method but [`Method::Abyss`]).
+    fn of_window(f: Raster, floor: f32) -> Self {
+        Estimate {
+            f,
+            floor,
+            scale: Vec::new(),
+            noise: None,
+            blended: None,
+            use_blend: false,
         }
     }
 }
@@ -645,20 +731,14 @@ fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
     out
 }
 
-/// The ring's entries whose photos are in `range`, in order.
-fn in_range(ring: &VecDeque<RingEntry>, range: Range<usize>) -> impl Iterator<Item = &RingEntry> {
-    ring.iter().filter(move |(s, ..)| range.contains(s))
+/// One photo in the ring: its block medians (linear light), the same pooled for the monitor (when the blocks are
+/// smaller than 8 pixels) and, with `--bright-spots` when it had any, its blocks of bright spots
+/// ([`crate::method::outliers::bright_spots`]).
+struct RingEntry {
+    low: Raster,
+    judged: Option<Raster>,
+    spots: Option<Vec<bool>>,
 }
-
-/// The block medians of the ring's photos in `range`, in order.
-fn low_in<'a>(ring: &'a VecDeque<RingEntry>, range: &Range<usize>) -> Vec<&'a Raster> {
-    in_range(ring, range.clone()).map(|(_, r, ..)| r).collect()
-}
-
-/// One photo in the ring: its sequence number, block medians (linear light), the block medians pooled for the
-/// monitor (when the blocks are smaller than 8 pixels) and, with `--bright-spots` when it had any, its blocks of
-/// bright spots ([`crate::method::outliers::bright_spots`]).
-type RingEntry = (usize, Raster, Option<Raster>, Option<Vec<bool>>);
 
 #[cfg(test)]
 mod tests {

@@ -30,6 +30,7 @@ pub mod outliers;
 pub mod params;
 pub mod raster;
 pub mod refine;
+pub(crate) mod ring;
 pub mod scatter;
 pub mod transfer;
 pub mod window;

@@ -7,6 +7,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 pub use crate::method::baseline::Method;
+use crate::method::factor::auto_block;
 use crate::method::transfer::Transfer;
 
 /// Grey level of the default seafloor colour `C`. Below mid-grey, so that objects brighter than the sediment
@@ -106,51 +107,79 @@ impl fmt::Display for SeafloorColour {
     }
 }
 
-/// What the [`Engine`](crate::method::engine::Engine) needs to know about the method. Defaults are those of
-/// `abysslight correct`.
+/// The method's parameters: what the [`Engine`](crate::method::engine::Engine) needs to know. `Params::default()`
+/// is exactly what `abysslight correct` runs without options (and `Options::default()`, through
+/// [`Options::params`](crate::run::options::Options::params)); the settings that say `auto` are resolved from the
+/// mission's photos in one place, [`Params::resolved`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
-    /// How the lighting is estimated. Default: [`Method::Paper`].
+    /// How the lighting is estimated. Default: [`Method::Abyss`].
     pub method: Method,
     /// Photos in the sliding window, `n` (odd). Default: 7.
     pub window: usize,
-    /// Block size `K` of the spatial median; 0 takes [`crate::method::factor::auto_block`] of the photos' size
-    /// (from `S` or the mask when given, else from the first photo). Default: 8.
+    /// Contamination rate `c`, the share of non-seafloor pixels, when known: with [`Method::Abyss`] the window's
+    /// `M` is its `(1 + c)/2` quantile ([`window_quantile`]) and the near window is the 5 % window of `c`. It does
+    /// not change `window` (`--contamination` chooses the window in
+    /// [`Options::params`](crate::run::options::Options::params)). Default: none.
+    pub contamination: Option<f64>,
+    /// Block size `K` of the spatial median; 0 is `auto` ([`Params::auto_block`]: from the photos' size, taken from
+    /// `S` or the mask when given, else from the first photo). Default: 0 (auto).
     pub downsample: usize,
     /// Seafloor colour `C`. Default: grey 0.4.
     pub seafloor_colour: SeafloorColour,
-    /// Smallest `F` a pixel is divided by. Default: 0.05.
+    /// Smallest `F` a pixel is divided by, for every method but [`Method::Abyss`] (which uses
+    /// [`Steps::relative_floor`]). Default: 0.05.
     pub factor_floor: f32,
-    /// Camera curve of the stored values. Default: linear.
-    pub transfer: Transfer,
+    /// Camera curve of the stored values; `None` is `auto`: the curve the files declare
+    /// ([`Facts::transfer`]), linear where nothing is declared (photos in memory carry no file facts: give
+    /// `Some(Transfer::Srgb)` for camera JPEGs). Default: `None` (auto).
+    pub transfer: Option<Transfer>,
     /// Degree of the polynomial of [`Method::Polynomial`]. Default: 4.
     pub degree: usize,
-    /// [`Method::Abyss`]: the floor of `F` as a share of the photo's lit level, with a smooth hand-over
+    /// The steps [`Method::Abyss`] adds to the paper.
+    pub steps: Steps,
+}
+
+/// The steps [`Method::Abyss`] adds to the paper, in the order the engine runs them on a photo's window
+/// (docs/method.md says what each one measured). The other methods ignore them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Steps {
+    /// Fill the window's `M` where bright spots that move — laser dots, highlights — held more than half of the
+    /// window at a block ([`crate::method::outliers`]). Default: false.
+    pub bright_spots: bool,
+    /// Photos in the near window whose `M`'s smooth shape bends the window's
+    /// ([`crate::method::refine::near_shape`]); `Some(0)`, or a length not shorter than `window`: off; `None` is
+    /// `auto`: [`crate::method::window::near_window`]. Default: `None` (auto: 5 inside the default window).
+    pub near_window: Option<usize>,
+    /// The scale of the water-column `S` for the survey photos; `None` estimates it per window
+    /// ([`crate::method::refine::backscatter_scale`]). Default: `Some(1.0)` (`S` as measured: the estimate is
+    /// biased low on red-starved channels).
+    pub backscatter_scale: Option<f32>,
+    /// One robust gain per photo and channel against its window's `M`. Default: true.
+    pub photo_gain: bool,
+    /// The floor of `F` as a share of the photo's lit level, with a smooth hand-over
     /// ([`crate::method::refine::soft_floor`]). Default: 0.001.
     pub relative_floor: f32,
-    /// [`Method::Abyss`]: one robust gain per photo and channel against its window's `M`. Default: true.
-    pub photo_gain: bool,
-    /// [`Method::Abyss`]: the scale of the water-column `S` for the survey photos; `None` estimates it per window
-    /// ([`crate::method::refine::backscatter_scale`]). Default: `Some(1.0)` (`S` as measured: the estimate is
-    /// biased low on red-starved channels, docs/evaluation.md).
-    pub backscatter_scale: Option<f32>,
-    /// [`Method::Abyss`]: blend dim regions towards their local level by their signal-to-noise ratio instead of
-    /// amplifying noise ([`crate::method::noise`]). Default: true.
+    /// Blend dim regions towards their local level by their signal-to-noise ratio instead of amplifying noise
+    /// ([`crate::method::noise`]). Default: true.
     pub denoise: bool,
-    /// [`Method::Abyss`] with `denoise`: even out the blend's block levels across light levels
+    /// With `denoise`: even out the blend's block levels across light levels
     /// ([`crate::method::noise::level_by_light`]), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
-    /// [`Method::Abyss`]: the quantile of the window's samples taken as `M` (0.5: the median, as in the paper).
-    /// With a contamination rate `c` of dark objects (nodules, shadows) the seafloor's own median is the
-    /// `(1 + c)/2` quantile; `correct` sets that when `--contamination` is given. Default: 0.5.
-    pub window_quantile: f32,
-    /// [`Method::Abyss`]: photos in the near window whose `M`'s smooth shape bends the window's
-    /// ([`crate::method::refine::near_shape`]); 0, or not shorter than `window`: off. `correct` sets
-    /// [`crate::method::window::near_window`]. Default: 0.
-    pub near_window: usize,
-    /// [`Method::Abyss`]: fill the window's `M` where bright spots that move — laser dots, highlights — held more
-    /// than half of the window at a block ([`crate::method::outliers`]). Default: false.
-    pub bright_spots: bool,
+}
+
+impl Default for Steps {
+    fn default() -> Self {
+        Steps {
+            bright_spots: false,
+            near_window: None,
+            backscatter_scale: Some(1.0),
+            photo_gain: true,
+            relative_floor: 0.001,
+            denoise: true,
+            level_by_light: true,
+        }
+    }
 }
 
 impl Default for Params {
@@ -158,19 +187,104 @@ impl Default for Params {
         Params {
             method: Method::default(),
             window: 7,
-            downsample: 8,
+            contamination: None,
+            downsample: 0,
             seafloor_colour: SeafloorColour::default(),
             factor_floor: 0.05,
-            transfer: Transfer::default(),
+            transfer: None,
             degree: 4,
-            relative_floor: 0.001,
-            photo_gain: true,
-            backscatter_scale: Some(1.0),
-            denoise: true,
-            level_by_light: true,
-            window_quantile: 0.5,
-            near_window: 0,
-            bright_spots: false,
+            steps: Steps::default(),
         }
+    }
+}
+
+/// What the `auto` settings of [`Params`] are resolved from: facts about the mission's photos.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Facts {
+    /// The photos' size (width, height), when known before the first photo.
+    pub size: Option<(usize, usize)>,
+    /// Static pixels are masked (`--mask`, `--mask-auto`).
+    pub masked: bool,
+    /// The curve the photos' files declare (`--transfer auto`: [`crate::io::transfer::assume`]), when read.
+    pub transfer: Option<Transfer>,
+}
+
+/// Why `auto` blocks are the size they are ([`Params::auto_block`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockRule {
+    /// Given (`downsample` is not 0).
+    Given,
+    /// The paper's 8 for a method other than [`Method::Abyss`].
+    Paper,
+    /// The paper's 8 with a mask: overlays that change from frame to frame (counters, clocks) are partly missed by
+    /// `--mask-auto`, and a block of 8 has enough seafloor beside them to outvote the missed pixels (with blocks of
+    /// 4, masked text on a 128×96 test dive came out 210–236 instead of white: tests/field.rs).
+    Masked,
+    /// [`auto_block`] of the photos' size.
+    Size,
+    /// Not known yet: the engine takes it from the first photo's size.
+    Unknown,
+}
+
+/// The quantile of its samples the window takes as `M`: with [`Method::Abyss`] and a contamination rate `c`, the
+/// `(1 + c)/2` quantile (abyssal contamination is dark — nodules, shadows — so that is the seafloor's own median);
+/// otherwise the median.
+pub fn window_quantile(method: Method, contamination: Option<f64>) -> f64 {
+    match (method, contamination) {
+        (Method::Abyss, Some(c)) => (1.0 + c) / 2.0,
+        _ => 0.5,
+    }
+}
+
+impl Params {
+    /// Every `auto` setting resolved from `facts` — the one place where that happens, for the command line and the
+    /// library alike: the blocks ([`Params::auto_block`]; left at 0 when the size is not known yet), the curve
+    /// (what the files declare, else linear) and the near window (`Some(0)` when off).
+    pub fn resolved(&self, facts: &Facts) -> Params {
+        Params {
+            downsample: self.auto_block(facts).0,
+            transfer: Some(self.transfer.or(facts.transfer).unwrap_or(Transfer::Linear)),
+            steps: Steps {
+                near_window: Some(self.near_window().unwrap_or(0)),
+                ..self.steps
+            },
+            ..*self
+        }
+    }
+
+    /// The block size `K` and the rule that gave it: `downsample` when given; for `auto` the paper's 8 for the
+    /// methods other than [`Method::Abyss`] and with a mask, else [`auto_block`] of the photos' size (0 while it is
+    /// not known).
+    pub fn auto_block(&self, facts: &Facts) -> (usize, BlockRule) {
+        let eight = crate::method::factor::AUTO_MAX_BLOCK;
+        match (self.downsample, facts.size) {
+            (k, _) if k > 0 => (k, BlockRule::Given),
+            _ if self.method != Method::Abyss => (eight, BlockRule::Paper),
+            _ if facts.masked => (eight, BlockRule::Masked),
+            (_, Some((w, h))) => (auto_block(w, h), BlockRule::Size),
+            (_, None) => (0, BlockRule::Unknown),
+        }
+    }
+
+    /// The near window in effect (`None`: off): `steps.near_window`, or for `auto`
+    /// [`crate::method::window::near_window`]; only with [`Method::Abyss`], and only when shorter than the window.
+    pub fn near_window(&self) -> Option<usize> {
+        if self.method != Method::Abyss {
+            return None;
+        }
+        match self.steps.near_window {
+            None => crate::method::window::near_window(self.window, self.contamination),
+            Some(k) => (k > 0 && k < self.window).then_some(k),
+        }
+    }
+
+    /// The quantile the window takes as `M` ([`window_quantile`]).
+    pub fn window_quantile(&self) -> f32 {
+        window_quantile(self.method, self.contamination) as f32
+    }
+
+    /// The curve in effect: `transfer`, or linear where it is `auto` and not resolved ([`Params::resolved`]).
+    pub fn curve(&self) -> Transfer {
+        self.transfer.unwrap_or(Transfer::Linear)
     }
 }

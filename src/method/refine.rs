@@ -13,7 +13,7 @@
 //!
 //! All work on block-resolution rasters in linear light.
 
-use crate::method::params::Params;
+use crate::method::params::Steps;
 use crate::method::raster::Raster;
 
 /// Percentile of `F` (per channel, over blocks) taken as the photo's lit level.
@@ -256,20 +256,20 @@ pub fn apply_gain(f: &mut Raster, gain: &[f32]) {
 }
 
 /// What the abyss method does to one photo's `F` (block resolution, linear light): the per-photo gain against the
-/// window's `M` (when `params.photo_gain`), then the soft relative floor. `own` is the photo's block-median image,
+/// window's `M` (when `steps.photo_gain`), then the soft relative floor. `own` is the photo's block-median image,
 /// `s_low` the (scaled) backscatter at block resolution. Returns the floor levels `φ` per channel.
 pub fn refine_factor(
     f: &mut Raster,
     own: &Raster,
     m: &Raster,
     s_low: Option<&Raster>,
-    params: &Params,
+    steps: &Steps,
 ) -> Vec<f32> {
-    if params.photo_gain {
+    if steps.photo_gain {
         let g = photo_gain(own, m, s_low, 0.3);
         apply_gain(f, &g);
     }
-    soft_floor(f, params.relative_floor)
+    soft_floor(f, steps.relative_floor)
 }
 
 /// Radius of [`near_shape`]'s squares, as a share of the longer side (in blocks): 1/8 of the frame (1/4 and

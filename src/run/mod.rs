@@ -32,7 +32,7 @@ use crate::method::scatter::Scatter;
 use crate::run::options::Options;
 use crate::run::plan::Plan;
 use crate::run::prepare::{prepare, spread_indices, Setup};
-use crate::run::report::{FileError, FrameReport, Progress, Report};
+use crate::run::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
 use crate::run::threads::{stream, Outcome};
 
 /// Run `abysslight correct` as described by `opts`.
@@ -51,24 +51,10 @@ pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report
 fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let started = Instant::now();
     let plan = Plan::new(opts, progress)?;
-    // --transfer auto: the curve the first survey photo declares, for the whole mission.
-    let (resolved, transfer_assumed) = resolve_transfer(opts, &plan)?;
-    // --downsample auto: blocks from the mission's photo size.
-    let (k, blocks_why) = plan.downsample(&resolved);
-    // --near-window auto: resolved from the window (0: off), so the report and the lock record what ran.
-    let resolved = Options {
-        downsample: k,
-        near_window: Some(resolved.near_window_for(plan.window.n).unwrap_or(0)),
-        ..resolved
-    };
-    let blocks = k.map_or_else(|| "auto".to_string(), |k| format!("{k}x{k}"));
+    let (params, transfer_assumed) = resolve(opts, &plan, progress)?;
+    // The options with every `auto` resolved, so the report and the lock record what ran.
+    let resolved = opts.with_resolved(&params);
     let opts = &resolved;
-    if let Some(why) = &transfer_assumed {
-        progress.stage(&format!("camera curve {why}; --transfer sets it"));
-    }
-    if let Some(why) = &blocks_why {
-        progress.stage(&format!("blocks {blocks} ({why}); --downsample sets them"));
-    }
     plan.create_work_dir()?;
     // One run per --out (per shard), the same options as earlier runs there, stale temp files removed
     // (src/run/guard.rs). Held until the report is written.
@@ -79,13 +65,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         }
         None => (None, Vec::new()),
     };
-    let setup = prepare(opts, &plan, progress)?;
     let Setup {
         engine,
         scatter,
         errors,
         mut warnings,
-    } = setup;
+    } = prepare(opts, &params, &plan, progress)?;
     warnings.splice(0..0, plan.warnings.iter().cloned());
     if let Some(first) = removed.first() {
         let m = format!(
@@ -107,43 +92,105 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
             FileError::from_error(&s.path, &e)
         })
         .collect();
-    let n = plan.window.n;
-    let near = match opts.near_window_for(n) {
-        Some(k) => format!(", near window {k}"),
-        None => String::new(),
-    };
-    if plan.streaming {
-        progress.stage(&format!(
-            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in{near}; \
-             blocks {blocks})",
-            n / 2
-        ));
-    } else {
-        progress.stage(&format!(
-            "correcting {} survey photos (window n = {n}{near}, blocks {blocks})",
-            plan.chunk.len() - plan.skipped_existing
-        ));
-    }
+    say_what_runs(&plan, &params, progress);
     progress.start(plan.chunk.len());
     let outcome = stream(opts, &plan, engine, progress)?;
     save_pictures(opts, &plan, &outcome)?;
-    let water_column_failed = errors.len();
-    let mut all_errors = errors;
-    all_errors.extend(survey_skipped);
-    all_errors.extend(outcome.errors);
+    let before = BeforeStream {
+        scatter,
+        transfer_assumed,
+        water_column_errors: errors,
+        survey_skipped,
+        warnings,
+    };
+    let mut report = report_of(opts, &plan, before, outcome);
+    report.elapsed_s = started.elapsed().as_secs_f64();
+    report.write(opts, plan.work_dir.as_deref())?;
+    Ok(report)
+}
+
+/// The method's parameters of the run, every `auto` resolved from the mission's facts ([`Plan::facts`],
+/// [`crate::method::params::Params::resolved`]), each resolution said; with `--transfer auto` the curve taken and
+/// why.
+fn resolve(
+    opts: &Options,
+    plan: &Plan,
+    progress: &dyn Progress,
+) -> Result<(crate::method::params::Params, Option<String>)> {
+    let facts = plan.facts(opts)?;
+    let given = opts.params()?;
+    let params = given.resolved(&facts.facts);
+    if let Some(why) = &facts.transfer_why {
+        progress.stage(&format!("camera curve {why}; --transfer sets it"));
+    }
+    if let Some(why) = facts.blocks_why(&given) {
+        progress.stage(&format!(
+            "blocks {} ({why}); --downsample sets them",
+            blocks(&params)
+        ));
+    }
+    Ok((params, facts.transfer_why))
+}
+
+/// `8x8`, or `auto` while the photos' size is not known.
+fn blocks(params: &crate::method::params::Params) -> String {
+    match params.downsample {
+        0 => "auto".to_string(),
+        k => format!("{k}x{k}"),
+    }
+}
+
+/// The line that says what is corrected, with which window.
+fn say_what_runs(plan: &Plan, params: &crate::method::params::Params, progress: &dyn Progress) {
+    let n = plan.window.n;
+    let near = match params.near_window() {
+        Some(k) => format!(", near window {k}"),
+        None => String::new(),
+    };
+    let blocks = blocks(params);
+    progress.stage(&if plan.streaming {
+        format!(
+            "correcting survey photos as they come (window n = {n}: each photo once the {} after it are in{near}; \
+             blocks {blocks})",
+            n / 2
+        )
+    } else {
+        format!(
+            "correcting {} survey photos (window n = {n}{near}, blocks {blocks})",
+            plan.chunk.len() - plan.skipped_existing
+        )
+    });
+}
+
+/// What a run knew before the survey stream, for its report.
+struct BeforeStream {
+    scatter: ScatterInfo,
+    transfer_assumed: Option<String>,
+    water_column_errors: Vec<FileError>,
+    survey_skipped: Vec<FileError>,
+    warnings: Vec<String>,
+}
+
+/// The report of a run (its time is filled in by the caller).
+fn report_of(opts: &Options, plan: &Plan, before: BeforeStream, outcome: Outcome) -> Report {
+    let water_column_failed = before.water_column_errors.len();
+    let mut errors = before.water_column_errors;
+    errors.extend(before.survey_skipped);
+    errors.extend(outcome.errors);
+    let mut warnings = before.warnings;
     warnings.extend(outcome.warnings);
     let mut monitor = Summary::default();
     for f in &outcome.frames {
         monitor.add(&f.health.flags);
     }
-    let mut report = Report {
+    Report {
         tool: "abysslight".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         options: opts.clone(),
-        transfer_assumed,
+        transfer_assumed: before.transfer_assumed,
         window: plan.window,
         layout: outcome.layout,
-        scatter,
+        scatter: before.scatter,
         survey_photos: if plan.streaming {
             outcome.streamed
         } else {
@@ -152,44 +199,18 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         corrected: outcome.frames.iter().filter(|f| !f.resumed).count(),
         skipped_existing: plan.skipped_existing,
         peak_photos_in_memory: outcome.peak_photos,
-        failed: all_errors.len() - water_column_failed,
+        failed: errors.len() - water_column_failed,
         water_column_failed,
         ignored_files: plan.found.ignored.len(),
         floored_pixels: outcome.totals.floored_pixels,
         clipped_samples: outcome.totals.clipped_samples,
         monitor,
         frames: outcome.frames,
-        errors: all_errors,
+        errors,
         warnings,
-        elapsed_s: started.elapsed().as_secs_f64(),
+        elapsed_s: 0.0,
         report_path: None,
-    };
-    report.write(opts, plan.work_dir.as_deref())?;
-    Ok(report)
-}
-
-/// `opts` with `--transfer auto` resolved from the first survey photo ([`crate::io::transfer::assume`]), and what
-/// was assumed and why; `opts` unchanged (and `None`) without it.
-fn resolve_transfer(opts: &Options, plan: &Plan) -> Result<(Options, Option<String>)> {
-    if !opts.transfer_auto {
-        return Ok((opts.clone(), None));
     }
-    let assumed = match plan.found.photos.first() {
-        Some(first) => crate::io::transfer::assume(&first.path)?,
-        None => crate::io::transfer::Assumed {
-            transfer: crate::method::transfer::Transfer::Linear,
-            why: "no photo file to read before the run (standard input or an empty folder)".into(),
-        },
-    };
-    let why = format!("{}: {}", assumed.transfer, assumed.why);
-    Ok((
-        Options {
-            transfer: assumed.transfer,
-            transfer_auto: false,
-            ..opts.clone()
-        },
-        Some(why),
-    ))
 }
 
 /// `overview.png` (the health series over the mission) and `flagged.png` (a few flagged photos beside their

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 pub use crate::method::baseline::Method;
+use crate::method::params::{Params, Steps};
 pub use crate::method::params::{SeafloorColour, DEFAULT_GREY};
 pub use crate::method::transfer::Transfer;
 use crate::method::window::{choose_window, p_half, WindowChoice};
@@ -127,15 +128,13 @@ pub struct Options {
     /// Write only chunk `K` of `N` contiguous chunks of the survey (reading the neighbours its windows need).
     /// The union of all shards' outputs equals a single run. Default: none (the whole survey).
     pub shard: Option<Shard>,
-    /// How stored values relate to light: `srgb`, `linear` or `gamma:G`. Estimation and correction run in
-    /// linear light. Default: linear (the command line's default is `auto`, see `transfer_auto`).
-    pub transfer: Transfer,
-    /// Take the curve from what the first survey photo's file declares (PNG `cICP`/`sRGB`/`gAMA`, ICC profile,
-    /// EXIF `ColorSpace`; a JPEG without any is sRGB, anything else linear: [`crate::io::transfer`]) instead of
-    /// `transfer`; the run says what it assumed and why, and records the curve in its report. Default: false
-    /// (the command line's `--transfer auto`, its default, sets it).
-    #[serde(default)]
-    pub transfer_auto: bool,
+    /// How stored values relate to light: `srgb`, `linear` or `gamma:G`; estimation and correction run in linear
+    /// light. `None` (`auto`) takes the curve the first survey photo's file declares (PNG `cICP`/`sRGB`/`gAMA`, ICC
+    /// profile, EXIF `ColorSpace`; a JPEG without any is sRGB, anything else linear: [`crate::io::transfer`]); the
+    /// run says what it assumed and why, and records the curve in its report. Default: `None` (auto). In a TOML
+    /// file a curve or `"auto"`.
+    #[serde(with = "curve_or_auto")]
+    pub transfer: Option<Transfer>,
     /// Mask image, the size of the photos: white pixels (overlays, laser dots, vehicle parts) are left out of every
     /// median; `F` beneath them is interpolated from the seafloor around them and they are corrected with it.
     /// Default: none.
@@ -217,6 +216,27 @@ fn number_or_auto<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<usize
     }
 }
 
+/// `transfer` in a TOML file or a report: a curve, or `"auto"` (`None`).
+mod curve_or_auto {
+    use super::Transfer;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(t: &Option<Transfer>, s: S) -> Result<S::Ok, S::Error> {
+        match t {
+            Some(t) => s.serialize_str(&t.to_string()),
+            None => s.serialize_str("auto"),
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Transfer>, D::Error> {
+        let t = String::deserialize(d)?;
+        if t.trim().eq_ignore_ascii_case("auto") {
+            return Ok(None);
+        }
+        t.parse().map(Some).map_err(serde::de::Error::custom)
+    }
+}
+
 fn default_scale() -> Option<f32> {
     Some(1.0)
 }
@@ -244,7 +264,7 @@ impl Default for Options {
             scatter_memory_mib: 2048,
             resume: false,
             shard: None,
-            transfer: Transfer::default(),
+            transfer: None,
             mask: None,
             mask_auto: false,
             method: Method::default(),
@@ -260,7 +280,6 @@ impl Default for Options {
             denoise: true,
             level_by_light: true,
             bright_spots: false,
-            transfer_auto: false,
         }
     }
 }
@@ -432,25 +451,86 @@ impl Options {
             .unwrap_or(crate::method::factor::AUTO_MAX_BLOCK)
     }
 
-    /// The quantile the window takes over its photos: with `method = abyss` and a contamination rate `c`, the
-    /// `(1 + c)/2` quantile (abyssal contamination is dark — nodules, shadows — so that is the seafloor's own
-    /// median); otherwise the median.
+    /// The quantile the window takes over its photos ([`crate::method::params::window_quantile`]).
     pub fn window_quantile(&self) -> f64 {
-        match (self.method, self.contamination) {
-            (Method::Abyss, Some(c)) => (1.0 + c) / 2.0,
-            _ => 0.5,
-        }
+        crate::method::params::window_quantile(self.method, self.contamination)
     }
 
-    /// The near window in effect for a window of `n` photos (`None`: off): `near_window`, or for `auto`
-    /// [`crate::method::window::near_window`]; only with `method = abyss`, and only when shorter than `n`.
-    pub fn near_window_for(&self, n: usize) -> Option<usize> {
-        if self.method != Method::Abyss {
-            return None;
-        }
-        match self.near_window {
-            None => crate::method::window::near_window(n, self.contamination),
-            Some(k) => (k > 0 && k < n).then_some(k),
+    /// The method's parameters of these options: the one mapping from a run's settings to the
+    /// [`Engine`](crate::method::engine::Engine)'s, with the `auto` settings still `auto` (a run resolves them
+    /// with [`Params::resolved`]). Every field of `Options` is named here, so a new one cannot be forgotten: it is
+    /// either the method's or the run's.
+    pub fn params(&self) -> Result<Params, Error> {
+        let Options {
+            // The method's.
+            window: _,
+            contamination,
+            risk: _,
+            downsample,
+            near_window,
+            seafloor_colour,
+            factor_floor,
+            transfer,
+            method,
+            degree,
+            relative_floor,
+            photo_gain,
+            backscatter_scale,
+            denoise,
+            level_by_light,
+            bright_spots,
+            // The run's: where photos come from and go to, and how the run goes.
+            water_column: _,
+            scatter: _,
+            survey: _,
+            out: _,
+            save_scatter: _,
+            save_factors: _,
+            jpeg_quality: _,
+            jpeg_subsampling: _,
+            png_compression: _,
+            threads: _,
+            scatter_memory_mib: _,
+            resume: _,
+            shard: _,
+            mask: _,
+            mask_auto: _,
+            watch: _,
+            idle_timeout: _,
+            poll_interval: _,
+            limit: _,
+            report: _,
+        } = *self;
+        Ok(Params {
+            method,
+            // `window` and `risk` (or `contamination`) choose n.
+            window: self.window_choice()?.n,
+            contamination,
+            downsample: downsample.unwrap_or(0),
+            seafloor_colour,
+            factor_floor,
+            transfer,
+            degree,
+            steps: Steps {
+                bright_spots,
+                near_window,
+                backscatter_scale,
+                photo_gain,
+                relative_floor,
+                denoise,
+                level_by_light,
+            },
+        })
+    }
+
+    /// These options with the `auto` settings of `params` (resolved by [`Params::resolved`]) written in, so that the
+    /// report and the lock record what ran.
+    pub fn with_resolved(&self, params: &Params) -> Options {
+        Options {
+            transfer: params.transfer,
+            downsample: (params.downsample > 0).then_some(params.downsample),
+            near_window: params.steps.near_window,
+            ..self.clone()
         }
     }
 

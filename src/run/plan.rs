@@ -11,6 +11,8 @@ use crate::io::{
     WORK_DIR,
 };
 use crate::method::baseline::Method;
+use crate::method::params::{BlockRule, Facts, Params};
+use crate::method::transfer::Transfer;
 use crate::method::window::WindowChoice;
 use crate::run::options::Options;
 use crate::run::report::Progress;
@@ -165,7 +167,10 @@ impl Plan {
     }
 
     /// What the run would read and write, in words (`correct --dry-run`).
-    pub fn describe(&self, opts: &Options) -> String {
+    pub fn describe(&self, opts: &Options) -> Result<String> {
+        let facts = self.facts(opts)?;
+        let given = opts.params()?;
+        let params = given.resolved(&facts.facts);
         let mut s = String::new();
         let mut line = |l: String| {
             s.push_str(&l);
@@ -242,7 +247,7 @@ impl Plan {
                 opts.contamination.unwrap_or_default()
             )
         };
-        line(match opts.near_window_for(self.window.n) {
+        line(match params.near_window() {
             Some(k) => format!("{window}, near window {k} (--near-window)"),
             None => window,
         });
@@ -262,81 +267,58 @@ impl Plan {
         line(format!(
             "method: {}, blocks {}, seafloor colour {}, transfer {}, factor floor {}",
             opts.method,
-            match self.downsample(opts) {
-                (Some(k), Some(why)) => format!("{k}x{k} (auto: {why})"),
-                (Some(k), None) => format!("{k}x{k}"),
-                (None, why) => format!("auto ({})", why.unwrap_or_default()),
+            match (params.downsample, facts.blocks_why(&given)) {
+                (k, Some(why)) if k > 0 => format!("{k}x{k} (auto: {why})"),
+                (k, _) if k > 0 => format!("{k}x{k}"),
+                (_, why) => format!("auto ({})", why.unwrap_or_default()),
             },
             opts.seafloor_colour,
-            if opts.transfer_auto {
-                match self.found.photos.first() {
-                    Some(e) => crate::io::transfer::assume(&e.path).map_or("auto".into(), |a| {
-                        format!("auto, {}: {}", a.transfer, a.why)
-                    }),
-                    None => "auto".into(),
-                }
-            } else {
-                opts.transfer.to_string()
+            match &facts.transfer_why {
+                Some(why) => format!("auto, {why}"),
+                None => params.curve().to_string(),
             },
             opts.factor_floor
         ));
-        s
+        Ok(s)
     }
 
-    /// The block size `K`: `--downsample K`, or for `auto` (`None`) with `--method abyss`
-    /// [`crate::method::factor::auto_block`] of the mission's photo size, with what it was taken from (the other
-    /// methods, the paper as published and the baselines, and runs with a mask take the paper's 8). Streaming runs
-    /// have no photo before the run: the size of `--scatter` or of the first water-column frame (the same camera),
-    /// or else `None`: the engine takes it from the first photo that arrives.
-    pub fn downsample(&self, opts: &Options) -> (Option<usize>, Option<String>) {
-        if let Some(k) = opts.downsample {
-            return (Some(k), None);
-        }
-        let eight = crate::method::factor::AUTO_MAX_BLOCK;
-        if opts.method != Method::Abyss {
-            return (
-                Some(eight),
-                Some(format!("the paper's 8 for --method {}", opts.method)),
-            );
-        }
-        // Overlays that change from frame to frame (counters, clocks) are partly missed by --mask-auto; a block
-        // of 8 has enough seafloor beside them to outvote the missed pixels (with blocks of 4, masked text on a
-        // 128×96 test dive came out 210–236 instead of white: tests/field.rs).
-        if opts.mask.is_some() || opts.mask_auto {
-            return (
-                Some(eight),
-                Some("the paper's 8 with a mask: overlays need the larger blocks".into()),
-            );
-        }
+    /// What the `auto` settings of the run are resolved from ([`Params::resolved`]): the mission's photo size
+    /// (the survey's; streaming runs have no photo before the run: the size of `--scatter` or of the first
+    /// water-column frame, the same camera, or else none, and the engine takes it from the first photo that
+    /// arrives), whether a mask is used, and with `--transfer auto` the curve the first survey photo declares
+    /// ([`crate::io::transfer::assume`]; linear without a photo file to read).
+    pub fn facts(&self, opts: &Options) -> Result<MissionFacts> {
         let water = || {
             let dir = opts.water_column.as_ref()?;
             let first = find_photos(dir).ok()?.photos.into_iter().next()?;
             crate::io::header_size(&first.path).ok()
         };
         let scatter = || crate::io::header_size(opts.scatter.as_ref()?).ok();
-        let (size, from) = match self.photo_size {
+        let (size, size_from) = match self.photo_size {
             Some(s) => (Some(s), "survey photos"),
             None => match scatter() {
                 Some(s) => (Some(s), "scatter image"),
                 None => (water(), "water-column frames"),
             },
         };
-        match size {
-            Some((w, h)) => {
-                let k = crate::method::factor::auto_block(w, h);
-                (
-                    Some(k),
-                    Some(format!(
-                        "{from} {w}x{h}, about {} blocks across",
-                        w.max(h) / k
-                    )),
-                )
-            }
-            None => (
-                None,
-                Some("from the first photo's size, about 160 blocks across".into()),
-            ),
-        }
+        let assumed = match (opts.transfer, self.found.photos.first()) {
+            (Some(_), _) => None,
+            (None, Some(first)) => Some(crate::io::transfer::assume(&first.path)?),
+            (None, None) => Some(crate::io::transfer::Assumed {
+                transfer: Transfer::Linear,
+                why: "no photo file to read before the run (standard input or an empty folder)"
+                    .into(),
+            }),
+        };
+        Ok(MissionFacts {
+            facts: Facts {
+                size,
+                masked: opts.mask.is_some() || opts.mask_auto,
+                transfer: assumed.as_ref().map(|a| a.transfer),
+            },
+            size_from,
+            transfer_why: assumed.map(|a| format!("{}: {}", a.transfer, a.why)),
+        })
     }
 
     /// Where the output of a survey photo goes.
@@ -348,6 +330,41 @@ impl Plan {
 /// The photos to read from `entries` (the survey from photo `first` on), each with what to do with it: write it
 /// (in `chunk`), only read it for the windows (a shard's halo), or only read it because `--resume` found its output
 /// complete. Also returns how many outputs were found complete.
+/// What the `auto` settings of a run are resolved from ([`Plan::facts`]), and where each fact came from.
+#[derive(Debug, Clone)]
+pub struct MissionFacts {
+    /// The facts.
+    pub facts: Facts,
+    /// Where the photo size came from: the survey photos, the scatter image or the water-column frames.
+    pub size_from: &'static str,
+    /// `--transfer auto`: the curve taken and why (`None` when the curve was given).
+    pub transfer_why: Option<String>,
+}
+
+impl MissionFacts {
+    /// Why `auto` blocks of `params` (before [`Params::resolved`]) are the size they are, in words; `None` when
+    /// `--downsample` gave them.
+    pub fn blocks_why(&self, params: &Params) -> Option<String> {
+        let (k, rule) = params.auto_block(&self.facts);
+        Some(match rule {
+            BlockRule::Given => return None,
+            BlockRule::Paper => format!("the paper's 8 for --method {}", params.method),
+            BlockRule::Masked => {
+                "the paper's 8 with a mask: overlays need the larger blocks".into()
+            }
+            BlockRule::Size => {
+                let (w, h) = self.facts.size.unwrap_or_default();
+                format!(
+                    "{} {w}x{h}, about {} blocks across",
+                    self.size_from,
+                    w.max(h) / k
+                )
+            }
+            BlockRule::Unknown => "from the first photo's size, about 160 blocks across".into(),
+        })
+    }
+}
+
 fn roles(
     entries: &[Entry],
     first: usize,

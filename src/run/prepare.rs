@@ -44,7 +44,13 @@ impl Warnings<'_> {
 }
 
 /// Estimate or load `S`, find the mask, and build the engine.
-pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Result<Setup<T>> {
+/// `params` are the run's, resolved ([`crate::method::params::Params::resolved`]).
+pub fn prepare<T>(
+    opts: &Options,
+    params: &Params,
+    plan: &Plan,
+    progress: &dyn Progress,
+) -> Result<Setup<T>> {
     let mut warnings = Warnings {
         progress,
         list: Vec::new(),
@@ -56,36 +62,17 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         s.save_png(&p)?;
         info.saved_to = Some(p);
     }
-    let mask = mask(opts, plan, progress, &mut warnings)?;
+    let mask = mask(opts, params.curve(), plan, progress, &mut warnings)?;
     if let (Some(m), Some(s)) = (&mask, &scatter) {
         m.check(s.layout, mask_path(opts))?;
     }
-    let params = Params {
-        method: opts.method,
-        window: plan.window.n,
-        // `None` here (a streaming run with nothing to read the size from): the engine takes it from the first
-        // photo.
-        downsample: opts.downsample.unwrap_or(0),
-        seafloor_colour: opts.seafloor_colour,
-        factor_floor: opts.factor_floor,
-        transfer: opts.transfer,
-        degree: opts.degree,
-        relative_floor: opts.relative_floor,
-        photo_gain: opts.photo_gain,
-        backscatter_scale: opts.backscatter_scale,
-        denoise: opts.denoise,
-        level_by_light: opts.level_by_light,
-        bright_spots: opts.bright_spots,
-        window_quantile: opts.window_quantile() as f32,
-        near_window: opts.near_window_for(plan.window.n).unwrap_or(0),
-    };
-    let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
+    let mut engine = Engine::new(*params, scatter.as_ref(), mask)?;
     drop(scatter);
     if opts.method == Method::Mean {
         engine.set_mission_mean(mission_mean(
             &plan.found.photos,
             opts.block(),
-            opts.transfer,
+            params.curve(),
             progress,
         )?);
     }
@@ -166,6 +153,7 @@ fn scatter(
 /// `--mask`, united with what `--mask-auto` finds.
 fn mask(
     opts: &Options,
+    transfer: Transfer,
     plan: &Plan,
     progress: &dyn Progress,
     warnings: &mut Warnings,
@@ -222,7 +210,7 @@ fn mask(
         "looking for the paths of laser dots in {} photos spread over the mission",
         many.len()
     ));
-    let path = spot_path(&many, &found, opts.block(), opts.transfer);
+    let path = spot_path(&many, &found, opts.block(), transfer);
     if let Some(p) = &path {
         found.union(p);
     }
