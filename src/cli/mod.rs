@@ -89,7 +89,7 @@ struct Cli {
 enum Command {
     /// Correct a dive: water-column frames + survey photos -> lighting-compensated photos.
     #[command(
-        override_usage = "abysslight correct [OPTIONS] --survey DIR --out DIR\n       abysslight correct --config FILE.toml [OPTIONS]",
+        override_usage = "abysslight correct [OPTIONS] --survey DIR --out DIR\n       abysslight correct --config FILE.toml [OPTIONS]\n       abysslight correct --cruise CRUISE --out DIR [OPTIONS]",
         after_help = EXIT_HELP,
         after_long_help = CORRECT_LONG_HELP
     )]
