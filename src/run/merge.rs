@@ -576,3 +576,73 @@ fn save_pictures(
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_file_names() {
+        let s = parse_shard_name("report-shard-3-of-16.json", "report-shard-", ".json").unwrap();
+        assert_eq!((s.index, s.count), (3, 16));
+        let l = parse_shard_name("lock-shard-16-of-16", "lock-shard-", "").unwrap();
+        assert_eq!((l.index, l.count), (16, 16));
+        for bad in [
+            "report-shard-0-of-4.json",
+            "report-shard-5-of-4.json",
+            "report-shard-1-4.json",
+            "report.json",
+        ] {
+            assert!(
+                parse_shard_name(bad, "report-shard-", ".json").is_none(),
+                "{bad}"
+            );
+        }
+        assert!(parse_shard_name(
+            "report-shard-1-of-4.json.abysslight-tmp",
+            "report-shard-",
+            ".json"
+        )
+        .is_none());
+    }
+
+    #[test]
+    fn flagged_images_round_trip_exactly() {
+        let d = tempfile::tempdir().unwrap();
+        let shard = Shard { index: 2, count: 5 };
+        let a = Raster::from_fn(5, 3, 3, |x, y, c| (x * 7 + y * 3 + c) as f32 / 11.0 + 1e-7);
+        let b = Raster::from_fn(2, 2, 1, |x, _, _| if x == 0 { f32::NAN } else { -0.0 });
+        save_flagged(d.path(), shard, &[(4, a.clone()), (9, b.clone())]).unwrap();
+        let dir = flagged_dir(d.path(), shard);
+        assert_eq!(load_flagged(&dir.join("4.f32")).unwrap(), a);
+        let got = load_flagged(&dir.join("9.f32")).unwrap();
+        assert!(got.data[0].is_nan() && got.data[1].to_bits() == (-0.0f32).to_bits());
+        // A rerun of the shard replaces what the earlier run kept.
+        save_flagged(d.path(), shard, &[(5, b)]).unwrap();
+        assert!(!dir.join("4.f32").exists() && dir.join("5.f32").exists());
+        // A truncated file is an error naming it.
+        std::fs::write(
+            dir.join("6.f32"),
+            &std::fs::read(dir.join("5.f32")).unwrap()[..20],
+        )
+        .unwrap();
+        let e = load_flagged(&dir.join("6.f32")).unwrap_err().to_string();
+        assert!(e.contains("6.f32"), "{e}");
+    }
+
+    #[test]
+    fn the_one_run_sample_is_spread_over_the_flagged_photos() {
+        // Up to 24 flagged photos are all kept; beyond, every second one, then every fourth, ...
+        let few: Vec<usize> = (0..24).map(|i| 3 * i).collect();
+        assert_eq!(crate::run::threads::flagged_sample(&few), few);
+        let many: Vec<usize> = (0..100).collect();
+        let kept = crate::run::threads::flagged_sample(&many);
+        assert!(kept.len() <= 24 && kept.len() >= 12, "{kept:?}");
+        let step = kept[1] - kept[0];
+        assert!(
+            step.is_power_of_two() && kept.windows(2).all(|w| w[1] - w[0] == step),
+            "{kept:?}"
+        );
+        assert_eq!(kept[0], 0);
+    }
+}
