@@ -1,5 +1,6 @@
 //! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
 
+mod cluster;
 mod extras;
 
 use std::io::IsTerminal;
@@ -88,7 +89,7 @@ struct Cli {
 enum Command {
     /// Correct a dive: water-column frames + survey photos -> lighting-compensated photos.
     #[command(
-        override_usage = "abysslight correct [OPTIONS] --survey DIR --out DIR\n       abysslight correct --config FILE.toml [OPTIONS]",
+        override_usage = "abysslight correct [OPTIONS] --survey DIR --out DIR\n       abysslight correct --config FILE.toml [OPTIONS]\n       abysslight correct --cruise CRUISE --out DIR [OPTIONS]",
         after_help = EXIT_HELP,
         after_long_help = CORRECT_LONG_HELP
     )]
@@ -108,6 +109,9 @@ enum Command {
     Evaluate(EvaluateArgs),
     /// Simulate a small dive, correct it with every method, score them and draw a contact sheet.
     Demo(DemoArgs),
+    /// Merge the reports of `correct --shard K/N` runs into the mission's report and pictures, as one run's.
+    #[command(after_long_help = cluster::MERGE_LONG_HELP)]
+    MergeShards(cluster::MergeShardsArgs),
     /// Print a shell completion script (bash, zsh, fish, powershell, elvish) to stdout.
     #[command(after_long_help = "\
 Examples:
@@ -335,6 +339,14 @@ struct CorrectArgs {
     /// median is S. Without it (and without --scatter) S = 0 and a warning says so.
     #[arg(long, value_name = "DIR", help_heading = H_IN)]
     water_column: Option<PathBuf>,
+
+    /// A cruise: one folder per dive, each with survey/ and water-column/; OUT/<dive> per dive.
+    ///
+    /// Every folder CRUISE/<dive>/ holding a survey/ folder is a dive, its water-column frames in
+    /// CRUISE/<dive>/water-column/ (or S from --scatter for every dive). The dives run one after the other with
+    /// the same flags (with --shard K/N: chunk K of each dive); a dive that fails does not stop the others.
+    #[arg(long, value_name = "CRUISE", conflicts_with_all = ["survey", "water_column"], help_heading = H_IN)]
+    cruise: Option<PathBuf>,
 
     /// Reuse a scatter image saved by an earlier run with --save-scatter.
     ///
@@ -829,8 +841,8 @@ impl Progress for Console {
     }
 }
 
-fn correct(args: CorrectArgs) -> Result<ExitCode, Error> {
-    let opts = options_from(&args)?;
+fn correct(args: &CorrectArgs) -> Result<ExitCode, Error> {
+    let opts = options_from(args)?;
     if args.dry_run {
         // The same checks and listing as a run, and nothing written.
         let plan = abysslight::run::plan::Plan::new(&opts, &abysslight::Silent)?;
@@ -1112,7 +1124,11 @@ pub fn run() -> ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Correct(a) => correct(*a),
+        Command::Correct(a) => match a.cruise.clone() {
+            Some(c) => cluster::correct_cruise(*a, &c),
+            None => correct(&a),
+        },
+        Command::MergeShards(a) => cluster::merge(a),
         Command::Window(a) => window(a),
         Command::Scatter(a) => scatter(a),
         Command::Bench(a) => bench(a),

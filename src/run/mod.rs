@@ -9,8 +9,10 @@
 //! Sources of photos: a folder ([`source`]), a folder watched during a dive ([`watch`]) or frames on stdin
 //! ([`stdin`]). [`options`] holds every setting, shared by the library, the TOML config file and the CLI.
 
+pub mod cruise;
 pub mod draw;
 pub mod guard;
+pub mod merge;
 pub mod options;
 pub mod pictures;
 pub mod plan;
@@ -227,6 +229,9 @@ fn save_pictures(opts: &Options, plan: &Plan, outcome: &Outcome) -> Result<()> {
         &pictures::overview(&outcome.frames, &Thresholds::default()),
         &work_dir.join(name("overview")),
     )?;
+    if let Some(shard) = opts.shard {
+        merge::save_flagged(work_dir, shard, &outcome.flagged_lit)?;
+    }
     let flagged = &outcome.flagged_lit;
     let rows: Vec<(&FrameReport, &crate::method::raster::Raster)> =
         spread_indices(flagged.len(), 6)

@@ -154,26 +154,46 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
 
 /// A contact sheet of flagged photos: corrected photo | `F·C`, with the photo's name and first reason.
 pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<RgbImage> {
+    let rows: Vec<(FrameReport, String, &Raster)> = rows
+        .iter()
+        .map(|(f, lit)| {
+            let reason = f
+                .health
+                .flags
+                .first()
+                .map_or(String::new(), |r| r.to_string());
+            ((*f).clone(), reason, *lit)
+        })
+        .collect();
+    flagged_sheet_with(&rows, tile_w)
+}
+
+/// [`flagged_sheet`] with each photo's first reason given as text (`abysslight merge-shards` reads it from the
+/// shards' reports).
+pub fn flagged_sheet_with(
+    rows: &[(FrameReport, String, &Raster)],
+    tile_w: u32,
+) -> Option<RgbImage> {
     if rows.is_empty() {
         return None;
     }
     let gap = 6u32;
     let label_h = 40u32;
     let mut tiles = Vec::new();
-    for (frame, lit) in rows {
+    for (frame, reason, lit) in rows {
         let corrected = image::open(&frame.output).ok()?.to_rgb8();
         let a = draw::tile(&corrected, tile_w, true);
         let f = draw::tile(&raster_rgb(lit), tile_w, false);
-        tiles.push((frame, a, f));
+        tiles.push((frame, reason, a, f));
     }
     let h: u32 = tiles
         .iter()
-        .map(|(_, a, f)| a.height().max(f.height()) + label_h + gap)
+        .map(|(_, _, a, f)| a.height().max(f.height()) + label_h + gap)
         .sum::<u32>()
         + gap;
     let mut img = RgbImage::from_pixel(2 * tile_w + 3 * gap, h, WHITE);
     let mut y = gap as i64;
-    for (frame, a, f) in &tiles {
+    for (frame, reason, a, f) in &tiles {
         let name = frame
             .input
             .file_name()
@@ -187,11 +207,7 @@ pub fn flagged_sheet(rows: &[(&FrameReport, &Raster)], tile_w: u32) -> Option<Rg
             1,
             BLACK,
         );
-        let reason: Vec<char> = frame
-            .health
-            .flags
-            .first()
-            .map_or(Vec::new(), |r| r.to_string().chars().collect());
+        let reason: Vec<char> = reason.chars().collect();
         let max_chars = ((2 * tile_w + gap) / 8) as usize;
         for (line, chunk) in reason.chunks(max_chars).take(2).enumerate() {
             let text: String = chunk.iter().collect();

@@ -105,6 +105,17 @@ impl FlaggedSample {
     }
 }
 
+/// The indices of the flagged photos whose `F·C` a run keeps for its sheet, the flagged photos' `indices` given
+/// in mission order (for `abysslight merge-shards`, which picks what one run would have picked).
+pub(crate) fn flagged_sample(indices: &[usize]) -> Vec<usize> {
+    let none = Raster::filled(0, 0, 1, 0.0);
+    let mut sample = FlaggedSample::default();
+    for &i in indices {
+        sample.offer(i, &none);
+    }
+    sample.kept.into_iter().map(|(i, _)| i).collect()
+}
+
 /// What the survey stream did.
 #[derive(Default)]
 pub struct Outcome {

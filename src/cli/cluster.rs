@@ -1,0 +1,137 @@
+//! The CLI's part of running on a cluster: `merge-shards` after a job array of `correct --shard K/N` runs, and
+//! `correct --cruise` over the dives of a cruise (src/run/merge.rs, src/run/cruise.rs).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use abysslight::run::cruise::{find_dives, merge_cruise};
+use abysslight::run::merge::{merge_shards, Merged};
+use abysslight::Error;
+use clap::Args;
+
+use super::{CorrectArgs, EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE};
+
+/// `merge-shards --help`: what it reads, examples, exit status.
+pub const MERGE_LONG_HELP: &str = "\
+Reads OUT/_abysslight/report-shard-K-of-N.json of every shard and writes OUT/_abysslight/report.json,
+overview.png and flagged.png as one run over the whole survey would have. Refuses (naming the shard) when a
+shard is missing or unfinished, or ran with other options. Where OUT holds one folder per dive (correct
+--cruise), each dive is merged.
+
+Examples:
+  sbatch --array=1-16 deploy/slurm/correct-array.sbatch --water-column W --survey S --out OUT
+  abysslight merge-shards OUT
+
+  All shards at once on one machine, then the merge:
+    parallel abysslight correct --water-column W --survey S --out OUT --shard {}/8 ::: $(seq 8) && abysslight merge-shards OUT
+
+Exit status:
+  0  merged; every photo was corrected
+  1  merged, but some files failed in the shards (listed in report.json)
+  2  not merged: a shard is missing, unfinished or ran differently (named on stderr)";
+
+#[derive(Args, Debug)]
+pub struct MergeShardsArgs {
+    /// The --out of the shards (or of a sharded --cruise: every dive in it is merged).
+    #[arg(value_name = "OUT")]
+    out: PathBuf,
+    /// No summary line (errors are still printed).
+    #[arg(long, short = 'q')]
+    quiet: bool,
+}
+
+fn summary(m: &Merged) -> String {
+    format!(
+        "merged {} shards: {} of {} photos in the report ({} corrected, {} failed, {} flagged); report: {}",
+        m.shards,
+        m.frames,
+        m.survey_photos,
+        m.corrected,
+        m.failed + m.water_column_failed,
+        m.flagged,
+        m.report_path.display()
+    )
+}
+
+/// `abysslight merge-shards OUT`.
+pub fn merge(a: MergeShardsArgs) -> Result<ExitCode, Error> {
+    if a.out.join(abysslight::io::WORK_DIR).is_dir() {
+        let m = merge_shards(&a.out)?;
+        if !a.quiet {
+            eprintln!("abysslight: {}", summary(&m));
+        }
+        return Ok(ExitCode::from(if m.all_ok() {
+            EXIT_OK
+        } else {
+            EXIT_SOME_FAILED
+        }));
+    }
+    let mut code = EXIT_OK;
+    for (dive, r) in merge_cruise(&a.out)? {
+        match r {
+            Ok(m) => {
+                if !a.quiet {
+                    eprintln!("abysslight: dive {dive}: {}", summary(&m));
+                }
+                if !m.all_ok() {
+                    code = code.max(EXIT_SOME_FAILED);
+                }
+            }
+            Err(e) => {
+                eprintln!("abysslight: dive {dive}: error: {e}");
+                code = EXIT_USAGE;
+            }
+        }
+    }
+    Ok(ExitCode::from(code))
+}
+
+/// `abysslight correct --cruise DIR --out OUT`: each dive as its own `correct` run (the same flags, the dive's
+/// survey, water column and `OUT/<dive>`), one after the other; a dive that fails does not stop the others. The
+/// exit status is the worst of the dives'.
+pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, Error> {
+    let out = args.out.clone().ok_or_else(|| {
+        Error::Usage("--cruise needs --out DIR (one folder per dive is made in it)".into())
+    })?;
+    if out == Path::new("-") {
+        return Err(Error::Usage(
+            "--cruise writes one folder per dive: --out - cannot be used".into(),
+        ));
+    }
+    let dives = find_dives(cruise)?;
+    args.cruise = None;
+    let mut worst = EXIT_OK;
+    let mut failed = Vec::new();
+    for (i, d) in dives.iter().enumerate() {
+        if !args.quiet {
+            eprintln!("abysslight: dive {} ({} of {})", d.name, i + 1, dives.len());
+        }
+        args.survey = Some(d.survey.clone());
+        if args.scatter.is_none() {
+            args.water_column = d.water_column.clone();
+        }
+        args.out = Some(out.join(&d.name));
+        let code = match super::correct(&args) {
+            Ok(code) => code,
+            Err(e) => {
+                eprintln!("abysslight: dive {}: error: {e}", d.name);
+                ExitCode::from(EXIT_USAGE)
+            }
+        };
+        let c = if code == ExitCode::from(EXIT_OK) {
+            EXIT_OK
+        } else if code == ExitCode::from(EXIT_SOME_FAILED) {
+            EXIT_SOME_FAILED
+        } else {
+            EXIT_USAGE
+        };
+        if c != EXIT_OK {
+            failed.push(d.name.clone());
+        }
+        worst = worst.max(c);
+    }
+    if !failed.is_empty() {
+        eprintln!("abysslight: dives with failures: {}", failed.join(", "));
+    }
+    Ok(ExitCode::from(worst))
+}

@@ -1,0 +1,648 @@
+//! `abysslight merge-shards OUT`: the mission's report and pictures from the runs of `--shard 1/N` … `N/N` into
+//! one `--out`, as one run over the whole survey would have written them.
+//!
+//! Each shard leaves `_abysslight/report-shard-K-of-N.json` (and, while it runs, `lock-shard-K-of-N`). The merge
+//! checks that every shard `1..=N` finished (a report and no lock), that they ran with the same options (those
+//! that decide the output pixels: [`fingerprint`]), the same version and the same survey; then it writes
+//! `_abysslight/report.json` with every photo counted once (the shards' frames, in mission order), the errors and
+//! warnings of every shard (those every shard saw, such as a bad water-column frame, once), the counts summed,
+//! and `overview.png` and `flagged.png`.
+//!
+//! The flagged sheet needs each flagged photo's `F·C`, which lives only in memory during a run: a shard writes
+//! the ones it kept for its own sheet to `_abysslight/flagged-lit-shard-K-of-N/<index>.f32` ([`save_flagged`]).
+//! The merge picks the photos one run would have picked (from the flagged photos of the whole mission) when the
+//! shards kept them, which they always do when the mission has at most 24 flagged photos; otherwise the sheet
+//! shows flagged photos spread over the mission from those the shards kept.
+
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::error::{Error, Result};
+use crate::io::WORK_DIR;
+use crate::method::monitor::{Flag, Health, Summary, Thresholds};
+use crate::method::raster::Raster;
+use crate::run::guard::fingerprint;
+use crate::run::options::{Options, Shard};
+use crate::run::report::FrameReport;
+
+/// What [`merge_shards`] wrote.
+#[derive(Debug, Clone)]
+pub struct Merged {
+    /// Number of shards merged (`N`).
+    pub shards: usize,
+    /// Survey photos of the mission.
+    pub survey_photos: usize,
+    /// Photos in the merged report's frames (corrected, or found corrected by `--resume`).
+    pub frames: usize,
+    /// Photos corrected by the shards.
+    pub corrected: usize,
+    /// Failed survey photos, and failed water-column frames.
+    pub failed: usize,
+    /// Water-column frames that failed.
+    pub water_column_failed: usize,
+    /// Photos flagged.
+    pub flagged: usize,
+    /// `OUT/_abysslight/report.json`.
+    pub report_path: PathBuf,
+}
+
+impl Merged {
+    /// True when no photo or water-column frame failed.
+    pub fn all_ok(&self) -> bool {
+        self.failed == 0 && self.water_column_failed == 0
+    }
+}
+
+/// One shard's report, read.
+struct ShardReport {
+    shard: Shard,
+    path: PathBuf,
+    json: Value,
+}
+
+/// Merge the shard reports under `out` (the shards' `--out`) into `out/_abysslight/report.json`, `overview.png`
+/// and `flagged.png`. Errors name the shards that are missing, unfinished or ran differently.
+pub fn merge_shards(out: &Path) -> Result<Merged> {
+    let work = out.join(WORK_DIR);
+    if !work.is_dir() {
+        return Err(Error::Usage(format!(
+            "{}: no {WORK_DIR} folder: not the --out of abysslight correct --shard runs",
+            out.display()
+        )));
+    }
+    let shards = read_shards(&work)?;
+    check_same(&shards)?;
+    let (report, frames) = merged_report(&shards, &work)?;
+    let report_path = work.join("report.json");
+    crate::io::write_with(&report_path, |w| {
+        serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
+            path: report_path.clone(),
+            reason: e.to_string(),
+        })
+    })?;
+    save_pictures(&work, &frames, &report["frames"], &shards)?;
+    let count = |k: &str| report[k].as_u64().unwrap_or(0) as usize;
+    Ok(Merged {
+        shards: shards.len(),
+        survey_photos: count("survey_photos"),
+        frames: frames.len(),
+        corrected: count("corrected"),
+        failed: count("failed"),
+        water_column_failed: count("water_column_failed"),
+        flagged: frames.iter().filter(|f| !f.health.flags.is_empty()).count(),
+        report_path,
+    })
+}
+
+/// `name` as `<prefix>K-of-N<suffix>`.
+fn parse_shard_name(name: &str, prefix: &str, suffix: &str) -> Option<Shard> {
+    let (k, n) = name
+        .strip_prefix(prefix)?
+        .strip_suffix(suffix)?
+        .split_once("-of-")?;
+    format!("{k}/{n}").parse().ok()
+}
+
+/// Every shard's report in `work`, checked complete: one shard count, every shard `1..=N` with a report and
+/// without a lock. All problems are named in one error.
+fn read_shards(work: &Path) -> Result<Vec<ShardReport>> {
+    let mut reports = BTreeMap::new();
+    let mut locks = BTreeMap::new();
+    let rd = std::fs::read_dir(work).map_err(|e| Error::io(work, e))?;
+    for e in rd.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if let Some(s) = parse_shard_name(&name, "report-shard-", ".json") {
+            reports.insert((s.count, s.index), e.path());
+        } else if let Some(s) = parse_shard_name(&name, "lock-shard-", "") {
+            locks.insert((s.count, s.index), e.path());
+        }
+    }
+    let counts: BTreeSet<usize> = reports.keys().chain(locks.keys()).map(|k| k.0).collect();
+    let n = match counts.len() {
+        0 => {
+            return Err(Error::Usage(format!(
+                "{}: no shard reports (report-shard-K-of-N.json): run abysslight correct ... --shard K/N \
+                 into this --out first",
+                work.display()
+            )))
+        }
+        1 => counts.into_iter().next().unwrap_or(1),
+        _ => {
+            let list: Vec<String> = counts.iter().map(|n| format!("of-{n}")).collect();
+            return Err(Error::Usage(format!(
+                "{}: shards of different counts N ({}): remove the reports and locks of the runs that do not \
+                 belong to this mission",
+                work.display(),
+                list.join(", ")
+            )));
+        }
+    };
+    let problems: Vec<String> = (1..=n)
+        .filter_map(|k| shard_problem(k, n, reports.get(&(n, k)), locks.get(&(n, k))))
+        .collect();
+    if !problems.is_empty() {
+        return Err(Error::Usage(format!(
+            "cannot merge {} shards in {}:\n  {}",
+            n,
+            work.display(),
+            problems.join("\n  ")
+        )));
+    }
+    reports
+        .into_iter()
+        .map(|((count, index), path)| {
+            let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+            let json: Value = serde_json::from_str(&text).map_err(|e| Error::Config {
+                path: path.clone(),
+                reason: format!("unreadable shard report: {e}"),
+            })?;
+            Ok(ShardReport {
+                shard: Shard { index, count },
+                path,
+                json,
+            })
+        })
+        .collect()
+}
+
+/// Why shard `k` of `n` cannot be merged, if it cannot.
+fn shard_problem(
+    k: usize,
+    n: usize,
+    report: Option<&PathBuf>,
+    lock: Option<&PathBuf>,
+) -> Option<String> {
+    let rerun = format!("rerun it (abysslight correct <the same arguments> --shard {k}/{n}, or resubmit array task {k})");
+    if let Some(lock) = lock {
+        let pid = std::fs::read_to_string(lock)
+            .ok()
+            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
+            .and_then(|v| v.get("pid").and_then(Value::as_u64))
+            .map_or(String::new(), |p| format!(" by pid {p}"));
+        return Some(format!(
+            "shard {k}/{n} has not finished: its lock {} is still there (taken{pid} on the machine that ran it): \
+             wait for it, or, if that task was killed or timed out, {rerun}",
+            lock.display()
+        ));
+    }
+    report
+        .is_none()
+        .then(|| format!("shard {k}/{n} is missing: no report-shard-{k}-of-{n}.json; {rerun}"))
+}
+
+/// The fingerprint of a report's options, or why it cannot be read.
+fn options_of(s: &ShardReport) -> Result<Value> {
+    let opts: Options =
+        serde_json::from_value(s.json["options"].clone()).map_err(|e| Error::Config {
+            path: s.path.clone(),
+            reason: format!("unreadable options in the shard report: {e}"),
+        })?;
+    Ok(fingerprint(&opts))
+}
+
+/// The shards ran with the same options, version and survey; the first difference is an error naming the shards.
+fn check_same(shards: &[ShardReport]) -> Result<()> {
+    let Some(first) = shards.first() else {
+        return Ok(());
+    };
+    let fp = options_of(first)?;
+    for s in &shards[1..] {
+        let other = options_of(s)?;
+        let diff: Vec<&String> = match (fp.as_object(), other.as_object()) {
+            (Some(a), Some(b)) => {
+                let keys: BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+                keys.into_iter()
+                    .filter(|k| a.get(*k) != b.get(*k))
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        if !diff.is_empty() {
+            let names: Vec<&str> = diff.iter().map(|s| s.as_str()).collect();
+            return Err(Error::Usage(format!(
+                "shard {} ran with other options than shard {} ({} differ: {} against {}): rerun it with the \
+                 options of the others",
+                s.shard,
+                first.shard,
+                names.join(", "),
+                s.path.display(),
+                first.path.display()
+            )));
+        }
+        for (key, what) in [
+            ("version", "another version of abysslight"),
+            (
+                "survey_photos",
+                "another count of survey photos (the survey folder changed between the runs)",
+            ),
+        ] {
+            if s.json[key] != first.json[key] {
+                return Err(Error::Usage(format!(
+                    "shard {} ran with {what} than shard {}: {key} {} against {} ({}); rerun it",
+                    s.shard,
+                    first.shard,
+                    s.json[key],
+                    first.json[key],
+                    s.path.display()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+/// The values of `key` in every shard's report, in shard order, once each (a file every shard saw, such as a
+/// bad water-column frame, is reported by each).
+fn union(shards: &[ShardReport], key: &str) -> Vec<Value> {
+    let mut seen = HashSet::new();
+    let mut all = Vec::new();
+    for s in shards {
+        for v in s.json[key].as_array().into_iter().flatten() {
+            if seen.insert(v.to_string()) {
+                all.push(v.clone());
+            }
+        }
+    }
+    all
+}
+
+/// The merged report (shard 1's, with every list and count over all shards) and its frames for the pictures.
+fn merged_report(shards: &[ShardReport], work: &Path) -> Result<(Value, Vec<FrameReport>)> {
+    let mut frames_json = Vec::new();
+    let mut inputs = HashSet::new();
+    for s in shards {
+        for f in s.json["frames"].as_array().into_iter().flatten() {
+            let input = f["input"].to_string();
+            if !inputs.insert(input.clone()) {
+                return Err(Error::Usage(format!(
+                    "{input} is in the report of shard {} and of an earlier shard ({}): the shards overlap",
+                    s.shard,
+                    s.path.display()
+                )));
+            }
+            frames_json.push(mission_numbered(f, frames_json.len()));
+        }
+    }
+    let frames: Vec<FrameReport> = frames_json.iter().map(frame_for_pictures).collect();
+    let sum = |k: &str| -> u64 { shards.iter().map(|s| s.json[k].as_u64().unwrap_or(0)).sum() };
+    let most = |k: &str| -> u64 {
+        shards
+            .iter()
+            .map(|s| s.json[k].as_u64().unwrap_or(0))
+            .max()
+            .unwrap_or(0)
+    };
+    let errors = union(shards, "errors");
+    let water_column_failed = most("water_column_failed");
+    let mut r = shards[0].json.clone();
+    r["options"]["shard"] = Value::Null;
+    for k in [
+        "corrected",
+        "skipped_existing",
+        "floored_pixels",
+        "clipped_samples",
+    ] {
+        r[k] = sum(k).into();
+    }
+    r["peak_photos_in_memory"] = most("peak_photos_in_memory").into();
+    r["water_column_failed"] = water_column_failed.into();
+    r["failed"] = (errors.len() as u64)
+        .saturating_sub(water_column_failed)
+        .into();
+    if let Some(layout) = shards
+        .iter()
+        .map(|s| &s.json["layout"])
+        .find(|l| !l.is_null())
+    {
+        r["layout"] = layout.clone();
+    }
+    r["monitor"] = serde_json::to_value(summary_of(&frames_json)).unwrap_or(Value::Null);
+    r["frames"] = Value::Array(frames_json);
+    r["errors"] = Value::Array(errors);
+    r["warnings"] = Value::Array(union(shards, "warnings"));
+    r["elapsed_s"] = shards
+        .iter()
+        .map(|s| s.json["elapsed_s"].as_f64().unwrap_or(0.0))
+        .sum::<f64>()
+        .into();
+    r["report_path"] = serde_json::to_value(work.join("report.json")).unwrap_or(Value::Null);
+    Ok((r, frames))
+}
+
+/// A shard's frame with its `index` (and `window`) counted from the mission's first photo, the frame being the
+/// `position`-th of the mission: a shard counts from the first photo it read.
+fn mission_numbered(f: &Value, position: usize) -> Value {
+    let mut f = f.clone();
+    let shift = |v: &Value| {
+        v.as_u64()
+            .map(|i| i as i64 + position as i64 - f["index"].as_i64().unwrap_or(0))
+    };
+    let window: Vec<Value> = f["window"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|w| shift(w).map_or(Value::Null, Value::from))
+        .collect();
+    if window.len() == 2 {
+        f["window"] = Value::Array(window);
+    }
+    f["index"] = position.into();
+    f
+}
+
+/// The monitor summary of the merged frames, counted from the flags' kinds.
+fn summary_of(frames: &[Value]) -> Summary {
+    let mut s = Summary::default();
+    for f in frames {
+        let kinds: Vec<&str> = f["health"]["flags"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|x| x["kind"].as_str())
+            .collect();
+        if kinds.is_empty() {
+            continue;
+        }
+        s.flagged += 1;
+        for k in kinds {
+            match k {
+                "contamination" => s.contamination += 1,
+                "factor-change" => s.factor_change += 1,
+                "colour-shift" => s.colour_shift += 1,
+                "scene-in-factor" => s.roughness += 1,
+                "exposure-jump" => s.exposure_jump += 1,
+                "camera-still" => s.camera_still += 1,
+                "short-mission" => s.short_mission += 1,
+                _ => {}
+            }
+        }
+    }
+    s
+}
+
+/// What the pictures read of a frame: paths, index, the health series (`null`, how JSON writes a NaN, back to
+/// NaN) and whether it is flagged (the flags' kinds do not matter to the pictures: the sheet draws the message).
+fn frame_for_pictures(f: &Value) -> FrameReport {
+    let h = &f["health"];
+    let num = |k: &str| h[k].as_f64().map_or(f32::NAN, |v| v as f32);
+    let flagged = h["flags"].as_array().is_some_and(|a| !a.is_empty());
+    let path = |k: &str| PathBuf::from(f[k].as_str().unwrap_or_default());
+    FrameReport {
+        input: path("input"),
+        output: path("output"),
+        index: f["index"].as_u64().unwrap_or(0) as usize,
+        window: [0, 0],
+        decode_ms: 0.0,
+        estimate_ms: 0.0,
+        correct_ms: 0.0,
+        encode_ms: 0.0,
+        floored_pixels: 0,
+        clipped_samples: 0,
+        resumed: false,
+        health: Health {
+            contamination: num("contamination"),
+            level: num("level"),
+            texture_kept: num("texture_kept"),
+            factor_change: num("factor_change"),
+            colour_shift: num("colour_shift"),
+            roughness: num("roughness"),
+            flags: if flagged {
+                vec![Flag::ShortMission {
+                    photos: 0,
+                    window: 0,
+                }]
+            } else {
+                Vec::new()
+            },
+            ..Health::default()
+        },
+        backscatter_scale: Vec::new(),
+        noise_sigma: Vec::new(),
+        texture_sigma: Vec::new(),
+    }
+}
+
+/// Folder of a shard's kept `F·C` images of flagged photos.
+fn flagged_dir(work: &Path, shard: Shard) -> PathBuf {
+    work.join(format!(
+        "flagged-lit-shard-{}-of-{}",
+        shard.index, shard.count
+    ))
+}
+
+/// Save the `F·C` images a shard kept for its flagged sheet (exactly, as `f32`), for [`merge_shards`]; the
+/// folder of an earlier run of the shard is replaced.
+pub fn save_flagged(work: &Path, shard: Shard, kept: &[(usize, Raster)]) -> Result<()> {
+    let dir = flagged_dir(work, shard);
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    }
+    for (index, lit) in kept {
+        let path = dir.join(format!("{index}.f32"));
+        crate::io::write_with(&path, |w| {
+            use std::io::Write;
+            let mut bytes = Vec::with_capacity(16 + 4 * lit.data.len());
+            bytes.extend_from_slice(b"ABLF");
+            for d in [lit.width, lit.height, lit.channels] {
+                bytes.extend_from_slice(&(d as u32).to_le_bytes());
+            }
+            for v in &lit.data {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            w.write_all(&bytes).map_err(|e| Error::io(&path, e))
+        })?;
+    }
+    Ok(())
+}
+
+/// Read one `F·C` image written by [`save_flagged`].
+fn load_flagged(path: &Path) -> Result<Raster> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bad = || Error::Decode {
+        path: path.to_owned(),
+        reason: "not an F·C image written by abysslight correct --shard".into(),
+    };
+    if bytes.len() < 16 || &bytes[..4] != b"ABLF" {
+        return Err(bad());
+    }
+    let word = |i: usize| {
+        u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]) as usize
+    };
+    let (width, height, channels) = (word(4), word(8), word(12));
+    let n = width
+        .checked_mul(height)
+        .and_then(|p| p.checked_mul(channels))
+        .ok_or_else(bad)?;
+    if bytes.len() != 16 + 4 * n {
+        return Err(bad());
+    }
+    let data = (0..n)
+        .map(|i| {
+            f32::from_le_bytes([
+                bytes[16 + 4 * i],
+                bytes[17 + 4 * i],
+                bytes[18 + 4 * i],
+                bytes[19 + 4 * i],
+            ])
+        })
+        .collect();
+    Ok(Raster {
+        width,
+        height,
+        channels,
+        data,
+    })
+}
+
+/// The `F·C` images every shard kept, by the photo's index in the mission (a shard names them by its own).
+fn kept_lit(work: &Path, shards: &[ShardReport]) -> Result<BTreeMap<usize, Raster>> {
+    let mut all = BTreeMap::new();
+    let mut offset = 0;
+    for s in shards {
+        let frames = s.json["frames"].as_array().cloned().unwrap_or_default();
+        let position: BTreeMap<u64, usize> = frames
+            .iter()
+            .enumerate()
+            .filter_map(|(j, f)| Some((f["index"].as_u64()?, offset + j)))
+            .collect();
+        offset += frames.len();
+        let Ok(rd) = std::fs::read_dir(flagged_dir(work, s.shard)) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let local = name
+                .strip_suffix(".f32")
+                .and_then(|i| i.parse::<u64>().ok());
+            if let Some(&p) = local.and_then(|i| position.get(&i)) {
+                all.insert(p, load_flagged(&e.path())?);
+            }
+        }
+    }
+    Ok(all)
+}
+
+/// `overview.png` and `flagged.png` of the merged mission, as one run draws them.
+fn save_pictures(
+    work: &Path,
+    frames: &[FrameReport],
+    frames_json: &Value,
+    shards: &[ShardReport],
+) -> Result<()> {
+    if frames.is_empty() {
+        return Ok(());
+    }
+    let overview = crate::run::pictures::overview(frames, &Thresholds::default());
+    crate::run::pictures::save_png(&overview, &work.join("overview.png"))?;
+    let lit = kept_lit(work, shards)?;
+    let flagged: Vec<usize> = frames
+        .iter()
+        .filter(|f| !f.health.flags.is_empty())
+        .map(|f| f.index)
+        .collect();
+    // The photos one run keeps (crate::run::threads), if the shards kept them all; else those the shards kept.
+    let one_run = crate::run::threads::flagged_sample(&flagged);
+    let pool: Vec<usize> = if one_run.iter().all(|i| lit.contains_key(i)) {
+        one_run
+    } else {
+        crate::run::threads::flagged_sample(&lit.keys().copied().collect::<Vec<_>>())
+    };
+    let rows: Vec<(FrameReport, String, &Raster)> =
+        crate::run::prepare::spread_indices(pool.len(), 6)
+            .into_iter()
+            .filter_map(|j| {
+                let index = pool[j];
+                let frame = frames.iter().find(|f| f.index == index)?.clone();
+                let reason = frames_json[index]["health"]["flags"][0]["message"]
+                    .as_str()
+                    .unwrap_or_default();
+                Some((frame, reason.to_string(), lit.get(&index)?))
+            })
+            .collect();
+    let sheet_path = work.join("flagged.png");
+    match crate::run::pictures::flagged_sheet_with(&rows, 320) {
+        Some(sheet) => crate::run::pictures::save_png(&sheet, &sheet_path),
+        None => match std::fs::remove_file(&sheet_path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(&sheet_path, e)),
+            _ => Ok(()),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_file_names() {
+        let s = parse_shard_name("report-shard-3-of-16.json", "report-shard-", ".json").unwrap();
+        assert_eq!((s.index, s.count), (3, 16));
+        let l = parse_shard_name("lock-shard-16-of-16", "lock-shard-", "").unwrap();
+        assert_eq!((l.index, l.count), (16, 16));
+        for bad in [
+            "report-shard-0-of-4.json",
+            "report-shard-5-of-4.json",
+            "report-shard-1-4.json",
+            "report.json",
+        ] {
+            assert!(
+                parse_shard_name(bad, "report-shard-", ".json").is_none(),
+                "{bad}"
+            );
+        }
+        assert!(parse_shard_name(
+            "report-shard-1-of-4.json.abysslight-tmp",
+            "report-shard-",
+            ".json"
+        )
+        .is_none());
+    }
+
+    #[test]
+    fn flagged_images_round_trip_exactly() {
+        let d = tempfile::tempdir().unwrap();
+        let shard = Shard { index: 2, count: 5 };
+        let a = Raster::from_fn(5, 3, 3, |x, y, c| (x * 7 + y * 3 + c) as f32 / 11.0 + 1e-7);
+        let b = Raster::from_fn(2, 2, 1, |x, _, _| if x == 0 { f32::NAN } else { -0.0 });
+        save_flagged(d.path(), shard, &[(4, a.clone()), (9, b.clone())]).unwrap();
+        let dir = flagged_dir(d.path(), shard);
+        assert_eq!(load_flagged(&dir.join("4.f32")).unwrap(), a);
+        let got = load_flagged(&dir.join("9.f32")).unwrap();
+        assert!(got.data[0].is_nan() && got.data[1].to_bits() == (-0.0f32).to_bits());
+        // A rerun of the shard replaces what the earlier run kept.
+        save_flagged(d.path(), shard, &[(5, b)]).unwrap();
+        assert!(!dir.join("4.f32").exists() && dir.join("5.f32").exists());
+        // A truncated file is an error naming it.
+        std::fs::write(
+            dir.join("6.f32"),
+            &std::fs::read(dir.join("5.f32")).unwrap()[..20],
+        )
+        .unwrap();
+        let e = load_flagged(&dir.join("6.f32")).unwrap_err().to_string();
+        assert!(e.contains("6.f32"), "{e}");
+    }
+
+    #[test]
+    fn the_one_run_sample_is_spread_over_the_flagged_photos() {
+        // Up to 24 flagged photos are all kept; beyond, every second one, then every fourth, ...
+        let few: Vec<usize> = (0..24).map(|i| 3 * i).collect();
+        assert_eq!(crate::run::threads::flagged_sample(&few), few);
+        let many: Vec<usize> = (0..100).collect();
+        let kept = crate::run::threads::flagged_sample(&many);
+        assert!(kept.len() <= 24 && kept.len() >= 12, "{kept:?}");
+        let step = kept[1] - kept[0];
+        assert!(
+            step.is_power_of_two() && kept.windows(2).all(|w| w[1] - w[0] == step),
+            "{kept:?}"
+        );
+        assert_eq!(kept[0], 0);
+    }
+}
