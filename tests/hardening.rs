@@ -277,6 +277,7 @@ fn sof_marker(d: &[u8]) -> Option<u8> {
 
 /// Real camera JPEGs (../shared/data/real) are never rejected, and their truncated forms always are.
 #[test]
+#[ignore = "needs ../shared/data/real beside the project (real photos are not shipped); .ci/run runs it where they are"]
 fn real_jpegs_pass_and_their_truncations_fail() {
     // Beside the project (../shared), or beside the folder of worktrees (../../shared).
     let here = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -285,8 +286,7 @@ fn real_jpegs_pass_and_their_truncations_fail() {
         .map(|r| here.join(r))
         .find(|p| p.is_dir())
     else {
-        eprintln!("skipped: ../shared/data/real is absent");
-        return;
+        panic!("../shared/data/real is absent");
     };
     let mut files: Vec<PathBuf> = walkdir::WalkDir::new(&root)
         .into_iter()

@@ -137,14 +137,12 @@ fn explicit_quality_and_subsampling_win() {
 }
 
 /// The estimator against ImageMagick's (`identify -format %Q`) on the real camera JPEGs beside the project, when
-/// both are there (users' clones have neither necessarily: the test then says so and checks nothing).
+/// ImageMagick is there (without it the test says so and checks nothing).
 #[test]
+#[ignore = "needs ../shared/data/real beside the project (real photos are not shipped); .ci/run runs it where they are"]
 fn real_jpegs_agree_with_imagemagick() {
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real");
-    if !root.is_dir() {
-        eprintln!("skipped: {} is absent", root.display());
-        return;
-    }
+    assert!(root.is_dir(), "{} is absent", root.display());
     let mut files = Vec::new();
     let mut stack = vec![root];
     while let Some(dir) = stack.pop() {
