@@ -388,8 +388,8 @@ fn sound_abyssal_dives_raise_no_flags() {
 /// dives of the matrix the rim used to come out 6–18 % darker than the lit centre (noise pulls a dim block's
 /// median towards its mean, the water-column `S` takes a larger share of a small signal). Two dives of seed set 1
 /// (not the set the method was tuned on), scored as the matrix scores them (on the samples with signal): the
-/// residual pattern at least 10 % lower than without it, the albedo error no more than 2 % higher. (Until the
-/// ninth round the dives were a07 and a11; since the noise is modelled as growing with the level, a07's rim is
+/// residual pattern at least 10 % lower than without it, the albedo error no more than 2 % higher. (The dives
+/// were once a07 and a11; since the noise is modelled as growing with the level, a07's rim is
 /// no longer darkened by it (its pattern 0.033 → 0.023) and the levels leave a07 as it is: 1.05×; a06 0.56×,
 /// a11 0.77×, a12 0.64×.)
 #[test]
@@ -415,7 +415,7 @@ fn levels_evened_out_across_light_lower_the_residual_pattern_of_dim_dives() {
 /// `--downsample auto` (blocks of 4 for 320×240 photos) against the paper's blocks of 8, on a04 of the tuning set:
 /// four narrow-ish lights from 4.5 m, whose centre is clipped (the dive whose pattern stayed 0.78× the paper's with
 /// blocks of 8). Scored as the matrix scores. Fails with blocks of 8 as the default. The two block sizes are
-/// compared without the near window (the eighth round's lever, which lowers the albedo error of blocks of 8 on
+/// compared without the near window (the near window, which lowers the albedo error of blocks of 8 on
 /// this dive, 0.33 → 0.32, and not that of blocks of 4: docs/evaluation.md).
 #[test]
 fn blocks_from_the_photo_size_lower_the_residual_pattern_below_the_papers() {
@@ -495,7 +495,7 @@ fn a_starved_channels_noise_is_not_taken_for_seafloor_texture() {
     }
 }
 
-/// The held-out dive the eighth round's default failed on (h07: four lights from 8 m in clear ocean water, red
+/// The held-out dive an earlier default failed on (h07: four lights from 8 m in clear ocean water, red
 /// signal in 18 % of its samples, JPEG), on a seed set the change was not found on: albedo error ≥ 10 % below the
 /// paper's (0.94× before the texture cap and the level-dependent noise, 0.76× after) and residual pattern ≥ 25 %
 /// below.

@@ -56,8 +56,8 @@ pub struct BlockStats {
 
 /// [`BlockStats`] of every `stride`-th block in both directions (`k`×`k` blocks; blocks cut by the photo's edge
 /// are skipped), in block-row order. An odd `k` is measured on the block's top-left `(k − 1)`² samples, the 2×2
-/// cells that fit (before the seventh round the cells ran one sample into the next block and the variance was
-/// divided by `k²` for `(k + 1)²` samples: `--downsample 3`, 5, 7 or 9 turned every photo flat grey). Block rows
+/// cells that fit (cells that ran one sample into the next block, with the variance divided by `k²` for
+/// `(k + 1)²` samples, turned every photo flat grey at `--downsample 3`, 5, 7 or 9). Block rows
 /// run in parallel.
 pub fn block_stats(
     photo: &Photo,
