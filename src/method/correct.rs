@@ -11,6 +11,21 @@ use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
 use crate::method::transfer::Curve;
 
+/// The taps along a row ([`taps`]) and each sample's weight `t` (the tap's, repeated for each channel: the
+/// vectorised expansion of `F` reads eight samples' weights at once).
+#[derive(Clone, Copy)]
+struct Along<'a> {
+    tx: &'a [Tap],
+    tq: &'a [f32],
+}
+
+/// Each sample's weight along a row of `c` channels.
+fn sample_weights(tx: &[Tap], c: usize) -> Vec<f32> {
+    tx.iter()
+        .flat_map(|t| std::iter::repeat_n(t.t, c))
+        .collect()
+}
+
 /// What the correction of one photo did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct CorrectStats {
@@ -114,6 +129,8 @@ pub fn correct_with_offset<T: Sample>(
         return CorrectStats::default();
     }
     let tx = taps(width, k);
+    let tq = sample_weights(&tx, c);
+    let along = Along { tx: &tx, tq: &tq };
     let ty = taps(height, k);
     samples
         .par_chunks_mut(row_len)
@@ -140,7 +157,7 @@ pub fn correct_with_offset<T: Sample>(
                 let srow = scatter.map(|s| s.row(y));
                 match blend {
                     None => {
-                        correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
+                        correct_row_dispatch(row, frow, fx, along, c, floor, srow, s_linear, curve)
                     }
                     Some(blend) => blend_row_dispatch(
                         row,
@@ -152,7 +169,7 @@ pub fn correct_with_offset<T: Sample>(
                             ax,
                         },
                         &BlendRow {
-                            tx: &tx,
+                            along,
                             rows: (t.i0 as usize, t.i1 as usize, t.t),
                             blend,
                             c,
@@ -179,7 +196,7 @@ fn correct_row_dispatch<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
@@ -189,9 +206,9 @@ fn correct_row_dispatch<T: Sample>(
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
-        return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, s_linear, curve) };
+        return unsafe { correct_row_avx2(row, frow, fx, along, c, floor, srow, s_linear, curve) };
     }
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, false)
+    correct_row_portable(row, frow, fx, along, c, floor, srow, s_linear, curve, false)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -201,14 +218,14 @@ unsafe fn correct_row_avx2<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
     s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, true)
+    correct_row_portable(row, frow, fx, along, c, floor, srow, s_linear, curve, true)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -217,7 +234,7 @@ fn correct_row_portable<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
@@ -227,9 +244,11 @@ fn correct_row_portable<T: Sample>(
 ) -> CorrectStats {
     // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
     // made a constant for RGB and grey so the per-pixel loop unrolls.
+    let tx = along.tx;
+    let tq = simd.then_some(along.tq);
     let floored_pixels = match c {
-        3 => expand_f::<3, 24, false>(frow, fx, tx, floor),
-        1 => expand_f::<1, 8, false>(frow, fx, tx, floor),
+        3 => expand_f::<3, 24, false>(frow, fx, tx, tq, floor),
+        1 => expand_f::<1, 8, false>(frow, fx, tx, tq, floor),
         _ => expand_f_dyn(frow, fx, tx, c, floor),
     };
     CorrectStats {
@@ -242,8 +261,9 @@ fn correct_row_portable<T: Sample>(
 /// floored; returns the pixels where any channel was floored. `N` = 8·`C`.
 ///
 /// Runs of 8 pixels between the same two block centres (most of a row for 8×8 blocks) are done as one
-/// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. Same operations, same bits as
-/// [`expand_f_dyn`] (tested).
+/// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. With `tq` (each sample's weight,
+/// [`sample_weights`]; only from callers compiled for AVX2) the group is [`expand_group_avx2`]. Same operations,
+/// same bits as [`expand_f_dyn`] (tested).
 #[inline(always)]
 // `!(f >= floor)` on purpose: true for NaN too, in one comparison.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -251,6 +271,7 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
     frow: &[f32],
     fx: &mut [f32],
     tx: &[Tap],
+    tq: Option<&[f32]>,
     floor: f32,
 ) -> u64 {
     debug_assert_eq!(N, 8 * C);
@@ -271,7 +292,13 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
             let taps: &[Tap; 8] = tx[x..x + 8].try_into().unwrap();
             let out: &mut [f32; N] = (&mut fx[x * C..x * C + N]).try_into().unwrap();
             let mut any_low = false;
-            if BY_PIXEL {
+            if let Some(_tq) = tq.map(|tq| &tq[x * C..x * C + N]) {
+                // SAFETY: `tq` is only given by callers compiled for AVX2 (the CPU was checked).
+                #[cfg(target_arch = "x86_64")]
+                {
+                    any_low = unsafe { expand_group_avx2::<C>(a, b, _tq, out, floor) };
+                }
+            } else if BY_PIXEL {
                 // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler
                 // kept the `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain
                 // row the flat loop is the faster (`cargo bench --bench kernels`).
@@ -324,12 +351,72 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
 /// [`expand_f`] for 3 and 1 channels, [`expand_f_dyn`] otherwise (inlined, so that it is compiled for the
 /// caller's target features: a closure would not be).
 #[inline(always)]
-fn expand_any(frow: &[f32], out: &mut [f32], tx: &[Tap], c: usize, floor: f32) -> u64 {
+fn expand_any(
+    frow: &[f32],
+    out: &mut [f32],
+    along: Along,
+    simd: bool,
+    c: usize,
+    floor: f32,
+) -> u64 {
+    let (tx, tq) = (along.tx, simd.then_some(along.tq));
     match c {
-        3 => expand_f::<3, 24, true>(frow, out, tx, floor),
-        1 => expand_f::<1, 8, true>(frow, out, tx, floor),
+        3 => expand_f::<3, 24, true>(frow, out, tx, tq, floor),
+        1 => expand_f::<1, 8, true>(frow, out, tx, tq, floor),
         _ => expand_f_dyn(frow, out, tx, c, floor),
     }
+}
+
+/// One group of [`expand_f`]: eight pixels of `C` (1 or 3) channels between the same two block centres `a` and
+/// `b`, `a + (b − a)·t` with each sample's `t` from `tq`, floored where `!(f >= floor)` (NaN too); whether any
+/// sample was. The scalar group's operations (no fused multiply-add), eight lanes at a time.
+///
+/// # Safety
+/// The CPU must have AVX2; `a`, `b` hold `C` values, `tq` and `out` `8·C`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn expand_group_avx2<const C: usize>(
+    a: &[f32],
+    b: &[f32],
+    tq: &[f32],
+    out: &mut [f32],
+    floor: f32,
+) -> bool {
+    use std::arch::x86_64::*;
+    assert!((C == 1 || C == 3) && a.len() >= C && b.len() >= C);
+    assert!(tq.len() >= 8 * C && out.len() >= 8 * C);
+    // Lane j of vector v holds channel (8v + j) % C.
+    const P: [[i32; 8]; 3] = [
+        [0, 1, 2, 0, 1, 2, 0, 1],
+        [2, 0, 1, 2, 0, 1, 2, 0],
+        [1, 2, 0, 1, 2, 0, 1, 2],
+    ];
+    let (mut a3, mut d3) = ([0.0f32; 8], [0.0f32; 8]);
+    for ch in 0..C {
+        a3[ch] = a[ch];
+        d3[ch] = b[ch] - a[ch];
+    }
+    let (a3, d3) = (_mm256_loadu_ps(a3.as_ptr()), _mm256_loadu_ps(d3.as_ptr()));
+    let fl = _mm256_set1_ps(floor);
+    let mut low = 0;
+    for v in 0..C {
+        let p = if C == 1 {
+            _mm256_setzero_si256()
+        } else {
+            _mm256_loadu_si256(P[v].as_ptr().cast())
+        };
+        let (av, dv) = (
+            _mm256_permutevar8x32_ps(a3, p),
+            _mm256_permutevar8x32_ps(d3, p),
+        );
+        let t = _mm256_loadu_ps(tq[8 * v..].as_ptr());
+        let f = _mm256_add_ps(av, _mm256_mul_ps(dv, t));
+        let m = _mm256_cmp_ps::<_CMP_NGE_UQ>(f, fl);
+        _mm256_storeu_ps(out[8 * v..].as_mut_ptr(), _mm256_blendv_ps(f, fl, m));
+        low |= _mm256_movemask_ps(m);
+    }
+    low != 0
 }
 
 /// [`expand_f`] for any channel count.
@@ -470,7 +557,7 @@ pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
 /// What a row with a [`Blend`] reads: the taps along x, the two block rows and the weight between them, the blend,
 /// the channel count, the floor of `F`, the row of `S` and the curve.
 struct BlendRow<'a> {
-    tx: &'a [Tap],
+    along: Along<'a>,
     rows: (usize, usize, f32),
     blend: Blend<'a>,
     c: usize,
@@ -524,7 +611,7 @@ fn blend_row_portable<T: Sample>(
         ax,
     } = s;
     let BlendRow {
-        tx,
+        along,
         rows,
         blend,
         c,
@@ -533,7 +620,7 @@ fn blend_row_portable<T: Sample>(
         s_linear,
         curve,
     } = *r;
-    let floored_pixels = expand_any(frow, fx, tx, c, floor);
+    let floored_pixels = expand_any(frow, fx, along, simd, c, floor);
     // Where the blend would change nothing (w ≥ 1 − NEGLIGIBLE_BLEND in both block rows: well-lit or noise-free
     // photos, e.g. most camera JPEGs) and S is not scaled, the plain vectorised row.
     let unscaled = blend.scatter_scale.iter().all(|&k| k == 1.0);
@@ -551,7 +638,7 @@ fn blend_row_portable<T: Sample>(
     if let Some(fields) = blend.fields {
         for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)] {
             lerp_rows(r.row(rows.0), r.row(rows.1), rows.2, frow);
-            expand_any(frow, out, tx, c, f32::NEG_INFINITY);
+            expand_any(frow, out, along, simd, c, f32::NEG_INFINITY);
         }
     }
     CorrectStats {
@@ -946,6 +1033,13 @@ unsafe fn store_codes<T: Sample>(out: &mut [T], codes: std::arch::x86_64::__m256
 mod tests {
     use super::*;
 
+    fn avx2() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+
     #[test]
     fn grouped_expansion_matches_pixel_by_pixel() {
         let mut r = 0x9E37_79B9u32;
@@ -972,16 +1066,33 @@ mod tests {
                     for floor in [0.05, f32::NEG_INFINITY] {
                         let mut want = vec![0.0f32; width * c];
                         let n_want = expand_f_dyn(&frow, &mut want, &tx, c, floor);
-                        for by_pixel in [false, true] {
+                        // The AVX2 group where the CPU has it.
+                        let tq = sample_weights(&tx, c);
+                        let simd = cfg!(target_arch = "x86_64") && avx2();
+                        for (by_pixel, tq) in [
+                            (false, None),
+                            (true, None),
+                            (true, Some(&tq[..]).filter(|_| simd)),
+                        ] {
                             let mut got = vec![0.0f32; width * c];
                             let n_got = match (c, by_pixel) {
-                                (3, false) => expand_f::<3, 24, false>(&frow, &mut got, &tx, floor),
-                                (3, true) => expand_f::<3, 24, true>(&frow, &mut got, &tx, floor),
-                                (_, false) => expand_f::<1, 8, false>(&frow, &mut got, &tx, floor),
-                                (_, true) => expand_f::<1, 8, true>(&frow, &mut got, &tx, floor),
+                                (3, false) => {
+                                    expand_f::<3, 24, false>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (3, true) => {
+                                    expand_f::<3, 24, true>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (_, false) => {
+                                    expand_f::<1, 8, false>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (_, true) => {
+                                    expand_f::<1, 8, true>(&frow, &mut got, &tx, tq, floor)
+                                }
                             };
-                            let what =
-                                format!("width {width}, k {k}, c {c}, floor {floor}, {by_pixel}");
+                            let what = format!(
+                                "width {width}, k {k}, c {c}, floor {floor}, {by_pixel}, {}",
+                                tq.is_some()
+                            );
                             assert_eq!(n_got, n_want, "{what}");
                             let bits =
                                 |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
@@ -1460,12 +1571,15 @@ mod tests {
             let curve = Curve::new(t, levels);
             let prepared = Prepared::from_raster(srow, t);
             let table = prepared.linear_table().unwrap_or(&[]);
+            let tq = sample_weights(tx, c);
+            let along = Along { tx, tq: &tq };
             for s in [None, Some(prepared.row(0))] {
                 let (mut a, mut b) = (row.to_vec(), row.to_vec());
                 let (mut fa, mut fb) = (vec![0.0; n], vec![0.0; n]);
-                let sa = correct_row_dispatch(&mut a, frow, &mut fa, tx, c, 0.05, s, table, &curve);
+                let sa =
+                    correct_row_dispatch(&mut a, frow, &mut fa, along, c, 0.05, s, table, &curve);
                 let sb = correct_row_portable(
-                    &mut b, frow, &mut fb, tx, c, 0.05, s, table, &curve, false,
+                    &mut b, frow, &mut fb, along, c, 0.05, s, table, &curve, false,
                 );
                 assert_eq!(a, b, "{t:?}");
                 assert_eq!(sa, sb, "{t:?}");
