@@ -86,43 +86,12 @@ pub fn correct_with_offset<T: Sample>(
     floor: f32,
     curve: &Curve,
 ) -> CorrectStats {
+    check_inputs(samples.len(), layout, scatter, factor_low, blend, curve);
     let Layout {
         width,
         height,
         channels: c,
     } = layout;
-    assert_eq!(samples.len(), width * height * c);
-    assert_eq!(factor_low.channels, c);
-    if let Some(b) = blend {
-        if let Some(f) = b.fields {
-            assert_eq!(
-                f.level.layout(),
-                factor_low.layout(),
-                "blend and factor differ in size"
-            );
-            assert_eq!(
-                f.weight.layout(),
-                factor_low.layout(),
-                "blend and factor differ in size"
-            );
-        }
-        assert_eq!(b.scatter_scale.len(), c, "one scale of S per channel");
-        assert!(
-            c <= 4,
-            "the blend handles up to 4 channels, the photo has {c}"
-        );
-    }
-    if let Some(s) = scatter {
-        assert_eq!(
-            s.layout, layout,
-            "scatter image size differs from the photo"
-        );
-        assert_eq!(
-            s.linear_table().is_none(),
-            curve.is_identity(),
-            "scatter prepared for another transfer"
-        );
-    }
     let s_linear = scatter.and_then(|s| s.linear_table()).unwrap_or(&[]);
     let row_len = width * c;
     if row_len == 0 {
@@ -186,6 +155,50 @@ pub fn correct_with_offset<T: Sample>(
             a += b;
             a
         })
+}
+
+/// The preconditions of [`correct_with_offset`]: sizes that agree, `S` prepared for `curve`'s transfer.
+fn check_inputs(
+    samples: usize,
+    layout: Layout,
+    scatter: Option<&Prepared>,
+    factor_low: &Raster,
+    blend: Option<Blend>,
+    curve: &Curve,
+) {
+    let c = layout.channels;
+    assert_eq!(samples, layout.width * layout.height * c);
+    assert_eq!(factor_low.channels, c);
+    if let Some(b) = blend {
+        if let Some(f) = b.fields {
+            assert_eq!(
+                f.level.layout(),
+                factor_low.layout(),
+                "blend and factor differ in size"
+            );
+            assert_eq!(
+                f.weight.layout(),
+                factor_low.layout(),
+                "blend and factor differ in size"
+            );
+        }
+        assert_eq!(b.scatter_scale.len(), c, "one scale of S per channel");
+        assert!(
+            c <= 4,
+            "the blend handles up to 4 channels, the photo has {c}"
+        );
+    }
+    if let Some(s) = scatter {
+        assert_eq!(
+            s.layout, layout,
+            "scatter image size differs from the photo"
+        );
+        assert_eq!(
+            s.linear_table().is_none(),
+            curve.is_identity(),
+            "scatter prepared for another transfer"
+        );
+    }
 }
 
 /// One row: `F` upsampled along the row and floored into `fx`, then `A = (I − S) / F`. Runs the AVX2 build of
@@ -844,40 +857,20 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     let (f, lx, wx, ax) = (&mut f[..len], &mut lx[..len], &wx[..len], &mut ax[..len]);
     let top = curve.max() as u16;
     let to_lin = curve.linear_table();
-    let (identity, max, inv_max) = (curve.is_identity(), curve.max(), 1.0 / curve.max());
+    let (identity, inv_max) = (curve.is_identity(), 1.0 / curve.max());
     // Per-channel constants repeated along a group of 8: lane j of the group at sample i is channel (i + j) % C.
-    let (mut kpat, mut vpat) = ([0.0f32; 16], [0.0f32; 16]);
-    for j in 0..16 {
-        kpat[j] = scale[j % C];
-        vpat[j] = precision(b.noise_var[j % C]);
-    }
+    let kpat: [f32; 16] = std::array::from_fn(|j| scale[j % C]);
+    let vpat: [f32; 16] = std::array::from_fn(|j| precision(b.noise_var[j % C]));
     // Pass 1.
     let n = len / 8 * 8;
     let (zero, lmin) = (_mm256_setzero_ps(), _mm256_set1_ps(LEVEL_MIN));
     let (zeroi, topi) = (_mm256_setzero_si256(), _mm256_set1_epi32(top as i32));
     for i in (0..n).step_by(8) {
+        let q8 = q.map(|q| &q[i..i + 8]);
         let (cv, lin, s) = if identity {
-            // As `sample_and_scatter`: code / max, and S's grid index / 65535.
-            let mut codes = [0i32; 8];
-            for (c, v) in codes.iter_mut().zip(&row[i..i + 8]) {
-                *c = v.to_u16() as i32;
-            }
-            let cv = _mm256_loadu_si256(codes.as_ptr().cast());
-            let lin = _mm256_mul_ps(_mm256_cvtepi32_ps(cv), _mm256_set1_ps(inv_max));
-            let s = match q {
-                Some(q) => {
-                    let mut qi = [0i32; 8];
-                    for (d, &v) in qi.iter_mut().zip(&q[i..i + 8]) {
-                        *d = v as i32;
-                    }
-                    let qv = _mm256_cvtepi32_ps(_mm256_loadu_si256(qi.as_ptr().cast()));
-                    _mm256_mul_ps(qv, _mm256_set1_ps(1.0 / 65535.0))
-                }
-                None => zero,
-            };
-            (cv, lin, s)
+            linear_lin_and_s(&row[i..i + 8], q8, inv_max)
         } else {
-            gather_lin_and_s(&row[i..i + 8], q.map(|q| &q[i..i + 8]), to_lin, s_linear)
+            gather_lin_and_s(&row[i..i + 8], q8, to_lin, s_linear)
         };
         let (kv, iv) = (
             _mm256_loadu_ps(kpat[i % C..].as_ptr()),
@@ -909,21 +902,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         ax[i] = a;
         f[i] = if ok { f[i] * f[i] * lv * vpat[ch] } else { 0.0 };
     }
-    // Pass 2.
-    let prior = b.prior_precision;
-    for ((g, a), l) in f
-        .chunks_exact_mut(C)
-        .zip(ax.chunks_exact(C))
-        .zip(lx.chunks_exact(C))
-    {
-        let (mut num, mut den) = (prior, prior);
-        for ch in 0..C {
-            num += g[ch] * a[ch];
-            den += g[ch] * l[ch].max(LEVEL_MIN);
-        }
-        let r = num / den;
-        g.fill(r);
-    }
+    pixel_ratios::<C>(f, ax, lx, b.prior_precision);
     // Pass 3.
     let mut clipped = 0u32;
     for (((l, &w), &a), &r) in lx.iter_mut().zip(wx).zip(ax.iter()).zip(f.iter()) {
@@ -934,17 +913,29 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         clipped += o as u32;
         *l = v;
     }
-    if identity {
-        for (v, &a) in row.iter_mut().zip(lx.iter()) {
+    codes_into(row, lx, curve);
+    clipped as u64
+}
+
+/// `row[k] = ` the code of linear light `l[k]` (8 at a time by [`codes_into_avx2`] for a non-linear curve).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn codes_into<T: Sample>(row: &mut [T], l: &[f32], curve: &Curve) {
+    if curve.is_identity() {
+        let max = curve.max();
+        for (v, &a) in row.iter_mut().zip(l) {
             *v = T::from_code(code_of(a * max + 0.5, max));
         }
     } else {
-        let done = codes_into_avx2(row, lx, curve);
-        for (v, &a) in row.iter_mut().zip(lx.iter()).skip(done) {
+        let done = codes_into_avx2(row, l, curve);
+        for (v, &a) in row.iter_mut().zip(l).skip(done) {
             *v = T::from_code(curve.code(a));
         }
     }
-    clipped as u64
 }
 
 /// `row[k] = curve.code(l[k])` for the first `8·⌊len/8⌋` samples, 8 at a time by [`Curve::codes_avx2`] (the same
@@ -962,6 +953,63 @@ unsafe fn codes_into_avx2<T: Sample>(row: &mut [T], l: &[f32], curve: &Curve) ->
         store_codes(&mut row[k..k + 8], codes);
     }
     n
+}
+
+/// Eight samples' codes, their linear light and their `S` for a linear curve, as `sample_and_scatter` gives
+/// them: code / max, and `S`'s grid index / 65535 (0 without).
+///
+/// # Safety
+/// The CPU must have AVX2; `samples` and `q` hold at least 8 values. Always inlined, into callers compiled for
+/// AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn linear_lin_and_s<T: Sample>(
+    samples: &[T],
+    q: Option<&[u16]>,
+    inv_max: f32,
+) -> (
+    std::arch::x86_64::__m256i,
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let mut codes = [0i32; 8];
+    for (c, v) in codes.iter_mut().zip(samples) {
+        *c = v.to_u16() as i32;
+    }
+    let cv = _mm256_loadu_si256(codes.as_ptr().cast());
+    let lin = _mm256_mul_ps(_mm256_cvtepi32_ps(cv), _mm256_set1_ps(inv_max));
+    let s = match q {
+        Some(q) => {
+            let mut qi = [0i32; 8];
+            for (d, &v) in qi.iter_mut().zip(q) {
+                *d = v as i32;
+            }
+            let qv = _mm256_cvtepi32_ps(_mm256_loadu_si256(qi.as_ptr().cast()));
+            _mm256_mul_ps(qv, _mm256_set1_ps(1.0 / 65535.0))
+        }
+        None => _mm256_setzero_ps(),
+    };
+    (cv, lin, s)
+}
+
+/// Pass 2 of [`blend_row_passes`]: per pixel, `r` from its samples' precision weights `g` (in `f`) and `Â` (in
+/// `ax`), written over its `g`s.
+#[inline(always)]
+fn pixel_ratios<const C: usize>(f: &mut [f32], ax: &[f32], lx: &[f32], prior: f32) {
+    for ((g, a), l) in f
+        .chunks_exact_mut(C)
+        .zip(ax.chunks_exact(C))
+        .zip(lx.chunks_exact(C))
+    {
+        let (mut num, mut den) = (prior, prior);
+        for ch in 0..C {
+            num += g[ch] * a[ch];
+            den += g[ch] * l[ch].max(LEVEL_MIN);
+        }
+        let r = num / den;
+        g.fill(r);
+    }
 }
 
 /// Eight samples' codes, their linear light (`to_lin` by code) and their `S` (`s_linear` by the grid indices `q`;
@@ -1220,18 +1268,92 @@ mod tests {
         }
     }
 
-    #[test]
-    #[allow(clippy::needless_range_loop)] // per-channel formulas, written as in the docs
-    fn blend_correction_matches_unfused_reference() {
-        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
-        // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
-        let (layout, k, low, scatter) = reference_frame(0.03);
-        let fields = Blended {
+    /// The blend fields of the reference tests: levels, weights from 0 to 1, noise variances (one of 0).
+    fn reference_fields() -> Blended {
+        Blended {
             level: Raster::from_fn(8, 5, 3, |x, y, c| 0.2 + 0.05 * ((x + 2 * y + c) % 7) as f32),
             weight: Raster::from_fn(8, 5, 3, |x, y, c| ((x * 5 + y + c) % 11) as f32 / 10.0),
             noise_var: vec![0.001, 0.0002, 0.0],
             prior_precision: 12.0,
-        };
+        }
+    }
+
+    /// `correct_with_offset` on 16-bit samples (linear curve) or on the same codes as 8-bit samples.
+    #[allow(clippy::too_many_arguments)]
+    fn corrected(
+        samples: &[u16],
+        layout: Layout,
+        prepared: &Prepared,
+        low: &Raster,
+        blend: Option<Blend>,
+        k: usize,
+        curve: &Curve,
+    ) -> Vec<u16> {
+        let s = Some(prepared);
+        if curve.is_identity() {
+            let mut got = samples.to_vec();
+            correct_with_offset(&mut got, layout, s, low, blend, k, 0.05, curve);
+            got
+        } else {
+            let mut g8: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
+            correct_with_offset(&mut g8, layout, s, low, blend, k, 0.05, curve);
+            g8.into_iter().map(u16::from).collect()
+        }
+    }
+
+    /// The blend of one pixel in f64 from its full-size fields (`i` its first sample): `Â = (I − k·S)/max(F,
+    /// 0.05)`, `r = (prior + Σ p·Â/l)/(prior + Σ p)` with `p = (F·l)²/σ²` (0 for clipped codes), `A = w·Â + (1 −
+    /// w)·l·r`.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+    fn reference_pixel(
+        i: usize,
+        codes: &[u16],
+        s_lin: &dyn Fn(usize) -> f64,
+        curve: &Curve,
+        (f, lv, wt): (&Raster, &Raster, &Raster),
+        fields: &Blended,
+        kscale: &[f32],
+        out: &mut [f64],
+    ) {
+        let top = curve.max() as u16;
+        let ahat: Vec<f64> = (0..3)
+            .map(|c| {
+                let j = i + c;
+                (curve.linear(codes[j]) as f64 - kscale[c] as f64 * s_lin(j))
+                    / (f.data[j] as f64).max(0.05)
+            })
+            .collect();
+        let (mut num, mut den) = (12.0f64, 12.0f64);
+        for c in 0..3 {
+            let j = i + c;
+            let l = (lv.data[j] as f64).max(1e-3);
+            let clipped = codes[j] == 0 || codes[j] == top;
+            let inv_var = if fields.noise_var[c] > 0.0 {
+                (1.0 / fields.noise_var[c] as f64).min(1e8)
+            } else {
+                1e8
+            };
+            let p = if clipped {
+                0.0
+            } else {
+                ((f.data[j] as f64).max(0.05) * l).powi(2) * inv_var
+            };
+            num += p * ahat[c] / l;
+            den += p;
+        }
+        for c in 0..3 {
+            let j = i + c;
+            let w = wt.data[j] as f64;
+            out[j] = w * ahat[c] + (1.0 - w) * (lv.data[j] as f64).max(1e-3) * num / den;
+        }
+    }
+
+    #[test]
+    fn blend_correction_matches_unfused_reference() {
+        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
+        let (layout, k, low, scatter) = reference_frame(0.03);
+        let fields = reference_fields();
         let up = |r: &Raster| upsample(r, k, 29, 17);
         let (f, lv, wt) = (up(&low), up(&fields.level), up(&fields.weight));
         let kscale = [0.7f32, 0.9, 1.0];
@@ -1252,63 +1374,19 @@ mod tests {
             };
             let mut expect = vec![0.0f64; samples.len()];
             for px in 0..29 * 17 {
-                let ahat: Vec<f64> = (0..3)
-                    .map(|c| {
-                        let i = px * 3 + c;
-                        (curve.linear(samples[i]) as f64 - kscale[c] as f64 * s_lin(i))
-                            / (f.data[i] as f64).max(0.05)
-                    })
-                    .collect();
-                let (mut num, mut den) = (12.0f64, 12.0f64);
-                for c in 0..3 {
-                    let i = px * 3 + c;
-                    let l = (lv.data[i] as f64).max(1e-3);
-                    let clipped = samples[i] == 0 || samples[i] as usize == levels - 1;
-                    let p = if clipped {
-                        0.0
-                    } else {
-                        let inv_var = if fields.noise_var[c] > 0.0 {
-                            (1.0 / fields.noise_var[c] as f64).min(1e8)
-                        } else {
-                            1e8
-                        };
-                        ((f.data[i] as f64).max(0.05) * l).powi(2) * inv_var
-                    };
-                    num += p * ahat[c] / l;
-                    den += p;
-                }
-                for c in 0..3 {
-                    let i = px * 3 + c;
-                    let w = wt.data[i] as f64;
-                    expect[i] = w * ahat[c] + (1.0 - w) * (lv.data[i] as f64).max(1e-3) * num / den;
-                }
-            }
-            let mut got = samples.clone();
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut got,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(blend),
-                    k,
-                    0.05,
+                let full = (&f, &lv, &wt);
+                reference_pixel(
+                    px * 3,
+                    &samples,
+                    &s_lin,
                     &curve,
+                    full,
+                    &fields,
+                    &kscale,
+                    &mut expect,
                 );
-            } else {
-                let mut g8: Vec<u8> = got.iter().map(|&v| v as u8).collect();
-                correct_with_offset(
-                    &mut g8,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(blend),
-                    k,
-                    0.05,
-                    &curve,
-                );
-                got = g8.into_iter().map(u16::from).collect();
             }
+            let got = corrected(&samples, layout, &prepared, &low, Some(blend), k, &curve);
             for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
                 let want = curve.code(e.clamp(0.0, 1.0) as f32);
                 assert!(
@@ -1316,54 +1394,48 @@ mod tests {
                     "{t:?} sample {i}: {g} vs {want}"
                 );
             }
-            // Weights of 1 everywhere (nothing to blend) and k = 1: the plain correction, bit for bit.
-            let ones = Blended {
-                weight: Raster::filled(8, 5, 3, 1.0),
-                ..fields.clone()
-            };
-            let unblended = Blend {
-                fields: Some(&ones),
-                scatter_scale: &[1.0; 3],
-            };
-            let (mut a, mut c) = (samples.clone(), samples.clone());
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut a,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(unblended),
-                    k,
-                    0.05,
-                    &curve,
-                );
-                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
-                assert_eq!(a, c);
-            }
-            // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
-            let plain = Blend {
-                fields: None,
-                scatter_scale: &[1.0; 3],
-            };
-            let (mut a, mut c) = (samples.clone(), samples.clone());
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut a,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(plain),
-                    k,
-                    0.05,
-                    &curve,
-                );
-                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
-                assert!(a
-                    .iter()
-                    .zip(&c)
-                    .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
-            }
         }
+    }
+
+    #[test]
+    fn a_blend_that_changes_nothing_is_the_plain_correction() {
+        let (layout, k, low, scatter) = reference_frame(0.03);
+        let prepared = Prepared::from_raster(&scatter, Transfer::Linear);
+        let curve = Curve::new(Transfer::Linear, 65536);
+        let samples: Vec<u16> = (0..29 * 17 * 3)
+            .map(|i| ((i * 7919) % 65536) as u16)
+            .collect();
+        let mut plain = samples.clone();
+        correct_in_place(&mut plain, layout, Some(&prepared), &low, k, 0.05, &curve);
+        // Weights of 1 everywhere (nothing to blend) and k = 1: the plain correction, bit for bit.
+        let ones = Blended {
+            weight: Raster::filled(8, 5, 3, 1.0),
+            ..reference_fields()
+        };
+        let unblended = Blend {
+            fields: Some(&ones),
+            scatter_scale: &[1.0; 3],
+        };
+        let a = corrected(
+            &samples,
+            layout,
+            &prepared,
+            &low,
+            Some(unblended),
+            k,
+            &curve,
+        );
+        assert_eq!(a, plain);
+        // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
+        let none = Blend {
+            fields: None,
+            scatter_scale: &[1.0; 3],
+        };
+        let a = corrected(&samples, layout, &prepared, &low, Some(none), k, &curve);
+        assert!(a
+            .iter()
+            .zip(&plain)
+            .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
     }
 
     /// The blend in passes (AVX2) against the per-pixel blend, bit for bit: codes and clipped counts, for 8- and
