@@ -1438,6 +1438,110 @@ mod tests {
             .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
     }
 
+    /// A random row of `n` samples for the blend: codes with black and top ones, F near 0 and NaN, levels below
+    /// LEVEL_MIN and NaN, weights 0 to 1, S's grid indices.
+    #[allow(clippy::type_complexity)]
+    fn random_blend_row<T: Sample>(
+        next: &mut dyn FnMut() -> u32,
+        levels: usize,
+        n: usize,
+    ) -> (Vec<T>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<u16>) {
+        let codes: Vec<T> = (0..n)
+            .map(|_| {
+                let v = match next() % 12 {
+                    0 => 0,
+                    1 => levels - 1,
+                    _ => next() as usize % levels,
+                };
+                T::from_code(v as u16)
+            })
+            .collect();
+        let f: Vec<f32> = (0..n)
+            .map(|_| match next() % 20 {
+                0 => f32::NAN,
+                1 => 1e-7,
+                _ => (next() % 1000) as f32 / 500.0 + 1e-4,
+            })
+            .collect();
+        let lx: Vec<f32> = (0..n)
+            .map(|_| match next() % 20 {
+                0 => f32::NAN,
+                1 => 1e-5,
+                _ => (next() % 1000) as f32 / 1000.0,
+            })
+            .collect();
+        let wx: Vec<f32> = (0..n).map(|_| (next() % 1001) as f32 / 1000.0).collect();
+        let q: Vec<u16> = (0..n).map(|_| next() as u16).collect();
+        (codes, f, lx, wx, q)
+    }
+
+    /// One random row of `len` pixels through [`blend_row`] and [`blend_row_passes`]: the same codes and clipped
+    /// counts, with S unscaled, scaled and absent.
+    #[cfg(target_arch = "x86_64")]
+    fn passes_agree<T: Sample, const C: usize>(
+        next: &mut dyn FnMut() -> u32,
+        transfer: Transfer,
+        levels: usize,
+        len: usize,
+    ) {
+        let curve = Curve::new(transfer, levels);
+        let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
+        let n = len * C;
+        let (codes, f, lx, wx, q) = random_blend_row::<T>(next, levels, n);
+        let b = Blended {
+            level: Raster::filled(1, 1, C, 0.4),
+            weight: Raster::filled(1, 1, C, 0.5),
+            noise_var: (0..C).map(|c| [1e-4, 0.0, 3e-3][c % 3]).collect(),
+            prior_precision: 17.0,
+        };
+        for (scale, with_s) in [
+            (vec![1.0f32; C], true),
+            (vec![0.8f32; C], true),
+            (vec![1.0; C], false),
+        ] {
+            let qs = with_s.then_some(q.as_slice());
+            let mut want = codes.clone();
+            let c_want = blend_row::<T, C>(
+                &mut want,
+                &f,
+                &lx,
+                &wx,
+                &scale,
+                &b,
+                qs,
+                &prepared_table,
+                &curve,
+            );
+            let mut got = codes.clone();
+            let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
+            // SAFETY: AVX2 checked above.
+            let c_got = unsafe {
+                blend_row_passes::<T, C>(
+                    &mut got,
+                    &mut f2,
+                    &mut l2,
+                    &wx,
+                    &mut ax,
+                    &scale,
+                    &b,
+                    qs,
+                    &prepared_table,
+                    &curve,
+                )
+            };
+            assert_eq!(
+                c_got, c_want,
+                "clipped, {transfer:?}, {levels} levels, {C} channels, {len} px"
+            );
+            let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
+            assert_eq!(
+                as16(&got),
+                as16(&want),
+                "{transfer:?}, {levels} levels, {C} channels, {len} px"
+            );
+        }
+    }
+
     /// The blend in passes (AVX2) against the per-pixel blend, bit for bit: codes and clipped counts, for 8- and
     /// 16-bit rows, sRGB and linear, of 1 and 3 channels whose lengths leave a tail, with black and top codes, F near 0 and
     /// NaN, levels below LEVEL_MIN and NaN, weights 0 to 1, S scaled or absent, noise variances of 0.
@@ -1455,100 +1559,12 @@ mod tests {
             r ^= r << 5;
             r
         };
-        fn run<T: Sample, const C: usize>(
-            next: &mut dyn FnMut() -> u32,
-            transfer: Transfer,
-            levels: usize,
-            len: usize,
-        ) {
-            let curve = Curve::new(transfer, levels);
-            let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
-            let n = len * C;
-            let codes: Vec<T> = (0..n)
-                .map(|_| {
-                    let v = match next() % 12 {
-                        0 => 0,
-                        1 => levels - 1,
-                        _ => next() as usize % levels,
-                    };
-                    T::from_code(v as u16)
-                })
-                .collect();
-            let f: Vec<f32> = (0..n)
-                .map(|_| match next() % 20 {
-                    0 => f32::NAN,
-                    1 => 1e-7,
-                    _ => (next() % 1000) as f32 / 500.0 + 1e-4,
-                })
-                .collect();
-            let lx: Vec<f32> = (0..n)
-                .map(|_| match next() % 20 {
-                    0 => f32::NAN,
-                    1 => 1e-5,
-                    _ => (next() % 1000) as f32 / 1000.0,
-                })
-                .collect();
-            let wx: Vec<f32> = (0..n).map(|_| (next() % 1001) as f32 / 1000.0).collect();
-            let q: Vec<u16> = (0..n).map(|_| next() as u16).collect();
-            let b = Blended {
-                level: Raster::filled(1, 1, C, 0.4),
-                weight: Raster::filled(1, 1, C, 0.5),
-                noise_var: (0..C).map(|c| [1e-4, 0.0, 3e-3][c % 3]).collect(),
-                prior_precision: 17.0,
-            };
-            for (scale, with_s) in [
-                (vec![1.0f32; C], true),
-                (vec![0.8f32; C], true),
-                (vec![1.0; C], false),
-            ] {
-                let qs = with_s.then_some(q.as_slice());
-                let mut want = codes.clone();
-                let c_want = blend_row::<T, C>(
-                    &mut want,
-                    &f,
-                    &lx,
-                    &wx,
-                    &scale,
-                    &b,
-                    qs,
-                    &prepared_table,
-                    &curve,
-                );
-                let mut got = codes.clone();
-                let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
-                // SAFETY: AVX2 checked above.
-                let c_got = unsafe {
-                    blend_row_passes::<T, C>(
-                        &mut got,
-                        &mut f2,
-                        &mut l2,
-                        &wx,
-                        &mut ax,
-                        &scale,
-                        &b,
-                        qs,
-                        &prepared_table,
-                        &curve,
-                    )
-                };
-                assert_eq!(
-                    c_got, c_want,
-                    "clipped, {transfer:?}, {levels} levels, {C} channels, {len} px"
-                );
-                let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
-                assert_eq!(
-                    as16(&got),
-                    as16(&want),
-                    "{transfer:?}, {levels} levels, {C} channels, {len} px"
-                );
-            }
-        }
         for t in [Transfer::Srgb, Transfer::Linear] {
             for len in [1usize, 7, 8, 13, 61, 200] {
-                run::<u8, 3>(&mut next, t, 256, len);
-                run::<u8, 1>(&mut next, t, 256, len);
-                run::<u16, 3>(&mut next, t, 65536, len);
-                run::<u16, 1>(&mut next, t, 65536, len);
+                passes_agree::<u8, 3>(&mut next, t, 256, len);
+                passes_agree::<u8, 1>(&mut next, t, 256, len);
+                passes_agree::<u16, 3>(&mut next, t, 65536, len);
+                passes_agree::<u16, 1>(&mut next, t, 65536, len);
             }
         }
     }
