@@ -960,7 +960,7 @@ mod tests {
         let m = generate(&tiny(), d.path()).unwrap();
         let c = crate::io::jpeg::parse(&std::fs::read(&m.distinct[0]).unwrap()).unwrap();
         assert_eq!(c.subsampling, Some(io::Subsampling::S420));
-        assert_eq!(c.quality, Some(90));
+        assert_eq!(c.quality, Some(tiny().quality));
     }
 
     #[test]
