@@ -1,6 +1,8 @@
-//! `cargo bench --bench cruise`: the same benchmark as `abysslight bench` with its defaults (12 MP JPEG mission of
-//! 20 and 200 photos, 2 threads). Set ABYSSLIGHT_BENCH_ARGS="--photos 4 --size 1000x750" for a quick run: the
-//! arguments are those of `abysslight bench`, passed to the binary.
+//! `cargo bench --bench cruise`: the same benchmark as `abysslight bench` with its defaults (a noisy dive of 60
+//! camera-like 12 MP JPEGs and 9 water-column frames, 2 threads, against the libjpeg-turbo floor measured through
+//! OpenCV in the same run). Set ABYSSLIGHT_BENCH_ARGS="--photos 4 --size 1000x750" for a quick run, or
+//! "--python /path/to/venv/bin/python --peer /path/to/peer.py": the arguments are those of `abysslight bench`,
+//! passed to the binary.
 
 use std::process::{Command, ExitCode};
 

@@ -165,12 +165,27 @@ struct BenchArgs {
     /// Photo size WIDTHxHEIGHT.
     #[arg(long, default_value = "4000x3000", value_name = "WxH")]
     size: String,
-    /// Survey photos of the short mission (the long one has 10x as many).
-    #[arg(long, default_value_t = 20)]
+    /// Survey photos of the mission.
+    #[arg(long, default_value_t = 60)]
     photos: usize,
-    /// How many times longer the long mission is.
-    #[arg(long, default_value_t = 10)]
+    /// Above 1: correct a mission this many times longer too, and measure on it (peak memory of both).
+    #[arg(long, default_value_t = 1)]
     long_factor: usize,
+    /// Water-column frames of the mission.
+    #[arg(long, default_value_t = 9)]
+    water_column: usize,
+    /// Sensor noise added to the generated photos: standard deviation in 8-bit levels.
+    #[arg(long, default_value_t = 3.0)]
+    noise: f32,
+    /// JPEG quality of the generated photos (4:2:0).
+    #[arg(long, default_value_t = 92)]
+    quality: u8,
+    /// A Python with OpenCV, for the libjpeg-turbo floor (cv2.imread + cv2.imencode, one thread).
+    #[arg(long, value_name = "PYTHON", default_value = "python3")]
+    python: PathBuf,
+    /// Also time this peer script on the same mission (run as PYTHON PEER paper WATER SURVEY OUT).
+    #[arg(long, value_name = "SCRIPT")]
+    peer: Option<PathBuf>,
     /// Worker threads of correct and of the floor.
     #[arg(long, short = 'j', default_value_t = 2)]
     threads: usize,
@@ -967,6 +982,11 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
         height: h,
         photos: a.photos,
         long_factor: a.long_factor,
+        water_column: a.water_column,
+        noise: a.noise,
+        quality: a.quality,
+        python: a.python,
+        peer: a.peer,
         threads: a.threads,
         window: a.window,
         jpeg_quality: a.jpeg_quality,

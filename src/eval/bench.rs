@@ -46,8 +46,18 @@ pub struct BenchOptions {
     /// Distinct synthetic photos generated (the mission cycles through them as hard links, so generating does not
     /// dominate the run).
     pub distinct: usize,
-    /// Water-column photos generated for the estimate of `S` (default 5).
+    /// Water-column photos generated for the estimate of `S` (default 9).
     pub water_column: usize,
+    /// Sensor noise added to every photo before it is saved, standard deviation in 8-bit levels (default 3: dark
+    /// abyssal photos are noisy, and the noise-aware blend of the default method runs on them).
+    pub noise: f32,
+    /// JPEG quality of the generated mission (default 92; 4:2:0 always, like a camera's).
+    pub quality: u8,
+    /// A Python with OpenCV (`cv2`) for the libjpeg-turbo floor (default `python3`); the line is left out, with
+    /// the reason, where it has no `cv2`.
+    pub python: PathBuf,
+    /// A peer implementation to time on the same mission, run as `PYTHON PEER paper WATER SURVEY OUT`.
+    pub peer: Option<PathBuf>,
     /// Worker threads of `correct` and of the codec floor (default 2).
     pub threads: usize,
     /// Sliding-window length `n` in photos passed to `correct` (default 7).
@@ -65,10 +75,14 @@ impl Default for BenchOptions {
         BenchOptions {
             width: 4000,
             height: 3000,
-            photos: 20,
-            long_factor: 10,
+            photos: 60,
+            long_factor: 1,
             distinct: 12,
-            water_column: 5,
+            water_column: 9,
+            noise: 3.0,
+            quality: 92,
+            python: PathBuf::from("python3"),
+            peer: None,
             threads: 2,
             window: 7,
             jpeg_quality: None,
@@ -104,107 +118,145 @@ pub struct BenchResult {
     pub height: usize,
     /// Worker threads used.
     pub threads: usize,
+    /// Sensor noise of the generated photos (standard deviation, 8-bit levels).
+    pub noise: f32,
+    /// JPEG quality of the generated photos.
+    pub quality: u8,
+    /// Water-column frames of the mission.
+    pub water_column: usize,
     /// Seconds spent generating the synthetic mission.
     pub generate_s: f64,
-    /// The short mission's `correct` run.
-    pub short: ChildResult,
-    /// The long mission's `correct` run (its rate is the headline figure).
+    /// The short mission's `correct` run (only with a long factor above 1: its peak memory beside the long one's).
+    pub short: Option<ChildResult>,
+    /// The mission's `correct` run (the headline figure).
     pub long: ChildResult,
-    /// Photos decoded and re-encoded for the codec floor (the long mission's inputs).
-    pub floor_photos: usize,
-    /// Seconds of the codec floor: decode + encode of `floor_photos` with the same threads and writer.
-    pub floor_s: f64,
-    /// Seconds of decode + encode of `correct`'s own outputs (same threads and settings): what the codec alone
-    /// costs on corrected content, which encodes larger (flattened light, brightened corners) than the input.
-    pub outputs_floor_s: f64,
-    /// The JPEG codec built in.
-    pub codec: String,
-    /// Bytes of the long mission's inputs and of `correct`'s outputs of them.
-    pub input_bytes: u64,
-    /// Bytes of `correct`'s outputs of the long mission.
-    pub output_bytes: u64,
-    /// Seconds of libjpeg-turbo decode + encode in memory of the long mission (`turbojpeg` feature only).
-    pub turbo_floor_s: Option<f64>,
+    /// Decode + encode with abysslight's own codec and writer.
+    pub codec: CodecFloors,
+    /// The libjpeg-turbo floor measured through OpenCV, or why it was not.
+    pub opencv_floor: std::result::Result<OpencvFloor, String>,
+    /// Wall-clock seconds of the peer on the same mission.
+    pub peer_s: Option<f64>,
 }
 
 impl BenchResult {
-    /// Photos per second of `correct` over the long mission.
+    /// Photos per second of `correct` over the mission.
     pub fn correct_rate(&self) -> f64 {
         self.long.photos as f64 / self.long.seconds
     }
     /// Photos per second of the codec floor (decode + encode of the inputs).
     pub fn floor_rate(&self) -> f64 {
-        self.floor_photos as f64 / self.floor_s
+        self.codec.photos as f64 / self.codec.floor_s
     }
     /// Photos per second of decode + encode of `correct`'s own outputs.
     pub fn outputs_floor_rate(&self) -> f64 {
-        self.long.photos as f64 / self.outputs_floor_s
+        self.long.photos as f64 / self.codec.outputs_floor_s
+    }
+    /// The libjpeg-turbo floor's seconds on `threads` cores with perfect parallelism (one thread's ÷ threads).
+    pub fn opencv_floor_s(&self) -> Option<f64> {
+        let f = self.opencv_floor.as_ref().ok()?;
+        Some((f.decode_s + f.encode_s) / self.threads.max(1) as f64)
     }
     /// The table printed at the end (Markdown).
     pub fn table(&self) -> String {
-        let mib = |k: u64| k as f64 / 1024.0;
-        let mut s = String::new();
-        s += &format!(
+        let mut s = format!(
             "machine: {} ({} cores), {}\n",
             self.machine, self.cores, self.rustc
         );
         s += &format!(
-            "mission: {}x{} RGB JPEG (quality 90, 4:2:0, like a camera's), {} threads (generated in {:.1} s)\n",
-            self.width, self.height, self.threads, self.generate_s
-        );
-        s += &format!("JPEG codec: {}\n\n", self.codec);
-        s += "| measure | value |\n|---|---|\n";
-        s += &format!(
-            "| correct ({} photos) | {:.2} photos/s |\n",
+            "mission: {} + {} water-column {}x{} RGB JPEGs (quality {}, 4:2:0, sensor noise {} levels), {} threads \
+             (generated in {:.1} s)\nJPEG codec: {}\n\n| measure | value |\n|---|---|\n",
             self.long.photos,
+            self.water_column,
+            self.width,
+            self.height,
+            self.quality,
+            self.noise,
+            self.threads,
+            self.generate_s,
+            self.codec.codec
+        );
+        s += &format!(
+            "| correct ({} photos) | {:.2} s, {:.2} photos/s |\n",
+            self.long.photos,
+            self.long.seconds,
             self.correct_rate()
         );
-        s += &format!(
-            "| floor: decode + encode ({} photos) | {:.2} photos/s |\n",
-            self.floor_photos,
-            self.floor_rate()
-        );
-        s += &format!(
-            "| ratio correct / floor | {:.3} |\n",
-            self.correct_rate() / self.floor_rate()
-        );
-        s += &format!(
-            "| decode + encode of correct's outputs ({} photos) | {:.2} photos/s |\n",
-            self.long.photos,
-            self.outputs_floor_rate()
-        );
-        s += &format!(
-            "| ratio correct / that | {:.3} |\n",
-            self.correct_rate() / self.outputs_floor_rate()
-        );
-        if let Some(t) = self.turbo_floor_s {
-            let rate = self.floor_photos as f64 / t;
+        s += &self.against_floors();
+        s += &self.sizes_and_memory();
+        s
+    }
+
+    fn against_floors(&self) -> String {
+        let mut s = String::new();
+        match (&self.opencv_floor, self.opencv_floor_s()) {
+            (Ok(f), Some(t)) => {
+                s += &format!(
+                    "| libjpeg-turbo floor (OpenCV, one thread: decode {} inputs {:.2} s + encode {} outputs \
+                     {:.2} s; ÷ {}) | {:.2} s |\n",
+                    f.inputs, f.decode_s, f.outputs, f.encode_s, self.threads, t
+                );
+                s += &format!(
+                    "| **correct / libjpeg-turbo floor (time)** | **{:.2}×** |\n",
+                    self.long.seconds / t
+                );
+            }
+            (Err(why), _) => {
+                s += &format!("| libjpeg-turbo floor (OpenCV) | not measured: {why} |\n")
+            }
+            (Ok(_), None) => {}
+        }
+        if let Some(p) = self.peer_s {
             s += &format!(
-                "| libjpeg-turbo decode + encode in memory ({} photos) | {:.2} photos/s |\n",
-                self.floor_photos, rate
-            );
-            s += &format!(
-                "| ratio correct / libjpeg-turbo | {:.3} |\n",
-                self.correct_rate() / rate
+                "| peer ({} photos) | {:.2} s; **correct's throughput / the peer's: {:.2}×** |\n",
+                self.long.photos,
+                p,
+                p / self.long.seconds
             );
         }
         s += &format!(
+            "| abysslight's decode + encode ({} photos) | {:.2} photos/s; correct / that (rate) {:.3} |\n",
+            self.codec.photos,
+            self.floor_rate(),
+            self.correct_rate() / self.floor_rate()
+        );
+        s += &format!(
+            "| abysslight's decode + encode of correct's outputs | {:.2} photos/s; correct / that (rate) {:.3} |\n",
+            self.outputs_floor_rate(),
+            self.correct_rate() / self.outputs_floor_rate()
+        );
+        if let Some(t) = self.codec.turbo_floor_s {
+            let rate = self.codec.photos as f64 / t;
+            s += &format!(
+                "| libjpeg-turbo decode + encode in memory, {} threads | {:.2} photos/s; correct / that (rate) {:.3} |\n",
+                self.threads,
+                rate,
+                self.correct_rate() / rate
+            );
+        }
+        s
+    }
+
+    fn sizes_and_memory(&self) -> String {
+        let mib = |k: u64| k as f64 / 1024.0;
+        let c = &self.codec;
+        let mut s = format!(
             "| output / input size ({} JPEGs) | {:.2} ({:.1} / {:.1} MB) |\n",
             self.long.photos,
-            self.output_bytes as f64 / self.input_bytes.max(1) as f64,
-            self.output_bytes as f64 / 1e6,
-            self.input_bytes as f64 / 1e6
+            c.output_bytes as f64 / c.input_bytes.max(1) as f64,
+            c.output_bytes as f64 / 1e6,
+            c.input_bytes as f64 / 1e6
         );
+        if let Some(short) = &self.short {
+            s += &format!(
+                "| peak memory, {} photos | {:.0} MiB |\n",
+                short.photos,
+                mib(short.peak_kib)
+            );
+        }
         s += &format!(
             "| peak memory, {} photos | {:.0} MiB |\n",
-            self.short.photos,
-            mib(self.short.peak_kib)
-        );
-        s += &format!(
-            "| peak memory, {} photos | {:.0} MiB ({:+.1} %) |\n",
             self.long.photos,
-            mib(self.long.peak_kib),
-            100.0 * (self.long.peak_kib as f64 / self.short.peak_kib.max(1) as f64 - 1.0)
+            mib(self.long.peak_kib)
         );
         s
     }
@@ -283,8 +335,31 @@ fn backscatter(y: usize, h: usize, c: usize) -> f32 {
 }
 
 /// A synthetic survey photo number `j`: seafloor texture moving past under a light cone, plus backscatter, plus
-/// an occasional bright object (a fish) that the median has to ignore.
+/// an occasional bright object (a fish) that the median has to ignore, and a little uniform noise (±1 %).
 pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool) -> Photo {
+    noisy_photo(width, height, j, water_column, None)
+}
+
+/// Noise of sample `c` of pixel (`x`, `y`) of photo `j`, in `[0, 1]` units: uniform ±1 % (`sigma: None`), or
+/// of standard deviation `sigma` 8-bit levels (the sum of three uniform variates: close to a Gaussian's shape).
+#[inline]
+fn noise_at(x: usize, y: usize, c: usize, j: usize, sigma: Option<f32>) -> f32 {
+    let h = |k: u32| hash(x as u32, y as u32, k + 11 + c as u32 + 3 * j as u32);
+    match sigma {
+        None => (h(0) - 0.5) * 0.02,
+        // Each uniform variate has variance 1/12: three have 1/4, so twice their centred sum has variance 1.
+        Some(s) => (h(0) + h(1 << 20) + h(2 << 20) - 1.5) * 2.0 * s / 255.0,
+    }
+}
+
+/// [`synthetic_photo`] with sensor noise of standard deviation `sigma` 8-bit levels instead of ±1 %.
+pub fn noisy_photo(
+    width: usize,
+    height: usize,
+    j: usize,
+    water_column: bool,
+    sigma: Option<f32>,
+) -> Photo {
     let colour = [0.45f32, 0.40, 0.32];
     let (cx, cy) = (width as f32 * 0.5, height as f32 * 0.58);
     let sigma2 = 2.0 * (0.38 * width as f32).powi(2);
@@ -308,7 +383,12 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
                 } else {
                     let coarse = value_noise(sx, sy, 180.0, 1);
                     let mid = value_noise(sx, sy, 23.0, 2);
-                    let grain = hash(sx as u32, sy as u32, 3);
+                    // With sensor noise, the finest texture a few pixels across (white grain would be read as
+                    // noise by nothing but its scaling with the light).
+                    let grain = match sigma {
+                        None => hash(sx as u32, sy as u32, 3),
+                        Some(_) => value_noise(sx, sy, 3.0, 3),
+                    };
                     0.45 + 0.5 * coarse + 0.35 * mid + 0.2 * grain
                 };
                 let in_fish = !water_column
@@ -316,8 +396,7 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
                         < (0.04 * width as f32).powi(2);
                 for c in 0..3 {
                     let s = backscatter(y, height, c);
-                    let noise =
-                        (hash(x as u32, y as u32, 11 + c as u32 + 3 * j as u32) - 0.5) * 0.02;
+                    let noise = noise_at(x, y, c, j, sigma);
                     let a = if in_fish { 0.95 } else { colour[c] * tex };
                     let v = if water_column {
                         s + noise
@@ -339,9 +418,8 @@ pub fn synthetic_photo(width: usize, height: usize, j: usize, water_column: bool
     }
 }
 
-/// Camera-like JPEG: quality 90, 4:2:0 (as most survey cameras write them; until issue 14 these inputs were
-/// 4:4:4).
-fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
+/// Camera-like JPEG: 4:2:0 (as most survey cameras write them) at `quality`.
+fn save_camera_jpeg(photo: &Photo, path: &Path, quality: u8) -> Result<()> {
     let Samples::U8(d) = &photo.samples else {
         unreachable!("synthetic photos are 8-bit")
     };
@@ -355,7 +433,7 @@ fn save_camera_jpeg(photo: &Photo, path: &Path) -> Result<()> {
         l.width,
         l.height,
         libjpeg_turbo_rs::PixelFormat::Rgb,
-        90,
+        quality,
         libjpeg_turbo_rs::Subsampling::S420,
     )
     .map_err(|e| enc_err(e.to_string()))?;
@@ -374,15 +452,17 @@ fn generate(o: &BenchOptions, root: &Path) -> Result<Mission> {
     for d in [&wc, &pool] {
         std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
     }
+    let sigma = (o.noise > 0.0).then_some(o.noise);
     for j in 0..o.water_column {
-        let p = synthetic_photo(o.width, o.height, j, true);
-        save_camera_jpeg(&p, &wc.join(format!("wc{j:03}.jpg")))?;
+        // Noise seeds apart from the survey photos'.
+        let p = noisy_photo(o.width, o.height, 1000 + j, true, sigma);
+        save_camera_jpeg(&p, &wc.join(format!("wc{j:03}.jpg")), o.quality)?;
     }
     let mut distinct = Vec::new();
     for j in 0..o.distinct.max(1) {
-        let p = synthetic_photo(o.width, o.height, j, false);
+        let p = noisy_photo(o.width, o.height, j, false, sigma);
         let path = pool.join(format!("d{j:03}.jpg"));
-        save_camera_jpeg(&p, &path)?;
+        save_camera_jpeg(&p, &path, o.quality)?;
         distinct.push(path);
     }
     Ok(Mission {
@@ -578,56 +658,33 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
     ));
     let t = Instant::now();
     let mission = generate(o, &root)?;
-    let short_dir = root.join("survey-short");
-    let long_dir = root.join("survey-long");
-    survey_folder(&mission, &short_dir, o.photos)?;
-    survey_folder(&mission, &long_dir, o.photos * o.long_factor.max(1))?;
+    let survey = root.join("survey");
+    survey_folder(&mission, &survey, o.photos * o.long_factor.max(1))?;
     let generate_s = t.elapsed().as_secs_f64();
-
-    say(&format!("correct, short mission ({} photos)", o.photos));
-    let short = run_child(
-        exe,
-        o,
-        &mission.water_column,
-        &short_dir,
-        &root.join("out-short"),
-    )?;
-    remove(&root.join("out-short"));
+    let wc = &mission.water_column;
+    let short = (o.long_factor > 1)
+        .then(|| {
+            say(&format!("correct, short mission ({} photos)", o.photos));
+            let short_dir = root.join("survey-short");
+            survey_folder(&mission, &short_dir, o.photos)?;
+            let r = run_child(exe, o, wc, &short_dir, &root.join("out-short"));
+            remove(&root.join("out-short"));
+            r
+        })
+        .transpose()?;
     say(&format!(
-        "correct, long mission ({} photos)",
+        "correct ({} photos)",
         o.photos * o.long_factor.max(1)
     ));
-    let long = run_child(
-        exe,
-        o,
-        &mission.water_column,
-        &long_dir,
-        &root.join("out-long"),
-    )?;
-    let input_bytes = photo_bytes(&long_dir)?;
-    let output_bytes = photo_bytes(&root.join("out-long"))?;
-    let settings = Options {
-        jpeg_quality: o.jpeg_quality,
-        jpeg_subsampling: o.jpeg_subsampling,
-        ..Options::default()
-    }
-    .encode_settings();
-    say("decode + encode of the corrected long mission");
-    let outputs_out = root.join("out-outputs-floor");
-    let (_, outputs_floor_s) = floor(&root.join("out-long"), &outputs_out, o.threads, settings)?;
-    remove(&outputs_out);
-    remove(&root.join("out-long"));
-    say("floor: decode + encode of the long mission");
-    let floor_out = root.join("out-floor");
-    let (floor_photos, floor_s) = floor(&long_dir, &floor_out, o.threads, settings)?;
-    remove(&floor_out);
-    #[cfg(feature = "turbojpeg")]
-    let turbo_floor_s = {
-        say("libjpeg-turbo decode + encode in memory of the long mission");
-        Some(turbo_floor(&long_dir, o.threads, settings)?)
+    let out = root.join("out");
+    let long = run_child(exe, o, wc, &survey, &out)?;
+    let opencv_floor = opencv_floor(o, &[wc, &survey], &out, say);
+    let codec = codec_floors(o, &survey, &out, &root, say)?;
+    let peer_s = match &o.peer {
+        Some(p) => Some(run_peer(o, p, wc, &survey, &root, say)?),
+        None => None,
     };
-    #[cfg(not(feature = "turbojpeg"))]
-    let turbo_floor_s = None;
+    remove(&out);
     Ok(BenchResult {
         machine,
         cores,
@@ -635,17 +692,187 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
         width: o.width,
         height: o.height,
         threads: o.threads,
+        noise: o.noise,
+        quality: o.quality,
+        water_column: o.water_column,
         generate_s,
         short,
         long,
-        floor_photos,
+        codec,
+        opencv_floor,
+        peer_s,
+    })
+}
+
+/// What the codec alone costs on the mission, through abysslight's own decoder and writer.
+#[derive(Debug, Clone, Serialize)]
+pub struct CodecFloors {
+    /// Photos decoded and re-encoded for the floor (the mission's survey photos).
+    pub photos: usize,
+    /// Seconds of decode + encode of `photos` with the same threads, decoder, writer and settings as `correct`.
+    pub floor_s: f64,
+    /// Seconds of decode + encode of `correct`'s own outputs (same threads and settings): what the codec alone
+    /// costs on corrected content, which encodes larger (flattened light, brightened corners) than the input.
+    pub outputs_floor_s: f64,
+    /// The JPEG codec built in.
+    pub codec: String,
+    /// Bytes of the survey photos.
+    pub input_bytes: u64,
+    /// Bytes of `correct`'s outputs of them.
+    pub output_bytes: u64,
+    /// Seconds of libjpeg-turbo decode + encode in memory (`turbojpeg` feature only).
+    pub turbo_floor_s: Option<f64>,
+}
+
+/// Decode + encode of the inputs and of `correct`'s outputs (in `out`) with abysslight's own codec and writer.
+fn codec_floors(
+    o: &BenchOptions,
+    survey: &Path,
+    out: &Path,
+    root: &Path,
+    say: &dyn Fn(&str),
+) -> Result<CodecFloors> {
+    let settings = Options {
+        jpeg_quality: o.jpeg_quality,
+        jpeg_subsampling: o.jpeg_subsampling,
+        ..Options::default()
+    }
+    .encode_settings();
+    let scratch = root.join("out-floor");
+    say("decode + encode of correct's outputs");
+    let (_, outputs_floor_s) = floor(out, &scratch, o.threads, settings)?;
+    remove(&scratch);
+    say("floor: decode + encode of the survey photos");
+    let (photos, floor_s) = floor(survey, &scratch, o.threads, settings)?;
+    remove(&scratch);
+    #[cfg(feature = "turbojpeg")]
+    let turbo_floor_s = {
+        say("libjpeg-turbo decode + encode in memory of the survey photos");
+        Some(turbo_floor(survey, o.threads, settings)?)
+    };
+    #[cfg(not(feature = "turbojpeg"))]
+    let turbo_floor_s = None;
+    Ok(CodecFloors {
+        photos,
         floor_s,
         outputs_floor_s,
         codec: crate::io::jpeg::codec_name().into(),
-        input_bytes,
-        output_bytes,
+        input_bytes: photo_bytes(survey)?,
+        output_bytes: photo_bytes(out)?,
         turbo_floor_s,
     })
+}
+
+/// The libjpeg-turbo floor as OpenCV measures it: `cv2.imread` of every input, `cv2.imencode` of every corrected
+/// output (decoded first, untimed) at the inputs' quality and 4:2:0, one thread. Prints the decode and encode
+/// seconds and the counts.
+const OPENCV_FLOOR: &str = r#"
+import os, sys, time
+import cv2
+cv2.setNumThreads(1)
+def photos(d):
+    return sorted(os.path.join(r, f) for r, _, fs in os.walk(d) for f in fs if f.lower().endswith(".jpg"))
+q, outs, ins = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
+dec = enc = 0.0
+n_in = n_out = 0
+for d in ins:
+    for p in photos(d):
+        t = time.perf_counter(); x = cv2.imread(p, cv2.IMREAD_UNCHANGED); dec += time.perf_counter() - t
+        assert x is not None, p
+        n_in += 1
+params = [cv2.IMWRITE_JPEG_QUALITY, q, cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420]
+for p in photos(outs):
+    x = cv2.imread(p, cv2.IMREAD_UNCHANGED)
+    assert x is not None, p
+    t = time.perf_counter(); ok, b = cv2.imencode(".jpg", x, params); enc += time.perf_counter() - t
+    assert ok, p
+    n_out += 1
+print(dec, enc, n_in, n_out)
+"#;
+
+/// The libjpeg-turbo floor as OpenCV measures it ([`OPENCV_FLOOR`]), in seconds of one thread.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct OpencvFloor {
+    /// Seconds of `cv2.imread` of every input (water-column frames and survey photos), one thread.
+    pub decode_s: f64,
+    /// Seconds of `cv2.imencode` of every corrected output, one thread.
+    pub encode_s: f64,
+    /// Inputs decoded.
+    pub inputs: usize,
+    /// Outputs encoded.
+    pub outputs: usize,
+}
+
+/// Run [`OPENCV_FLOOR`] with `o.python` on `inputs` and the outputs in `out`; `Err` with the reason where that
+/// Python has no OpenCV.
+fn opencv_floor(
+    o: &BenchOptions,
+    inputs: &[&Path],
+    out: &Path,
+    say: &dyn Fn(&str),
+) -> std::result::Result<OpencvFloor, String> {
+    say(&format!(
+        "libjpeg-turbo floor: OpenCV decode + encode, one thread ({})",
+        o.python.display()
+    ));
+    let q = o.jpeg_quality.unwrap_or(o.quality).to_string();
+    let r = Command::new(&o.python)
+        .args(["-c", OPENCV_FLOOR, &q])
+        .arg(out)
+        .args(inputs)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", o.python.display()))?;
+    let text = String::from_utf8_lossy(&r.stdout);
+    let v: Vec<f64> = text
+        .split_whitespace()
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    match (r.status.success(), v.as_slice()) {
+        (true, &[d, e, i, n]) => Ok(OpencvFloor {
+            decode_s: d,
+            encode_s: e,
+            inputs: i as usize,
+            outputs: n as usize,
+        }),
+        _ => Err(format!(
+            "{} with OpenCV failed: {}",
+            o.python.display(),
+            String::from_utf8_lossy(&r.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        )),
+    }
+}
+
+/// Wall-clock seconds of the peer on the same mission (`PYTHON PEER paper WATER SURVEY OUT --window N`).
+fn run_peer(
+    o: &BenchOptions,
+    peer: &Path,
+    wc: &Path,
+    survey: &Path,
+    root: &Path,
+    say: &dyn Fn(&str),
+) -> Result<f64> {
+    say(&format!("peer: {} paper", peer.display()));
+    let out = root.join("out-peer");
+    let t = Instant::now();
+    let r = Command::new(&o.python)
+        .arg(peer)
+        .arg("paper")
+        .args([wc, survey, &out])
+        .args(["--window", &o.window.to_string()])
+        .output()
+        .map_err(|e| Error::io(peer, e))?;
+    let secs = t.elapsed().as_secs_f64();
+    remove(&out);
+    if !r.status.success() {
+        return Err(Error::Usage(format!(
+            "bench: the peer failed: {}",
+            String::from_utf8_lossy(&r.stderr).trim()
+        )));
+    }
+    Ok(secs)
 }
 
 /// Total bytes of the photos below `dir` (each name counted, hard links too).
@@ -733,7 +960,7 @@ mod tests {
         let m = generate(&tiny(), d.path()).unwrap();
         let c = crate::io::jpeg::parse(&std::fs::read(&m.distinct[0]).unwrap()).unwrap();
         assert_eq!(c.subsampling, Some(io::Subsampling::S420));
-        assert_eq!(c.quality, Some(90));
+        assert_eq!(c.quality, Some(tiny().quality));
     }
 
     #[test]

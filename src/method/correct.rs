@@ -11,6 +11,21 @@ use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
 use crate::method::transfer::Curve;
 
+/// The taps along a row ([`taps`]) and each sample's weight `t` (the tap's, repeated for each channel: the
+/// vectorised expansion of `F` reads eight samples' weights at once).
+#[derive(Clone, Copy)]
+struct Along<'a> {
+    tx: &'a [Tap],
+    tq: &'a [f32],
+}
+
+/// Each sample's weight along a row of `c` channels.
+fn sample_weights(tx: &[Tap], c: usize) -> Vec<f32> {
+    tx.iter()
+        .flat_map(|t| std::iter::repeat_n(t.t, c))
+        .collect()
+}
+
 /// What the correction of one photo did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct CorrectStats {
@@ -71,12 +86,88 @@ pub fn correct_with_offset<T: Sample>(
     floor: f32,
     curve: &Curve,
 ) -> CorrectStats {
+    check_inputs(samples.len(), layout, scatter, factor_low, blend, curve);
     let Layout {
         width,
         height,
         channels: c,
     } = layout;
-    assert_eq!(samples.len(), width * height * c);
+    let s_linear = scatter.and_then(|s| s.linear_table()).unwrap_or(&[]);
+    let row_len = width * c;
+    if row_len == 0 {
+        return CorrectStats::default();
+    }
+    let tx = taps(width, k);
+    let tq = sample_weights(&tx, c);
+    let along = Along { tx: &tx, tq: &tq };
+    let ty = taps(height, k);
+    samples
+        .par_chunks_mut(row_len)
+        .enumerate()
+        .map_init(
+            || {
+                let extra = if blend.is_some() { row_len } else { 0 };
+                (
+                    vec![0.0f32; factor_low.width * c],
+                    vec![0.0f32; row_len],
+                    vec![0.0f32; extra],
+                    vec![0.0f32; extra],
+                    vec![0.0f32; extra],
+                )
+            },
+            |(frow, fx, lx, wx, ax), (y, row)| {
+                let t = ty[y];
+                lerp_rows(
+                    factor_low.row(t.i0 as usize),
+                    factor_low.row(t.i1 as usize),
+                    t.t,
+                    frow,
+                );
+                let srow = scatter.map(|s| s.row(y));
+                match blend {
+                    None => {
+                        correct_row_dispatch(row, frow, fx, along, c, floor, srow, s_linear, curve)
+                    }
+                    Some(blend) => blend_row_dispatch(
+                        row,
+                        RowScratch {
+                            frow,
+                            fx,
+                            lx,
+                            wx,
+                            ax,
+                        },
+                        &BlendRow {
+                            along,
+                            rows: (t.i0 as usize, t.i1 as usize, t.t),
+                            blend,
+                            c,
+                            floor,
+                            srow,
+                            s_linear,
+                            curve,
+                        },
+                    ),
+                }
+            },
+        )
+        .reduce(CorrectStats::default, |mut a, b| {
+            a += b;
+            a
+        })
+}
+
+/// The preconditions of [`correct_with_offset`]: sizes that agree, `S` prepared for `curve`'s transfer.
+fn check_inputs(
+    samples: usize,
+    layout: Layout,
+    scatter: Option<&Prepared>,
+    factor_low: &Raster,
+    blend: Option<Blend>,
+    curve: &Curve,
+) {
+    let c = layout.channels;
+    assert_eq!(samples, layout.width * layout.height * c);
     assert_eq!(factor_low.channels, c);
     if let Some(b) = blend {
         if let Some(f) = b.fields {
@@ -108,67 +199,6 @@ pub fn correct_with_offset<T: Sample>(
             "scatter prepared for another transfer"
         );
     }
-    let s_linear = scatter.and_then(|s| s.linear_table()).unwrap_or(&[]);
-    let row_len = width * c;
-    if row_len == 0 {
-        return CorrectStats::default();
-    }
-    let tx = taps(width, k);
-    let ty = taps(height, k);
-    samples
-        .par_chunks_mut(row_len)
-        .enumerate()
-        .map_init(
-            || {
-                let extra = if blend.is_some() { row_len } else { 0 };
-                (
-                    vec![0.0f32; factor_low.width * c],
-                    vec![0.0f32; row_len],
-                    vec![0.0f32; extra],
-                    vec![0.0f32; extra],
-                    vec![0.0f32; extra],
-                )
-            },
-            |(frow, fx, lx, wx, ax), (y, row)| {
-                let t = ty[y];
-                lerp_rows(
-                    factor_low.row(t.i0 as usize),
-                    factor_low.row(t.i1 as usize),
-                    t.t,
-                    frow,
-                );
-                let srow = scatter.map(|s| s.row(y));
-                match blend {
-                    None => {
-                        correct_row_dispatch(row, frow, fx, &tx, c, floor, srow, s_linear, curve)
-                    }
-                    Some(blend) => blend_row_dispatch(
-                        row,
-                        RowScratch {
-                            frow,
-                            fx,
-                            lx,
-                            wx,
-                            ax,
-                        },
-                        &BlendRow {
-                            tx: &tx,
-                            rows: (t.i0 as usize, t.i1 as usize, t.t),
-                            blend,
-                            c,
-                            floor,
-                            srow,
-                            s_linear,
-                            curve,
-                        },
-                    ),
-                }
-            },
-        )
-        .reduce(CorrectStats::default, |mut a, b| {
-            a += b;
-            a
-        })
 }
 
 /// One row: `F` upsampled along the row and floored into `fx`, then `A = (I − S) / F`. Runs the AVX2 build of
@@ -179,7 +209,7 @@ fn correct_row_dispatch<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
@@ -189,9 +219,9 @@ fn correct_row_dispatch<T: Sample>(
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (checked above); the body is safe code compiled for AVX2.
-        return unsafe { correct_row_avx2(row, frow, fx, tx, c, floor, srow, s_linear, curve) };
+        return unsafe { correct_row_avx2(row, frow, fx, along, c, floor, srow, s_linear, curve) };
     }
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, false)
+    correct_row_portable(row, frow, fx, along, c, floor, srow, s_linear, curve, false)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -201,14 +231,14 @@ unsafe fn correct_row_avx2<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
     s_linear: &[f32],
     curve: &Curve,
 ) -> CorrectStats {
-    correct_row_portable(row, frow, fx, tx, c, floor, srow, s_linear, curve, true)
+    correct_row_portable(row, frow, fx, along, c, floor, srow, s_linear, curve, true)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -217,7 +247,7 @@ fn correct_row_portable<T: Sample>(
     row: &mut [T],
     frow: &[f32],
     fx: &mut [f32],
-    tx: &[Tap],
+    along: Along,
     c: usize,
     floor: f32,
     srow: Option<&[u16]>,
@@ -227,9 +257,11 @@ fn correct_row_portable<T: Sample>(
 ) -> CorrectStats {
     // F of this row at full resolution, floored (one row: the full-size F never exists). The channel count is
     // made a constant for RGB and grey so the per-pixel loop unrolls.
+    let tx = along.tx;
+    let tq = simd.then_some(along.tq);
     let floored_pixels = match c {
-        3 => expand_f::<3, 24, false>(frow, fx, tx, floor),
-        1 => expand_f::<1, 8, false>(frow, fx, tx, floor),
+        3 => expand_f::<3, 24, false>(frow, fx, tx, tq, floor),
+        1 => expand_f::<1, 8, false>(frow, fx, tx, tq, floor),
         _ => expand_f_dyn(frow, fx, tx, c, floor),
     };
     CorrectStats {
@@ -242,8 +274,9 @@ fn correct_row_portable<T: Sample>(
 /// floored; returns the pixels where any channel was floored. `N` = 8·`C`.
 ///
 /// Runs of 8 pixels between the same two block centres (most of a row for 8×8 blocks) are done as one
-/// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. Same operations, same bits as
-/// [`expand_f_dyn`] (tested).
+/// straight-line group of `N` samples, which vectorises; the rest pixel by pixel. With `tq` (each sample's weight,
+/// [`sample_weights`]; only from callers compiled for AVX2) the group is [`expand_group_avx2`]. Same operations,
+/// same bits as [`expand_f_dyn`] (tested).
 #[inline(always)]
 // `!(f >= floor)` on purpose: true for NaN too, in one comparison.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -251,6 +284,7 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
     frow: &[f32],
     fx: &mut [f32],
     tx: &[Tap],
+    tq: Option<&[f32]>,
     floor: f32,
 ) -> u64 {
     debug_assert_eq!(N, 8 * C);
@@ -271,7 +305,13 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
             let taps: &[Tap; 8] = tx[x..x + 8].try_into().unwrap();
             let out: &mut [f32; N] = (&mut fx[x * C..x * C + N]).try_into().unwrap();
             let mut any_low = false;
-            if BY_PIXEL {
+            if let Some(_tq) = tq.map(|tq| &tq[x * C..x * C + N]) {
+                // SAFETY: `tq` is only given by callers compiled for AVX2 (the CPU was checked).
+                #[cfg(target_arch = "x86_64")]
+                {
+                    any_low = unsafe { expand_group_avx2::<C>(a, b, _tq, out, floor) };
+                }
+            } else if BY_PIXEL {
                 // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler
                 // kept the `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain
                 // row the flat loop is the faster (`cargo bench --bench kernels`).
@@ -324,12 +364,72 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
 /// [`expand_f`] for 3 and 1 channels, [`expand_f_dyn`] otherwise (inlined, so that it is compiled for the
 /// caller's target features: a closure would not be).
 #[inline(always)]
-fn expand_any(frow: &[f32], out: &mut [f32], tx: &[Tap], c: usize, floor: f32) -> u64 {
+fn expand_any(
+    frow: &[f32],
+    out: &mut [f32],
+    along: Along,
+    simd: bool,
+    c: usize,
+    floor: f32,
+) -> u64 {
+    let (tx, tq) = (along.tx, simd.then_some(along.tq));
     match c {
-        3 => expand_f::<3, 24, true>(frow, out, tx, floor),
-        1 => expand_f::<1, 8, true>(frow, out, tx, floor),
+        3 => expand_f::<3, 24, true>(frow, out, tx, tq, floor),
+        1 => expand_f::<1, 8, true>(frow, out, tx, tq, floor),
         _ => expand_f_dyn(frow, out, tx, c, floor),
     }
+}
+
+/// One group of [`expand_f`]: eight pixels of `C` (1 or 3) channels between the same two block centres `a` and
+/// `b`, `a + (b − a)·t` with each sample's `t` from `tq`, floored where `!(f >= floor)` (NaN too); whether any
+/// sample was. The scalar group's operations (no fused multiply-add), eight lanes at a time.
+///
+/// # Safety
+/// The CPU must have AVX2; `a`, `b` hold `C` values, `tq` and `out` `8·C`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn expand_group_avx2<const C: usize>(
+    a: &[f32],
+    b: &[f32],
+    tq: &[f32],
+    out: &mut [f32],
+    floor: f32,
+) -> bool {
+    use std::arch::x86_64::*;
+    assert!((C == 1 || C == 3) && a.len() >= C && b.len() >= C);
+    assert!(tq.len() >= 8 * C && out.len() >= 8 * C);
+    // Lane j of vector v holds channel (8v + j) % C.
+    const P: [[i32; 8]; 3] = [
+        [0, 1, 2, 0, 1, 2, 0, 1],
+        [2, 0, 1, 2, 0, 1, 2, 0],
+        [1, 2, 0, 1, 2, 0, 1, 2],
+    ];
+    let (mut a3, mut d3) = ([0.0f32; 8], [0.0f32; 8]);
+    for ch in 0..C {
+        a3[ch] = a[ch];
+        d3[ch] = b[ch] - a[ch];
+    }
+    let (a3, d3) = (_mm256_loadu_ps(a3.as_ptr()), _mm256_loadu_ps(d3.as_ptr()));
+    let fl = _mm256_set1_ps(floor);
+    let mut low = 0;
+    for v in 0..C {
+        let p = if C == 1 {
+            _mm256_setzero_si256()
+        } else {
+            _mm256_loadu_si256(P[v].as_ptr().cast())
+        };
+        let (av, dv) = (
+            _mm256_permutevar8x32_ps(a3, p),
+            _mm256_permutevar8x32_ps(d3, p),
+        );
+        let t = _mm256_loadu_ps(tq[8 * v..].as_ptr());
+        let f = _mm256_add_ps(av, _mm256_mul_ps(dv, t));
+        let m = _mm256_cmp_ps::<_CMP_NGE_UQ>(f, fl);
+        _mm256_storeu_ps(out[8 * v..].as_mut_ptr(), _mm256_blendv_ps(f, fl, m));
+        low |= _mm256_movemask_ps(m);
+    }
+    low != 0
 }
 
 /// [`expand_f`] for any channel count.
@@ -470,7 +570,7 @@ pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
 /// What a row with a [`Blend`] reads: the taps along x, the two block rows and the weight between them, the blend,
 /// the channel count, the floor of `F`, the row of `S` and the curve.
 struct BlendRow<'a> {
-    tx: &'a [Tap],
+    along: Along<'a>,
     rows: (usize, usize, f32),
     blend: Blend<'a>,
     c: usize,
@@ -524,7 +624,7 @@ fn blend_row_portable<T: Sample>(
         ax,
     } = s;
     let BlendRow {
-        tx,
+        along,
         rows,
         blend,
         c,
@@ -533,7 +633,7 @@ fn blend_row_portable<T: Sample>(
         s_linear,
         curve,
     } = *r;
-    let floored_pixels = expand_any(frow, fx, tx, c, floor);
+    let floored_pixels = expand_any(frow, fx, along, simd, c, floor);
     // Where the blend would change nothing (w ≥ 1 − NEGLIGIBLE_BLEND in both block rows: well-lit or noise-free
     // photos, e.g. most camera JPEGs) and S is not scaled, the plain vectorised row.
     let unscaled = blend.scatter_scale.iter().all(|&k| k == 1.0);
@@ -551,7 +651,7 @@ fn blend_row_portable<T: Sample>(
     if let Some(fields) = blend.fields {
         for (r, out) in [(&fields.level, &mut *lx), (&fields.weight, &mut *wx)] {
             lerp_rows(r.row(rows.0), r.row(rows.1), rows.2, frow);
-            expand_any(frow, out, tx, c, f32::NEG_INFINITY);
+            expand_any(frow, out, along, simd, c, f32::NEG_INFINITY);
         }
     }
     CorrectStats {
@@ -757,40 +857,20 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     let (f, lx, wx, ax) = (&mut f[..len], &mut lx[..len], &wx[..len], &mut ax[..len]);
     let top = curve.max() as u16;
     let to_lin = curve.linear_table();
-    let (identity, max, inv_max) = (curve.is_identity(), curve.max(), 1.0 / curve.max());
+    let (identity, inv_max) = (curve.is_identity(), 1.0 / curve.max());
     // Per-channel constants repeated along a group of 8: lane j of the group at sample i is channel (i + j) % C.
-    let (mut kpat, mut vpat) = ([0.0f32; 16], [0.0f32; 16]);
-    for j in 0..16 {
-        kpat[j] = scale[j % C];
-        vpat[j] = precision(b.noise_var[j % C]);
-    }
+    let kpat: [f32; 16] = std::array::from_fn(|j| scale[j % C]);
+    let vpat: [f32; 16] = std::array::from_fn(|j| precision(b.noise_var[j % C]));
     // Pass 1.
     let n = len / 8 * 8;
     let (zero, lmin) = (_mm256_setzero_ps(), _mm256_set1_ps(LEVEL_MIN));
     let (zeroi, topi) = (_mm256_setzero_si256(), _mm256_set1_epi32(top as i32));
     for i in (0..n).step_by(8) {
+        let q8 = q.map(|q| &q[i..i + 8]);
         let (cv, lin, s) = if identity {
-            // As `sample_and_scatter`: code / max, and S's grid index / 65535.
-            let mut codes = [0i32; 8];
-            for (c, v) in codes.iter_mut().zip(&row[i..i + 8]) {
-                *c = v.to_u16() as i32;
-            }
-            let cv = _mm256_loadu_si256(codes.as_ptr().cast());
-            let lin = _mm256_mul_ps(_mm256_cvtepi32_ps(cv), _mm256_set1_ps(inv_max));
-            let s = match q {
-                Some(q) => {
-                    let mut qi = [0i32; 8];
-                    for (d, &v) in qi.iter_mut().zip(&q[i..i + 8]) {
-                        *d = v as i32;
-                    }
-                    let qv = _mm256_cvtepi32_ps(_mm256_loadu_si256(qi.as_ptr().cast()));
-                    _mm256_mul_ps(qv, _mm256_set1_ps(1.0 / 65535.0))
-                }
-                None => zero,
-            };
-            (cv, lin, s)
+            linear_lin_and_s(&row[i..i + 8], q8, inv_max)
         } else {
-            gather_lin_and_s(&row[i..i + 8], q.map(|q| &q[i..i + 8]), to_lin, s_linear)
+            gather_lin_and_s(&row[i..i + 8], q8, to_lin, s_linear)
         };
         let (kv, iv) = (
             _mm256_loadu_ps(kpat[i % C..].as_ptr()),
@@ -822,21 +902,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         ax[i] = a;
         f[i] = if ok { f[i] * f[i] * lv * vpat[ch] } else { 0.0 };
     }
-    // Pass 2.
-    let prior = b.prior_precision;
-    for ((g, a), l) in f
-        .chunks_exact_mut(C)
-        .zip(ax.chunks_exact(C))
-        .zip(lx.chunks_exact(C))
-    {
-        let (mut num, mut den) = (prior, prior);
-        for ch in 0..C {
-            num += g[ch] * a[ch];
-            den += g[ch] * l[ch].max(LEVEL_MIN);
-        }
-        let r = num / den;
-        g.fill(r);
-    }
+    pixel_ratios::<C>(f, ax, lx, b.prior_precision);
     // Pass 3.
     let mut clipped = 0u32;
     for (((l, &w), &a), &r) in lx.iter_mut().zip(wx).zip(ax.iter()).zip(f.iter()) {
@@ -847,17 +913,29 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         clipped += o as u32;
         *l = v;
     }
-    if identity {
-        for (v, &a) in row.iter_mut().zip(lx.iter()) {
+    codes_into(row, lx, curve);
+    clipped as u64
+}
+
+/// `row[k] = ` the code of linear light `l[k]` (8 at a time by [`codes_into_avx2`] for a non-linear curve).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn codes_into<T: Sample>(row: &mut [T], l: &[f32], curve: &Curve) {
+    if curve.is_identity() {
+        let max = curve.max();
+        for (v, &a) in row.iter_mut().zip(l) {
             *v = T::from_code(code_of(a * max + 0.5, max));
         }
     } else {
-        let done = codes_into_avx2(row, lx, curve);
-        for (v, &a) in row.iter_mut().zip(lx.iter()).skip(done) {
+        let done = codes_into_avx2(row, l, curve);
+        for (v, &a) in row.iter_mut().zip(l).skip(done) {
             *v = T::from_code(curve.code(a));
         }
     }
-    clipped as u64
 }
 
 /// `row[k] = curve.code(l[k])` for the first `8·⌊len/8⌋` samples, 8 at a time by [`Curve::codes_avx2`] (the same
@@ -875,6 +953,63 @@ unsafe fn codes_into_avx2<T: Sample>(row: &mut [T], l: &[f32], curve: &Curve) ->
         store_codes(&mut row[k..k + 8], codes);
     }
     n
+}
+
+/// Eight samples' codes, their linear light and their `S` for a linear curve, as `sample_and_scatter` gives
+/// them: code / max, and `S`'s grid index / 65535 (0 without).
+///
+/// # Safety
+/// The CPU must have AVX2; `samples` and `q` hold at least 8 values. Always inlined, into callers compiled for
+/// AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn linear_lin_and_s<T: Sample>(
+    samples: &[T],
+    q: Option<&[u16]>,
+    inv_max: f32,
+) -> (
+    std::arch::x86_64::__m256i,
+    std::arch::x86_64::__m256,
+    std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    let mut codes = [0i32; 8];
+    for (c, v) in codes.iter_mut().zip(samples) {
+        *c = v.to_u16() as i32;
+    }
+    let cv = _mm256_loadu_si256(codes.as_ptr().cast());
+    let lin = _mm256_mul_ps(_mm256_cvtepi32_ps(cv), _mm256_set1_ps(inv_max));
+    let s = match q {
+        Some(q) => {
+            let mut qi = [0i32; 8];
+            for (d, &v) in qi.iter_mut().zip(q) {
+                *d = v as i32;
+            }
+            let qv = _mm256_cvtepi32_ps(_mm256_loadu_si256(qi.as_ptr().cast()));
+            _mm256_mul_ps(qv, _mm256_set1_ps(1.0 / 65535.0))
+        }
+        None => _mm256_setzero_ps(),
+    };
+    (cv, lin, s)
+}
+
+/// Pass 2 of [`blend_row_passes`]: per pixel, `r` from its samples' precision weights `g` (in `f`) and `Â` (in
+/// `ax`), written over its `g`s.
+#[inline(always)]
+fn pixel_ratios<const C: usize>(f: &mut [f32], ax: &[f32], lx: &[f32], prior: f32) {
+    for ((g, a), l) in f
+        .chunks_exact_mut(C)
+        .zip(ax.chunks_exact(C))
+        .zip(lx.chunks_exact(C))
+    {
+        let (mut num, mut den) = (prior, prior);
+        for ch in 0..C {
+            num += g[ch] * a[ch];
+            den += g[ch] * l[ch].max(LEVEL_MIN);
+        }
+        let r = num / den;
+        g.fill(r);
+    }
 }
 
 /// Eight samples' codes, their linear light (`to_lin` by code) and their `S` (`s_linear` by the grid indices `q`;
@@ -946,6 +1081,13 @@ unsafe fn store_codes<T: Sample>(out: &mut [T], codes: std::arch::x86_64::__m256
 mod tests {
     use super::*;
 
+    fn avx2() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+
     #[test]
     fn grouped_expansion_matches_pixel_by_pixel() {
         let mut r = 0x9E37_79B9u32;
@@ -972,16 +1114,33 @@ mod tests {
                     for floor in [0.05, f32::NEG_INFINITY] {
                         let mut want = vec![0.0f32; width * c];
                         let n_want = expand_f_dyn(&frow, &mut want, &tx, c, floor);
-                        for by_pixel in [false, true] {
+                        // The AVX2 group where the CPU has it.
+                        let tq = sample_weights(&tx, c);
+                        let simd = cfg!(target_arch = "x86_64") && avx2();
+                        for (by_pixel, tq) in [
+                            (false, None),
+                            (true, None),
+                            (true, Some(&tq[..]).filter(|_| simd)),
+                        ] {
                             let mut got = vec![0.0f32; width * c];
                             let n_got = match (c, by_pixel) {
-                                (3, false) => expand_f::<3, 24, false>(&frow, &mut got, &tx, floor),
-                                (3, true) => expand_f::<3, 24, true>(&frow, &mut got, &tx, floor),
-                                (_, false) => expand_f::<1, 8, false>(&frow, &mut got, &tx, floor),
-                                (_, true) => expand_f::<1, 8, true>(&frow, &mut got, &tx, floor),
+                                (3, false) => {
+                                    expand_f::<3, 24, false>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (3, true) => {
+                                    expand_f::<3, 24, true>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (_, false) => {
+                                    expand_f::<1, 8, false>(&frow, &mut got, &tx, tq, floor)
+                                }
+                                (_, true) => {
+                                    expand_f::<1, 8, true>(&frow, &mut got, &tx, tq, floor)
+                                }
                             };
-                            let what =
-                                format!("width {width}, k {k}, c {c}, floor {floor}, {by_pixel}");
+                            let what = format!(
+                                "width {width}, k {k}, c {c}, floor {floor}, {by_pixel}, {}",
+                                tq.is_some()
+                            );
                             assert_eq!(n_got, n_want, "{what}");
                             let bits =
                                 |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
@@ -1109,18 +1268,92 @@ mod tests {
         }
     }
 
-    #[test]
-    #[allow(clippy::needless_range_loop)] // per-channel formulas, written as in the docs
-    fn blend_correction_matches_unfused_reference() {
-        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
-        // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
-        let (layout, k, low, scatter) = reference_frame(0.03);
-        let fields = Blended {
+    /// The blend fields of the reference tests: levels, weights from 0 to 1, noise variances (one of 0).
+    fn reference_fields() -> Blended {
+        Blended {
             level: Raster::from_fn(8, 5, 3, |x, y, c| 0.2 + 0.05 * ((x + 2 * y + c) % 7) as f32),
             weight: Raster::from_fn(8, 5, 3, |x, y, c| ((x * 5 + y + c) % 11) as f32 / 10.0),
             noise_var: vec![0.001, 0.0002, 0.0],
             prior_precision: 12.0,
-        };
+        }
+    }
+
+    /// `correct_with_offset` on 16-bit samples (linear curve) or on the same codes as 8-bit samples.
+    #[allow(clippy::too_many_arguments)]
+    fn corrected(
+        samples: &[u16],
+        layout: Layout,
+        prepared: &Prepared,
+        low: &Raster,
+        blend: Option<Blend>,
+        k: usize,
+        curve: &Curve,
+    ) -> Vec<u16> {
+        let s = Some(prepared);
+        if curve.is_identity() {
+            let mut got = samples.to_vec();
+            correct_with_offset(&mut got, layout, s, low, blend, k, 0.05, curve);
+            got
+        } else {
+            let mut g8: Vec<u8> = samples.iter().map(|&v| v as u8).collect();
+            correct_with_offset(&mut g8, layout, s, low, blend, k, 0.05, curve);
+            g8.into_iter().map(u16::from).collect()
+        }
+    }
+
+    /// The blend of one pixel in f64 from its full-size fields (`i` its first sample): `Â = (I − k·S)/max(F,
+    /// 0.05)`, `r = (prior + Σ p·Â/l)/(prior + Σ p)` with `p = (F·l)²/σ²` (0 for clipped codes), `A = w·Â + (1 −
+    /// w)·l·r`.
+    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
+    fn reference_pixel(
+        i: usize,
+        codes: &[u16],
+        s_lin: &dyn Fn(usize) -> f64,
+        curve: &Curve,
+        (f, lv, wt): (&Raster, &Raster, &Raster),
+        fields: &Blended,
+        kscale: &[f32],
+        out: &mut [f64],
+    ) {
+        let top = curve.max() as u16;
+        let ahat: Vec<f64> = (0..3)
+            .map(|c| {
+                let j = i + c;
+                (curve.linear(codes[j]) as f64 - kscale[c] as f64 * s_lin(j))
+                    / (f.data[j] as f64).max(0.05)
+            })
+            .collect();
+        let (mut num, mut den) = (12.0f64, 12.0f64);
+        for c in 0..3 {
+            let j = i + c;
+            let l = (lv.data[j] as f64).max(1e-3);
+            let clipped = codes[j] == 0 || codes[j] == top;
+            let inv_var = if fields.noise_var[c] > 0.0 {
+                (1.0 / fields.noise_var[c] as f64).min(1e8)
+            } else {
+                1e8
+            };
+            let p = if clipped {
+                0.0
+            } else {
+                ((f.data[j] as f64).max(0.05) * l).powi(2) * inv_var
+            };
+            num += p * ahat[c] / l;
+            den += p;
+        }
+        for c in 0..3 {
+            let j = i + c;
+            let w = wt.data[j] as f64;
+            out[j] = w * ahat[c] + (1.0 - w) * (lv.data[j] as f64).max(1e-3) * num / den;
+        }
+    }
+
+    #[test]
+    fn blend_correction_matches_unfused_reference() {
+        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
+        let (layout, k, low, scatter) = reference_frame(0.03);
+        let fields = reference_fields();
         let up = |r: &Raster| upsample(r, k, 29, 17);
         let (f, lv, wt) = (up(&low), up(&fields.level), up(&fields.weight));
         let kscale = [0.7f32, 0.9, 1.0];
@@ -1141,63 +1374,19 @@ mod tests {
             };
             let mut expect = vec![0.0f64; samples.len()];
             for px in 0..29 * 17 {
-                let ahat: Vec<f64> = (0..3)
-                    .map(|c| {
-                        let i = px * 3 + c;
-                        (curve.linear(samples[i]) as f64 - kscale[c] as f64 * s_lin(i))
-                            / (f.data[i] as f64).max(0.05)
-                    })
-                    .collect();
-                let (mut num, mut den) = (12.0f64, 12.0f64);
-                for c in 0..3 {
-                    let i = px * 3 + c;
-                    let l = (lv.data[i] as f64).max(1e-3);
-                    let clipped = samples[i] == 0 || samples[i] as usize == levels - 1;
-                    let p = if clipped {
-                        0.0
-                    } else {
-                        let inv_var = if fields.noise_var[c] > 0.0 {
-                            (1.0 / fields.noise_var[c] as f64).min(1e8)
-                        } else {
-                            1e8
-                        };
-                        ((f.data[i] as f64).max(0.05) * l).powi(2) * inv_var
-                    };
-                    num += p * ahat[c] / l;
-                    den += p;
-                }
-                for c in 0..3 {
-                    let i = px * 3 + c;
-                    let w = wt.data[i] as f64;
-                    expect[i] = w * ahat[c] + (1.0 - w) * (lv.data[i] as f64).max(1e-3) * num / den;
-                }
-            }
-            let mut got = samples.clone();
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut got,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(blend),
-                    k,
-                    0.05,
+                let full = (&f, &lv, &wt);
+                reference_pixel(
+                    px * 3,
+                    &samples,
+                    &s_lin,
                     &curve,
+                    full,
+                    &fields,
+                    &kscale,
+                    &mut expect,
                 );
-            } else {
-                let mut g8: Vec<u8> = got.iter().map(|&v| v as u8).collect();
-                correct_with_offset(
-                    &mut g8,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(blend),
-                    k,
-                    0.05,
-                    &curve,
-                );
-                got = g8.into_iter().map(u16::from).collect();
             }
+            let got = corrected(&samples, layout, &prepared, &low, Some(blend), k, &curve);
             for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
                 let want = curve.code(e.clamp(0.0, 1.0) as f32);
                 assert!(
@@ -1205,53 +1394,151 @@ mod tests {
                     "{t:?} sample {i}: {g} vs {want}"
                 );
             }
-            // Weights of 1 everywhere (nothing to blend) and k = 1: the plain correction, bit for bit.
-            let ones = Blended {
-                weight: Raster::filled(8, 5, 3, 1.0),
-                ..fields.clone()
-            };
-            let unblended = Blend {
-                fields: Some(&ones),
-                scatter_scale: &[1.0; 3],
-            };
-            let (mut a, mut c) = (samples.clone(), samples.clone());
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut a,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(unblended),
-                    k,
-                    0.05,
+        }
+    }
+
+    #[test]
+    fn a_blend_that_changes_nothing_is_the_plain_correction() {
+        let (layout, k, low, scatter) = reference_frame(0.03);
+        let prepared = Prepared::from_raster(&scatter, Transfer::Linear);
+        let curve = Curve::new(Transfer::Linear, 65536);
+        let samples: Vec<u16> = (0..29 * 17 * 3)
+            .map(|i| ((i * 7919) % 65536) as u16)
+            .collect();
+        let mut plain = samples.clone();
+        correct_in_place(&mut plain, layout, Some(&prepared), &low, k, 0.05, &curve);
+        // Weights of 1 everywhere (nothing to blend) and k = 1: the plain correction, bit for bit.
+        let ones = Blended {
+            weight: Raster::filled(8, 5, 3, 1.0),
+            ..reference_fields()
+        };
+        let unblended = Blend {
+            fields: Some(&ones),
+            scatter_scale: &[1.0; 3],
+        };
+        let a = corrected(
+            &samples,
+            layout,
+            &prepared,
+            &low,
+            Some(unblended),
+            k,
+            &curve,
+        );
+        assert_eq!(a, plain);
+        // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
+        let none = Blend {
+            fields: None,
+            scatter_scale: &[1.0; 3],
+        };
+        let a = corrected(&samples, layout, &prepared, &low, Some(none), k, &curve);
+        assert!(a
+            .iter()
+            .zip(&plain)
+            .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
+    }
+
+    /// A random row of `n` samples for the blend: codes with black and top ones, F near 0 and NaN, levels below
+    /// LEVEL_MIN and NaN, weights 0 to 1, S's grid indices.
+    #[allow(clippy::type_complexity)]
+    fn random_blend_row<T: Sample>(
+        next: &mut dyn FnMut() -> u32,
+        levels: usize,
+        n: usize,
+    ) -> (Vec<T>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<u16>) {
+        let codes: Vec<T> = (0..n)
+            .map(|_| {
+                let v = match next() % 12 {
+                    0 => 0,
+                    1 => levels - 1,
+                    _ => next() as usize % levels,
+                };
+                T::from_code(v as u16)
+            })
+            .collect();
+        let f: Vec<f32> = (0..n)
+            .map(|_| match next() % 20 {
+                0 => f32::NAN,
+                1 => 1e-7,
+                _ => (next() % 1000) as f32 / 500.0 + 1e-4,
+            })
+            .collect();
+        let lx: Vec<f32> = (0..n)
+            .map(|_| match next() % 20 {
+                0 => f32::NAN,
+                1 => 1e-5,
+                _ => (next() % 1000) as f32 / 1000.0,
+            })
+            .collect();
+        let wx: Vec<f32> = (0..n).map(|_| (next() % 1001) as f32 / 1000.0).collect();
+        let q: Vec<u16> = (0..n).map(|_| next() as u16).collect();
+        (codes, f, lx, wx, q)
+    }
+
+    /// One random row of `len` pixels through [`blend_row`] and [`blend_row_passes`]: the same codes and clipped
+    /// counts, with S unscaled, scaled and absent.
+    #[cfg(target_arch = "x86_64")]
+    fn passes_agree<T: Sample, const C: usize>(
+        next: &mut dyn FnMut() -> u32,
+        transfer: Transfer,
+        levels: usize,
+        len: usize,
+    ) {
+        let curve = Curve::new(transfer, levels);
+        let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
+        let n = len * C;
+        let (codes, f, lx, wx, q) = random_blend_row::<T>(next, levels, n);
+        let b = Blended {
+            level: Raster::filled(1, 1, C, 0.4),
+            weight: Raster::filled(1, 1, C, 0.5),
+            noise_var: (0..C).map(|c| [1e-4, 0.0, 3e-3][c % 3]).collect(),
+            prior_precision: 17.0,
+        };
+        for (scale, with_s) in [
+            (vec![1.0f32; C], true),
+            (vec![0.8f32; C], true),
+            (vec![1.0; C], false),
+        ] {
+            let qs = with_s.then_some(q.as_slice());
+            let mut want = codes.clone();
+            let c_want = blend_row::<T, C>(
+                &mut want,
+                &f,
+                &lx,
+                &wx,
+                &scale,
+                &b,
+                qs,
+                &prepared_table,
+                &curve,
+            );
+            let mut got = codes.clone();
+            let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
+            // SAFETY: AVX2 checked above.
+            let c_got = unsafe {
+                blend_row_passes::<T, C>(
+                    &mut got,
+                    &mut f2,
+                    &mut l2,
+                    &wx,
+                    &mut ax,
+                    &scale,
+                    &b,
+                    qs,
+                    &prepared_table,
                     &curve,
-                );
-                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
-                assert_eq!(a, c);
-            }
-            // Without blend fields and with k = 1 the linear path is the plain correction (within one code).
-            let plain = Blend {
-                fields: None,
-                scatter_scale: &[1.0; 3],
+                )
             };
-            let (mut a, mut c) = (samples.clone(), samples.clone());
-            if t == Transfer::Linear {
-                correct_with_offset(
-                    &mut a,
-                    layout,
-                    Some(&prepared),
-                    &low,
-                    Some(plain),
-                    k,
-                    0.05,
-                    &curve,
-                );
-                correct_in_place(&mut c, layout, Some(&prepared), &low, k, 0.05, &curve);
-                assert!(a
-                    .iter()
-                    .zip(&c)
-                    .all(|(x, y)| (*x as i32 - *y as i32).abs() <= 1));
-            }
+            assert_eq!(
+                c_got, c_want,
+                "clipped, {transfer:?}, {levels} levels, {C} channels, {len} px"
+            );
+            let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
+            assert_eq!(
+                as16(&got),
+                as16(&want),
+                "{transfer:?}, {levels} levels, {C} channels, {len} px"
+            );
         }
     }
 
@@ -1272,100 +1559,12 @@ mod tests {
             r ^= r << 5;
             r
         };
-        fn run<T: Sample, const C: usize>(
-            next: &mut dyn FnMut() -> u32,
-            transfer: Transfer,
-            levels: usize,
-            len: usize,
-        ) {
-            let curve = Curve::new(transfer, levels);
-            let prepared_table: Vec<f32> = (0..65536).map(|i| i as f32 / 65535.0 * 0.2).collect();
-            let n = len * C;
-            let codes: Vec<T> = (0..n)
-                .map(|_| {
-                    let v = match next() % 12 {
-                        0 => 0,
-                        1 => levels - 1,
-                        _ => next() as usize % levels,
-                    };
-                    T::from_code(v as u16)
-                })
-                .collect();
-            let f: Vec<f32> = (0..n)
-                .map(|_| match next() % 20 {
-                    0 => f32::NAN,
-                    1 => 1e-7,
-                    _ => (next() % 1000) as f32 / 500.0 + 1e-4,
-                })
-                .collect();
-            let lx: Vec<f32> = (0..n)
-                .map(|_| match next() % 20 {
-                    0 => f32::NAN,
-                    1 => 1e-5,
-                    _ => (next() % 1000) as f32 / 1000.0,
-                })
-                .collect();
-            let wx: Vec<f32> = (0..n).map(|_| (next() % 1001) as f32 / 1000.0).collect();
-            let q: Vec<u16> = (0..n).map(|_| next() as u16).collect();
-            let b = Blended {
-                level: Raster::filled(1, 1, C, 0.4),
-                weight: Raster::filled(1, 1, C, 0.5),
-                noise_var: (0..C).map(|c| [1e-4, 0.0, 3e-3][c % 3]).collect(),
-                prior_precision: 17.0,
-            };
-            for (scale, with_s) in [
-                (vec![1.0f32; C], true),
-                (vec![0.8f32; C], true),
-                (vec![1.0; C], false),
-            ] {
-                let qs = with_s.then_some(q.as_slice());
-                let mut want = codes.clone();
-                let c_want = blend_row::<T, C>(
-                    &mut want,
-                    &f,
-                    &lx,
-                    &wx,
-                    &scale,
-                    &b,
-                    qs,
-                    &prepared_table,
-                    &curve,
-                );
-                let mut got = codes.clone();
-                let (mut f2, mut l2, mut ax) = (f.clone(), lx.clone(), vec![0.0f32; n]);
-                // SAFETY: AVX2 checked above.
-                let c_got = unsafe {
-                    blend_row_passes::<T, C>(
-                        &mut got,
-                        &mut f2,
-                        &mut l2,
-                        &wx,
-                        &mut ax,
-                        &scale,
-                        &b,
-                        qs,
-                        &prepared_table,
-                        &curve,
-                    )
-                };
-                assert_eq!(
-                    c_got, c_want,
-                    "clipped, {transfer:?}, {levels} levels, {C} channels, {len} px"
-                );
-                let as16 = |v: &[T]| v.iter().map(|x| x.to_u16()).collect::<Vec<_>>();
-                assert_eq!(
-                    as16(&got),
-                    as16(&want),
-                    "{transfer:?}, {levels} levels, {C} channels, {len} px"
-                );
-            }
-        }
         for t in [Transfer::Srgb, Transfer::Linear] {
             for len in [1usize, 7, 8, 13, 61, 200] {
-                run::<u8, 3>(&mut next, t, 256, len);
-                run::<u8, 1>(&mut next, t, 256, len);
-                run::<u16, 3>(&mut next, t, 65536, len);
-                run::<u16, 1>(&mut next, t, 65536, len);
+                passes_agree::<u8, 3>(&mut next, t, 256, len);
+                passes_agree::<u8, 1>(&mut next, t, 256, len);
+                passes_agree::<u16, 3>(&mut next, t, 65536, len);
+                passes_agree::<u16, 1>(&mut next, t, 65536, len);
             }
         }
     }
@@ -1460,12 +1659,15 @@ mod tests {
             let curve = Curve::new(t, levels);
             let prepared = Prepared::from_raster(srow, t);
             let table = prepared.linear_table().unwrap_or(&[]);
+            let tq = sample_weights(tx, c);
+            let along = Along { tx, tq: &tq };
             for s in [None, Some(prepared.row(0))] {
                 let (mut a, mut b) = (row.to_vec(), row.to_vec());
                 let (mut fa, mut fb) = (vec![0.0; n], vec![0.0; n]);
-                let sa = correct_row_dispatch(&mut a, frow, &mut fa, tx, c, 0.05, s, table, &curve);
+                let sa =
+                    correct_row_dispatch(&mut a, frow, &mut fa, along, c, 0.05, s, table, &curve);
                 let sb = correct_row_portable(
-                    &mut b, frow, &mut fb, tx, c, 0.05, s, table, &curve, false,
+                    &mut b, frow, &mut fb, along, c, 0.05, s, table, &curve, false,
                 );
                 assert_eq!(a, b, "{t:?}");
                 assert_eq!(sa, sb, "{t:?}");

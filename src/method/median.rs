@@ -216,15 +216,13 @@ pub fn block_median<T: Sample>(
 ) -> Raster {
     assert!(k > 0, "block size must be positive");
     assert_eq!(samples.len(), width * height * channels);
-    let bw = blocks(width, k);
-    let bh = blocks(height, k);
+    let (bw, bh) = (blocks(width, k), blocks(height, k));
     let mut out = Raster::filled(bw, bh, channels, 0.0);
     if bw == 0 || bh == 0 {
         return out;
     }
-    let scale = 1.0 / T::MAX;
+    let (scale, kk) = (1.0 / T::MAX, k * k);
     let row_len = width * channels;
-    let kk = k * k;
     let net = if kk <= NETWORK_MAX {
         prune_network(&sorting_network(kk), &median_positions(kk))
     } else {
@@ -273,37 +271,71 @@ pub fn block_median<T: Sample>(
                         }
                     }
                     apply_network(&net, v, lanes);
-                    let o = &mut out_row[lane0..lane0 + lanes];
-                    if kk % 2 == 1 {
-                        let m = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
-                        for (o, &m) in o.iter_mut().zip(m) {
-                            *o = m.to_u16() as f32 * scale;
-                        }
-                    } else {
-                        let lo = &v[(kk / 2 - 1) * lanes..(kk / 2) * lanes];
-                        let hi = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
-                        for ((o, &a), &b) in o.iter_mut().zip(lo).zip(hi) {
-                            *o = (a.to_u16() as f32 + b.to_u16() as f32) * 0.5 * scale;
-                        }
-                    }
+                    write_medians(v, kk, lanes, scale, &mut out_row[lane0..lane0 + lanes]);
                     lane0 += lanes;
                 }
             }
-            let mut scratch: Vec<T> = Vec::with_capacity(kk);
-            for bx in first_scalar..bw {
-                let x0 = bx * k;
-                let x1 = (x0 + k).min(width);
-                for c in 0..channels {
-                    scratch.clear();
-                    for y in y0..y1 {
-                        let row = &samples[y * row_len..(y + 1) * row_len];
-                        scratch.extend((x0..x1).map(|x| row[x * channels + c]));
-                    }
-                    out_row[bx * channels + c] = median_of_samples(&mut scratch) * scale;
-                }
-            }
+            let band = Band {
+                samples,
+                width,
+                channels,
+                k,
+                rows: y0..y1,
+            };
+            selected_medians(&band, first_scalar..bw, scale, out_row);
         });
     out
+}
+
+/// A band of block rows `rows` of a photo of `width` pixels of `channels` samples, in blocks of `k`.
+struct Band<'a, T> {
+    samples: &'a [T],
+    width: usize,
+    channels: usize,
+    k: usize,
+    rows: std::ops::Range<usize>,
+}
+
+/// The medians of blocks `bxs` of a band by selection (partial blocks, huge `k`), scaled by `scale`, into the
+/// band's output row.
+fn selected_medians<T: Sample>(
+    b: &Band<T>,
+    bxs: std::ops::Range<usize>,
+    scale: f32,
+    out_row: &mut [f32],
+) {
+    let (k, c) = (b.k, b.channels);
+    let row_len = b.width * c;
+    let mut scratch: Vec<T> = Vec::with_capacity(k * k);
+    for bx in bxs {
+        let x0 = bx * k;
+        let x1 = (x0 + k).min(b.width);
+        for ch in 0..c {
+            scratch.clear();
+            for y in b.rows.clone() {
+                let row = &b.samples[y * row_len..(y + 1) * row_len];
+                scratch.extend((x0..x1).map(|x| row[x * c + ch]));
+            }
+            out_row[bx * c + ch] = median_of_samples(&mut scratch) * scale;
+        }
+    }
+}
+
+/// The medians of `lanes` columns of `kk` values sorted by the network (`v`, value `e` of lane `l` at
+/// `e·lanes + l`), scaled by `scale`, into `out`: the middle value, or the mean of the two middle ones.
+fn write_medians<T: Sample>(v: &[T], kk: usize, lanes: usize, scale: f32, out: &mut [f32]) {
+    if kk % 2 == 1 {
+        let m = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
+        for (o, &m) in out.iter_mut().zip(m) {
+            *o = m.to_u16() as f32 * scale;
+        }
+    } else {
+        let lo = &v[(kk / 2 - 1) * lanes..(kk / 2) * lanes];
+        let hi = &v[(kk / 2) * lanes..(kk / 2 + 1) * lanes];
+        for ((o, &a), &b) in out.iter_mut().zip(lo).zip(hi) {
+            *o = (a.to_u16() as f32 + b.to_u16() as f32) * 0.5 * scale;
+        }
+    }
 }
 
 /// Gather the rows of a band of blocks for the network: element `e = dy·k + dx` of lane `l` (lane `l` = sample
