@@ -1133,8 +1133,14 @@ fn window(args: WindowArgs) -> Result<ExitCode, Error> {
     Ok(ExitCode::from(EXIT_OK))
 }
 
+/// The `abysslight` command with the process's arguments.
 pub fn run() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    run_from(std::env::args_os())
+}
+
+/// The `abysslight` command with `args` (the first is the program's name).
+pub fn run_from(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
+    let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
             let code = if e.use_stderr() { EXIT_USAGE } else { EXIT_OK };
