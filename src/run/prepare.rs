@@ -60,25 +60,7 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
     if let (Some(m), Some(s)) = (&mask, &scatter) {
         m.check(s.layout, mask_path(opts))?;
     }
-    let params = Params {
-        method: opts.method,
-        window: plan.window.n,
-        // `None` here (a streaming run with nothing to read the size from): the engine takes it from the first
-        // photo.
-        downsample: opts.downsample.unwrap_or(0),
-        seafloor_colour: opts.seafloor_colour,
-        factor_floor: opts.factor_floor,
-        transfer: opts.transfer,
-        degree: opts.degree,
-        relative_floor: opts.relative_floor,
-        photo_gain: opts.photo_gain,
-        backscatter_scale: opts.backscatter_scale,
-        denoise: opts.denoise,
-        level_by_light: opts.level_by_light,
-        bright_spots: opts.bright_spots,
-        window_quantile: opts.window_quantile() as f32,
-        near_window: opts.near_window_for(plan.window.n).unwrap_or(0),
-    };
+    let params = engine_params(opts, plan.window.n, mask.is_some());
     let mut engine = Engine::new(params, scatter.as_ref(), mask)?;
     drop(scatter);
     if opts.method == Method::Mean {
@@ -95,6 +77,38 @@ pub fn prepare<T>(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Resul
         errors,
         warnings: warnings.list,
     })
+}
+
+/// The engine's parameters for `opts` with a window of `n` photos: what `correct` runs, and what the Python
+/// binding's `Engine` runs with the same options. `downsample` `auto` is resolved as a run resolves it (the paper's
+/// 8 for the methods other than `abyss` and with a mask; otherwise 0, which the engine takes from the photos'
+/// size: [`crate::method::factor::auto_block`]).
+pub fn engine_params(opts: &Options, n: usize, masked: bool) -> Params {
+    let eight = crate::method::factor::AUTO_MAX_BLOCK;
+    let auto = if opts.method == Method::Abyss && !masked {
+        0
+    } else {
+        eight
+    };
+    Params {
+        method: opts.method,
+        window: n,
+        // `None` here (a streaming run with nothing to read the size from): the engine takes it from the first
+        // photo.
+        downsample: opts.downsample.unwrap_or(auto),
+        seafloor_colour: opts.seafloor_colour,
+        factor_floor: opts.factor_floor,
+        transfer: opts.transfer,
+        degree: opts.degree,
+        relative_floor: opts.relative_floor,
+        photo_gain: opts.photo_gain,
+        backscatter_scale: opts.backscatter_scale,
+        denoise: opts.denoise,
+        level_by_light: opts.level_by_light,
+        bright_spots: opts.bright_spots,
+        window_quantile: opts.window_quantile() as f32,
+        near_window: opts.near_window_for(n).unwrap_or(0),
+    }
 }
 
 /// The path a mask error names: `--mask`, or the mask `--mask-auto` found.
