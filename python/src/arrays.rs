@@ -54,9 +54,10 @@ impl Shape {
 /// photo, which the engine keeps for the window).
 fn samples<T: numpy::Element + Copy>(a: &Bound<'_, PyArrayDyn<T>>) -> Vec<T> {
     let r = a.readonly();
+    // `as_slice` also accepts Fortran order, whose samples are not in row order: C order only.
     match r.as_slice() {
-        Ok(s) => s.to_vec(),
-        Err(_) => r.as_array().iter().copied().collect(),
+        Ok(s) if a.is_c_contiguous() => s.to_vec(),
+        _ => r.as_array().iter().copied().collect(),
     }
 }
 
