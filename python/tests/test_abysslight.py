@@ -227,7 +227,7 @@ def test_mask_leaves_pixels_out_like_the_command(srgb_dive, tmp_path):
     m = np.zeros((64, 96), bool)
     m[5:15, 70:90] = True  # an overlay's place
     mask_png = tmp_path / "mask.png"
-    _write_grey_png(mask_png, (m * 255).astype(np.uint8))
+    _write_png(mask_png, (m * 255).astype(np.uint8))
     out = tmp_path / "masked"
     run_cli("correct", "--water-column", root / "water", "--survey", root / "survey", "--out", out, "--quiet",
             "--mask", mask_png)
@@ -244,17 +244,45 @@ def test_mask_leaves_pixels_out_like_the_command(srgb_dive, tmp_path):
     assert_same_pixels(got, out)
 
 
-def _write_grey_png(path, a):
+def _write_png(path, a, srgb=False):
+    """An 8-bit grey or RGB PNG written here (filter 0), optionally declaring sRGB."""
     import struct
     import zlib
 
     def chunk(kind, body):
         return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
 
-    h, w = a.shape
+    h, w = a.shape[:2]
+    colour = 2 if a.ndim == 3 else 0
     raw = b"".join(b"\x00" + a[y].tobytes() for y in range(h))
-    Path(path).write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+    Path(path).write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, colour, 0, 0, 0))
+                           + (chunk(b"sRGB", b"\x00") if srgb else b"")
                            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+# ../shared beside the repository (ABYSSLIGHT_SHARED elsewhere).
+SHARED = Path(os.environ.get("ABYSSLIGHT_SHARED", Path(__file__).resolve().parents[3] / "shared"))
+REAL = SHARED / "data" / "real" / "nephrops-uwtv-burrows" / "run_20230604_1632"
+
+
+@pytest.mark.skipif(os.environ.get("ABYSSLIGHT_REAL") != "1" or not REAL.is_dir(),
+                    reason="needs ../shared/data/real and ABYSSLIGHT_REAL=1")
+def test_engine_equals_the_command_on_a_real_set(tmp_path):
+    # Real JPEGs decoded by the library and stored as sRGB PNGs (lossless outputs to compare), no water column.
+    survey = tmp_path / "survey"
+    survey.mkdir()
+    photos = [abysslight.read(p) for p in sorted(REAL.glob("*.jpg"))[:30]]
+    for i, p in enumerate(photos):
+        _write_png(survey / f"{i:03}.png", p, srgb=True)
+    out = tmp_path / "cli"
+    run_cli("correct", "--survey", survey, "--out", out, "--quiet")
+    assert _report(out)["options"]["transfer"] == "srgb"
+    engine = abysslight.Engine(transfer="srgb")
+    got = {}
+    for i, p in enumerate(photos):
+        got.update({c.tag: c for c in engine.push(p, i)})
+    got.update({c.tag: c for c in engine.finish()})
+    assert_same_pixels(got, out)
 
 
 def _count_while(fn):
