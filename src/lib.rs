@@ -46,6 +46,13 @@
 
 #![warn(missing_docs)]
 
+// The command line (`cli` feature) is part of the library so that the Python extension can run the same `abysslight`
+// command; its code names the crate as `abysslight::`, as the binary did.
+extern crate self as abysslight;
+
+#[cfg(feature = "cli")]
+#[doc(hidden)]
+pub mod cli;
 pub mod error;
 pub mod eval;
 pub mod io;

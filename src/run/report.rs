@@ -24,6 +24,11 @@ pub trait Progress: Sync {
     fn photo_done(&self, input: &Path, ok: bool);
     /// The survey pass ended.
     fn finish(&self);
+    /// Asked before each survey photo enters the engine: `true` stops the run there with an error (the photos
+    /// written so far are complete; `resume` finishes the run). The Python binding's Ctrl-C. Default: never.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// A [`Progress`] that ignores everything.

@@ -374,6 +374,12 @@ pub fn stream(
         };
         let mut reached_end = true;
         for (item, photo, decode_ms) in dec_rx {
+            if progress.cancelled() {
+                return Err(Error::Usage(
+                    "interrupted: the photos written so far are complete; run again with resume to finish"
+                        .into(),
+                ));
+            }
             feed.outcome.streamed += 1;
             let index = item.index;
             match photo {

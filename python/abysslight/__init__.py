@@ -1,0 +1,104 @@
+"""Remove the lighting of co-moving artificial lights from deep-sea survey photographs (Köser et al., "Robustly
+Removing Deep Sea Lighting Effects for Visual Mapping of Abyssal Plains").
+
+numpy arrays in, numpy arrays out::
+
+    import abysslight
+    scatter = abysslight.Scatter.from_frames(water_column_frames)
+    engine = abysslight.Engine(scatter=scatter, transfer="srgb")
+    for i, photo in enumerate(photos):
+        for c in engine.push(photo, i):
+            corrected[c.tag] = c.image
+    for c in engine.finish():
+        corrected[c.tag] = c.image
+
+or a whole mission from folders to folders, as ``abysslight correct`` runs it::
+
+    report = abysslight.correct(water_column="descent", survey="survey", out="corrected")
+
+Options are the command's long names with ``_`` (``window=9``, ``method="paper"``); none given are the command's
+defaults. See docs/python.md.
+"""
+
+from typing import Any, Callable, Dict, Optional
+
+from . import _abysslight
+from ._abysslight import Corrected, Engine, Mask, Scatter, __version__, evaluate, read, simulate
+
+__all__ = [
+    "Corrected",
+    "Engine",
+    "Mask",
+    "Scatter",
+    "correct",
+    "evaluate",
+    "read",
+    "simulate",
+    "__version__",
+]
+
+ProgressCallback = Callable[[int, int, str, bool], Any]
+
+
+def _tqdm_progress() -> "tuple[Optional[ProgressCallback], Callable[[], None]]":
+    """A tqdm bar fed by the run's callback, if tqdm is installed."""
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None, lambda: None
+    bar = None
+
+    def update(done: int, total: int, path: str, ok: bool) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total or None, unit="photo", desc="abysslight")
+        bar.update(1)
+
+    def close() -> None:
+        if bar is not None:
+            bar.close()
+
+    return update, close
+
+
+def correct(
+    survey: Optional[Any] = None,
+    out: Optional[Any] = None,
+    water_column: Optional[Any] = None,
+    *,
+    progress: "Optional[ProgressCallback | bool]" = None,
+    **options: Any,
+) -> Dict[str, Any]:
+    """Run ``abysslight correct``: correct the photos of the folder ``survey`` into ``out``, with ``S`` from the
+    water-column frames in ``water_column`` (or ``scatter="scatter.png"``), and return the run report (what
+    ``out/_abysslight/report.json`` holds) as a dict.
+
+    ``options`` are the command's long names with ``_`` (``window=9``, ``method="paper"``, ``transfer="srgb"``,
+    ``resume=True``, ``config="dive.toml"``); none given are the command's defaults. Flags that turn something off
+    are ``no_denoise=True`` or ``denoise=False``.
+
+    ``progress``: a callable ``progress(done, total, path, ok)`` called after each photo; ``None`` (default) shows a
+    tqdm bar when tqdm is installed; ``False``: nothing. Stages and warnings go to the ``abysslight`` logger.
+
+    The GIL is released while it runs. Ctrl-C (KeyboardInterrupt) stops it before the next photo; the photos
+    written so far are complete and ``resume=True`` finishes the run. An exception raised by ``progress`` stops it
+    the same way and is raised here.
+
+    Raises TypeError for an unknown option, ValueError for a bad value (with the command's message), OSError when a
+    folder cannot be read.
+    """
+    close: Callable[[], None] = lambda: None
+    if progress is None:
+        callback, close = _tqdm_progress()
+    elif progress is False:
+        callback = None
+    elif progress is True:
+        callback, close = _tqdm_progress()
+    else:
+        callback = progress
+    try:
+        return _abysslight.correct(
+            progress=callback, survey=survey, out=out, water_column=water_column, **options
+        )
+    finally:
+        close()

@@ -1,0 +1,130 @@
+"""Type stubs of the compiled extension (abysslight's Rust library through PyO3)."""
+
+import os
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+PathLike = Union[str, "os.PathLike[str]"]
+PhotoArray = Union[npt.NDArray[np.uint8], npt.NDArray[np.uint16]]
+
+class Scatter:
+    """The backscatter image S: the per-pixel temporal median of water-column frames."""
+
+    @staticmethod
+    def from_frames(frames: Iterable[PhotoArray]) -> "Scatter":
+        """S from water-column frames in memory (HxWx3 or HxW, uint8 or uint16, all of one shape)."""
+    @staticmethod
+    def from_files(files: Union[PathLike, Sequence[PathLike]], memory_mib: int = 2048) -> "Scatter":
+        """S from a folder of water-column frames (searched recursively) or a list of files."""
+    @staticmethod
+    def load(path: PathLike) -> "Scatter":
+        """A scatter image saved by a run (--save-scatter) or by Scatter.save."""
+    def save(self, path: PathLike) -> None:
+        """Save as a 16-bit PNG (what Scatter.load and `correct --scatter` read)."""
+    @property
+    def image(self) -> npt.NDArray[np.float32]:
+        """S as HxWxC float32, stored values scaled to [0, 1]."""
+    @property
+    def frames(self) -> int:
+        """Water-column frames the median was taken over."""
+    @property
+    def shape(self) -> Tuple[int, int, int]:
+        """(height, width, channels)."""
+
+class Mask:
+    """Static pixels (overlays, laser dots, vehicle parts) left out of every median."""
+
+    def __init__(self, array: Union[npt.NDArray[np.bool_], npt.NDArray[np.uint8]]) -> None:
+        """From an HxW array: True (or non-zero) where pixels are ignored."""
+    @staticmethod
+    def load(path: PathLike) -> "Mask":
+        """A mask image (white: ignored), as --mask reads it."""
+    @property
+    def array(self) -> npt.NDArray[np.bool_]:
+        """HxW, True where ignored."""
+    @property
+    def count(self) -> int:
+        """Pixels ignored."""
+
+class Corrected:
+    """One corrected photo, out of Engine.push or Engine.finish."""
+
+    tag: Any
+    """What was pushed with the photo."""
+    index: int
+    """Position among the photos pushed (0-based)."""
+    image: PhotoArray
+    """The corrected photo: same shape and dtype as the photo pushed."""
+    factor: npt.NDArray[np.float32]
+    """F at block resolution, in linear light (h x w x C)."""
+    health: Dict[str, Any]
+    """Health figures and flags of the estimate (as in the run report's frames)."""
+    window: Tuple[int, int]
+    """(first, end) indices of the photos whose median gave F."""
+
+class Engine:
+    """The method over a stream of photos in memory; memory bounded by the window.
+
+    Options are `abysslight correct`'s method options by their long names with '_': window, contamination,
+    risk, downsample, near_window, seafloor_colour, factor_floor, transfer, method, degree, relative_floor,
+    photo_gain / no_photo_gain, backscatter_scale, denoise / no_denoise, level_by_light / no_level_by_light,
+    bright_spots. None given: the command's defaults. transfer="auto" (the default) means what the command assumes
+    for a file that declares no colour information: linear; give transfer="srgb" for arrays from JPEGs or
+    sRGB-encoded cameras.
+    """
+
+    def __init__(
+        self,
+        scatter: Optional[Scatter] = None,
+        mask: Optional[Mask] = None,
+        **options: Any,
+    ) -> None: ...
+    def push(self, photo: PhotoArray, tag: Any = None) -> List[Corrected]:
+        """Give the next photo; returns the photos whose window became complete, in order (GIL released)."""
+    def finish(self) -> List[Corrected]:
+        """Every photo still waiting, corrected with the window shifted back from the end."""
+    @property
+    def window(self) -> int: ...
+    @property
+    def downsample(self) -> int: ...
+    @property
+    def transfer(self) -> str: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def waiting(self) -> int: ...
+
+def correct(progress: Optional[Callable[[int, int, str, bool], Any]] = None, **options: Any) -> Dict[str, Any]: ...
+def run_cli(argv: List[str]) -> int:
+    """Run the abysslight command with argv (argv[0] is the program's name); returns its exit status."""
+
+def read(path: PathLike) -> PhotoArray:
+    """Decode a photo file as a run decodes it (HxWx3 or HxW, uint8 or uint16)."""
+
+def simulate(
+    frames: int = 30,
+    water_column: int = 15,
+    width: int = 320,
+    height: int = 240,
+    seed: int = 1,
+    contamination: float = 0.2,
+    bit_depth: int = 8,
+    encode: str = "linear",
+    noise: float = 1.0,
+) -> Dict[str, Any]:
+    """A simulated dive in memory: {"survey": [arrays], "water_column": [arrays], "albedo": [float32 arrays],
+    "transfer": the curve the photos were encoded with}."""
+
+def evaluate(
+    sets: Sequence[Tuple[str, PathLike]],
+    truth: Optional[PathLike] = None,
+    placements: Optional[PathLike] = None,
+    cell: float = 8.0,
+    transfer: Optional[str] = None,
+    mask: Optional[PathLike] = None,
+) -> Dict[str, Any]:
+    """Score folders of corrected photos, as `abysslight evaluate` does; sets: (label, folder) pairs."""
