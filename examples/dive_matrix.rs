@@ -11,6 +11,9 @@
 //! what a window over a straight track takes into `F` from the seafloor itself, whatever the lights do —
 //! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
+//! `--columns NAME[,NAME]` keeps only those of the columns above (the oracle and the window's floor are always
+//! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
+//! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
 //! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
@@ -126,6 +129,7 @@ fn main() {
     let mut size = (320usize, 240usize);
     let mut held_out = false;
     let mut nodules = false;
+    let mut columns: Option<Vec<String>> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -148,6 +152,15 @@ fn main() {
             "--ablation" => ablation = true,
             "--held-out" => held_out = true,
             "--nodules" => nodules = true,
+            "--columns" => {
+                columns = Some(
+                    args.next()
+                        .expect("--columns NAME[,NAME]")
+                        .split(',')
+                        .map(str::to_owned)
+                        .collect(),
+                )
+            }
             "--ablation-only" => {
                 ablation = true;
                 ablation_only = Some(
@@ -229,6 +242,14 @@ fn main() {
             methods.push((label.to_string(), Box::new(f)));
         }
     }
+    if let Some(c) = &columns {
+        methods.retain(|(l, _)| c.contains(l));
+    }
+    let peer = peer.filter(|_| {
+        columns
+            .as_ref()
+            .is_none_or(|c| c.iter().any(|l| l == "numpy"))
+    });
     let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
     let started = Instant::now();
     let (dives, seed): (&[matrix::DiveSpec], fn(usize, u64) -> u64) = match (nodules, held_out) {
