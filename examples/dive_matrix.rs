@@ -42,6 +42,9 @@ use abysslight::method::transfer::Transfer;
 use abysslight::run::options::{Method, Options};
 use abysslight::{correct_mission, Silent};
 
+/// The seed of a set's `index`-th dive in seed set `offset`.
+type SeedOf = fn(usize, u64) -> u64;
+
 /// Options of one column, made from the options every column shares.
 type MakeOptions = Box<dyn Fn(Options) -> Options>;
 
@@ -252,7 +255,7 @@ fn main() {
     });
     let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
     let started = Instant::now();
-    let (dives, seed): (&[matrix::DiveSpec], fn(usize, u64) -> u64) = match (nodules, held_out) {
+    let (dives, seed): (&[matrix::DiveSpec], SeedOf) = match (nodules, held_out) {
         (false, false) => (DIVES, matrix::seed),
         (false, true) => (HELD_OUT, matrix::held_out_seed),
         (true, false) => (NODULES, matrix::nodule_seed),
