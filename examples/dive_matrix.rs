@@ -11,6 +11,9 @@
 //! what a window over a straight track takes into `F` from the seafloor itself, whatever the lights do —
 //! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
+//! `--columns NAME[,NAME]` keeps only those of the columns above (the oracle and the window's floor are always
+//! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
+//! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
 //! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
@@ -29,13 +32,18 @@ use std::time::Instant;
 use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
-use abysslight::eval::matrix::{self, load_set, signal_mask, window_floor, DIVES, HELD_OUT};
+use abysslight::eval::matrix::{
+    self, load_set, signal_mask, window_floor, DIVES, HELD_OUT, NODULES, NODULES_HELD_OUT,
+};
 use abysslight::eval::simulate::Dive;
 use abysslight::method::factor::auto_block;
 use abysslight::method::raster::Raster;
 use abysslight::method::transfer::Transfer;
 use abysslight::run::options::{Method, Options};
 use abysslight::{correct_mission, Silent};
+
+/// The seed of a set's `index`-th dive in seed set `offset`.
+type SeedOf = fn(usize, u64) -> u64;
 
 /// Options of one column, made from the options every column shares.
 type MakeOptions = Box<dyn Fn(Options) -> Options>;
@@ -123,6 +131,8 @@ fn main() {
     let mut ablation_only: Option<Vec<String>> = None;
     let mut size = (320usize, 240usize);
     let mut held_out = false;
+    let mut nodules = false;
+    let mut columns: Option<Vec<String>> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -144,6 +154,16 @@ fn main() {
             }
             "--ablation" => ablation = true,
             "--held-out" => held_out = true,
+            "--nodules" => nodules = true,
+            "--columns" => {
+                columns = Some(
+                    args.next()
+                        .expect("--columns NAME[,NAME]")
+                        .split(',')
+                        .map(str::to_owned)
+                        .collect(),
+                )
+            }
             "--ablation-only" => {
                 ablation = true;
                 ablation_only = Some(
@@ -225,14 +245,24 @@ fn main() {
             methods.push((label.to_string(), Box::new(f)));
         }
     }
+    if let Some(c) = &columns {
+        methods.retain(|(l, _)| c.contains(l));
+    }
+    let peer = peer.filter(|_| {
+        columns
+            .as_ref()
+            .is_none_or(|c| c.iter().any(|l| l == "numpy"))
+    });
     let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
     let started = Instant::now();
-    let dives = if held_out { HELD_OUT } else { DIVES };
-    let seed = if held_out {
-        matrix::held_out_seed
-    } else {
-        matrix::seed
+    let (dives, seed): (&[matrix::DiveSpec], SeedOf) = match (nodules, held_out) {
+        (false, false) => (DIVES, matrix::seed),
+        (false, true) => (HELD_OUT, matrix::held_out_seed),
+        (true, false) => (NODULES, matrix::nodule_seed),
+        (true, true) => (NODULES_HELD_OUT, matrix::nodule_held_out_seed),
     };
+    // The coverage each column is told: the twelve's, or none (a nodule field corrected as a user would).
+    let told = |spec: &matrix::DiveSpec| spec.told.then_some(spec.contamination);
     for (i, spec) in dives.iter().enumerate() {
         if only
             .as_ref()
@@ -280,12 +310,19 @@ fn main() {
                 water_column: Some(water.clone()),
                 survey: Some(survey.clone()),
                 out: Some(dir.join(label)),
-                contamination: Some(spec.contamination),
+                contamination: told(spec),
                 transfer: Some(t_enc),
                 ..Options::default()
             });
             let report = correct_mission(&o, &Silent)
                 .unwrap_or_else(|e| panic!("{} {label}: {e}", spec.name));
+            if label == "default" {
+                eprintln!(
+                    "dive_matrix: {} default: {}",
+                    spec.name,
+                    flag_summary(&report)
+                );
+            }
             if label == "abyss-scale-auto" {
                 // The backscatter scale the default estimated (median over photos, per channel).
                 let k: Vec<String> = (0..3)
@@ -316,7 +353,7 @@ fn main() {
         scores.push(("oracle".into(), score(&oracle(&raw, &dive), &dive, &signal)));
         // The default's window and quantile (the paper's column and the numpy peer take the same window).
         let default = Options {
-            contamination: Some(spec.contamination),
+            contamination: told(spec),
             ..Options::default()
         };
         let window = default.window_choice().map_or(7, |w| w.n);
@@ -393,6 +430,31 @@ fn main() {
         started.elapsed().as_secs_f64(),
         out.join("matrix.md").display()
     );
+}
+
+/// Photos flagged by the monitor (share and the count of each kind) and the windows used.
+fn flag_summary(report: &abysslight::run::report::Report) -> String {
+    let mut kinds: std::collections::BTreeMap<&str, usize> = Default::default();
+    let mut flagged = 0;
+    for f in &report.frames {
+        flagged += usize::from(!f.health.flags.is_empty());
+        for k in &f.health.flags {
+            *kinds.entry(k.kind()).or_default() += 1;
+        }
+    }
+    let lens: Vec<usize> = report
+        .frames
+        .iter()
+        .map(|f| f.window[1] + 1 - f.window[0])
+        .collect();
+    format!(
+        "flagged {} of {} photos {:?}; windows {}..{} photos",
+        flagged,
+        report.frames.len(),
+        kinds,
+        lens.iter().min().unwrap_or(&0),
+        lens.iter().max().unwrap_or(&0)
+    )
 }
 
 fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {

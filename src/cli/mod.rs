@@ -1021,6 +1021,7 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         altitude_swing: a.altitude_swing,
         white_balance: a.white_balance,
         exposure: a.exposure,
+        contamination_along: None,
     };
     let t = std::time::Instant::now();
     if a.truth_lighting {

@@ -38,6 +38,15 @@ pub struct DiveSpec {
     pub jpeg: bool,
     /// Horizontal field of view, degrees.
     pub fov: f32,
+    /// Share of a photo's along-track extent the next photo sees (0.6 for the twelve; 0.9: a slow sledge).
+    pub overlap: f32,
+    /// Survey photos.
+    pub frames: usize,
+    /// Coverage at the first, middle and last photo instead of one ([`Simulation::contamination_along`]).
+    pub along: Option<[f64; 3]>,
+    /// The coverage is given to every method (`--contamination`, as for the twelve); `false` for the nodule
+    /// fields, corrected as a user would, at default options.
+    pub told: bool,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -66,8 +75,71 @@ const fn d(
         srgb,
         jpeg,
         fov,
+        overlap: 0.6,
+        frames: 30,
+        along: None,
+        told: true,
     }
 }
+
+/// A nodule field ([`NODULES`]): 40 photos at overlap `overlap`, coverage `c` (or `along` the track), not told.
+#[allow(clippy::too_many_arguments)]
+const fn n(
+    name: &'static str,
+    rig: Rig,
+    beam: f32,
+    water: &'static str,
+    altitude: f32,
+    swing: f32,
+    c: f64,
+    along: Option<[f64; 3]>,
+    bits: u32,
+    srgb: bool,
+    jpeg: bool,
+    overlap: f32,
+) -> DiveSpec {
+    DiveSpec {
+        overlap,
+        frames: 40,
+        along,
+        told: false,
+        ..d(
+            name, rig, beam, water, altitude, swing, c, bits, srgb, jpeg, 80.0,
+        )
+    }
+}
+
+/// Coverage along the patchy dives' tracks: bare sediment, a dense field, a sparse one.
+const PATCHY: Option<[f64; 3]> = Some([0.02, 0.45, 0.15]);
+
+#[rustfmt::skip]
+/// Nodule fields (docs/nodules.md): 30–50 % of the seafloor covered, one dive per rig patchy along the track,
+/// slow (overlap 0.9, a sledge) and fast (0.6) tracks, 40 photos each, corrected at default options (the coverage
+/// is not given). `dive_matrix --nodules` scores them; the window's choice was tuned on these.
+pub const NODULES: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     along   bits srgb   jpeg   overlap
+    n("n01", Rig::Two,   36.0, "oceanic-i",   5.0, 0.3, 0.30, None,   8,  true,  false, 0.6),
+    n("n02", Rig::Three, 30.0, "oceanic-iii", 4.5, 0.2, 0.40, None,   16, false, false, 0.9),
+    n("n03", Rig::Four,  36.0, "oceanic-i",   6.0, 0.4, 0.50, None,   8,  true,  true,  0.6),
+    n("n04", Rig::Aft,   36.0, "oceanic-i",   5.0, 0.3, 0.45, PATCHY, 8,  true,  false, 0.9),
+    n("n05", Rig::Two,   30.0, "oceanic-iii", 5.5, 0.3, 0.50, None,   16, false, false, 0.9),
+    n("n06", Rig::Three, 36.0, "oceanic-i",   5.0, 0.4, 0.45, PATCHY, 8,  true,  false, 0.6),
+    n("n07", Rig::Four,  30.0, "oceanic-i",   4.5, 0.2, 0.30, None,   8,  true,  false, 0.9),
+    n("n08", Rig::Aft,   36.0, "oceanic-iii", 6.0, 0.5, 0.40, None,   8,  true,  true,  0.6),
+];
+
+#[rustfmt::skip]
+/// Held-out nodule fields: other coverages (33–48 %, another patchy profile), seeds and rig/track pairings than
+/// [`NODULES`], never used to choose anything (`dive_matrix --nodules --held-out`).
+pub const NODULES_HELD_OUT: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     along   bits srgb   jpeg   overlap
+    n("g01", Rig::Three, 36.0, "oceanic-i",   5.0, 0.3, 0.35, None,   8,  true,  false, 0.9),
+    n("g02", Rig::Aft,   30.0, "oceanic-iii", 5.5, 0.4, 0.45, None,   16, false, false, 0.6),
+    n("g03", Rig::Two,   36.0, "oceanic-i",   4.5, 0.3, 0.48, Some([0.05, 0.48, 0.2]), 8, true, false, 0.9),
+    n("g04", Rig::Four,  32.0, "oceanic-iii", 5.0, 0.2, 0.45, None,   8,  true,  true,  0.9),
+    n("g05", Rig::Two,   36.0, "oceanic-i",   6.0, 0.5, 0.33, None,   8,  true,  false, 0.6),
+    n("g06", Rig::Aft,   36.0, "oceanic-i",   4.5, 0.3, 0.38, None,   16, true,  false, 0.9),
+];
 
 #[rustfmt::skip]
 /// The twelve dives (docs/evaluation.md, "The dive matrix").
@@ -104,7 +176,8 @@ pub const HELD_OUT: &[DiveSpec] = &[
 ];
 
 impl DiveSpec {
-    /// The dive rendered with `seed` at `size` (width, height): 30 photos and 15 water-column frames, the camera's
+    /// The dive rendered with `seed` at `size` (width, height): its photos (30; 40 for a nodule field) at its overlap
+    /// and 15 water-column frames, the camera's
     /// white balance from the two-way path (red capped at ×6) and the exposure from the brightest sediment;
     /// `jpeg` is left to the caller (the matrix saves the rendered PNGs as JPEGs).
     pub fn simulation(&self, seed: u64, size: (usize, usize)) -> Simulation {
@@ -114,7 +187,9 @@ impl DiveSpec {
         let eta = water.attenuation;
         let gain = |c: usize| ((eta[c] - eta[1]) * path).exp().clamp(0.2, 6.0);
         Simulation {
-            frames: 30,
+            frames: self.frames,
+            overlap: self.overlap,
+            contamination_along: self.along,
             water_column: 15,
             width: size.0,
             height: size.1,
@@ -171,6 +246,18 @@ pub fn dive_and_seed(name: &str, offset: u64) -> Option<(&'static DiveSpec, u64)
     find(DIVES)
         .map(|(i, d)| (d, seed(i, offset)))
         .or_else(|| find(HELD_OUT).map(|(i, d)| (d, held_out_seed(i, offset))))
+        .or_else(|| find(NODULES).map(|(i, d)| (d, nodule_seed(i, offset))))
+        .or_else(|| find(NODULES_HELD_OUT).map(|(i, d)| (d, nodule_held_out_seed(i, offset))))
+}
+
+/// The seed of the `index`-th nodule field ([`NODULES`]) in seed set `offset`.
+pub fn nodule_seed(index: usize, offset: u64) -> u64 {
+    7000 + offset * 100 + index as u64
+}
+
+/// The seed of the `index`-th held-out nodule field ([`NODULES_HELD_OUT`]) in seed set `offset`.
+pub fn nodule_held_out_seed(index: usize, offset: u64) -> u64 {
+    8000 + offset * 100 + index as u64
 }
 
 /// The seed of the matrix's `index`-th dive in seed set `offset` (0: the set the method was tuned on).
@@ -359,6 +446,21 @@ mod tests {
             assert_eq!(dive_and_seed(h.name, 2), Some((h, held_out_seed(i, 2))));
             // Not a copy of a matrix dive under another name.
             assert!(DIVES.iter().all(|d| DiveSpec { name: h.name, ..*d } != *h));
+        }
+        // Nodule fields: their own names and seeds, the held-out ones never a tuned one's.
+        for (i, d) in NODULES.iter().enumerate() {
+            assert_eq!(dive_and_seed(d.name, 1), Some((d, nodule_seed(i, 1))));
+            assert!(!d.told && d.frames == 40);
+        }
+        for (i, d) in NODULES_HELD_OUT.iter().enumerate() {
+            assert_eq!(
+                dive_and_seed(d.name, 0),
+                Some((d, nodule_held_out_seed(i, 0)))
+            );
+            assert!(NODULES.iter().all(|t| t.name != d.name));
+            for o in 0..10 {
+                assert!((0..NODULES.len()).all(|j| nodule_seed(j, o) != nodule_held_out_seed(i, o)));
+            }
         }
         assert_eq!(dive_and_seed("a03", 1), Some((&DIVES[2], seed(2, 1))));
         assert_eq!(dive_and_seed("x01", 0), None);

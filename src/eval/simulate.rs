@@ -153,6 +153,10 @@ pub struct Simulation {
     /// default) or `brightest` (the brightest sediment anywhere in the frame, any channel after white balance,
     /// reads 0.8 — as an auto-exposure avoiding clipping does, so red-starved photos become dark and noisy).
     pub exposure: Exposure,
+    /// Nodule coverage that changes along the track: the share at the first photo, the middle one and the last
+    /// (linear in between), in place of `contamination` (a dive from bare sediment into a dense field and out to
+    /// a sparse one). Default: none (one coverage).
+    pub contamination_along: Option<[f64; 3]>,
 }
 
 /// How a simulated camera sets its exposure.
@@ -277,6 +281,7 @@ impl Default for Simulation {
             altitude_swing: None,
             white_balance: [1.0; 3],
             exposure: Exposure::Centre,
+            contamination_along: None,
         }
     }
 }
@@ -390,6 +395,8 @@ struct Floor {
     sediment: [f32; 3],
     /// Nodules per square metre and radius range.
     nodule_density: f32,
+    /// Coverage along the track: at `y = 0`, at the middle and at the end `y = length` ([`Simulation::contamination_along`]).
+    along: Option<([f64; 3], f32)>,
     r_min: f32,
     r_max: f32,
 }
@@ -400,19 +407,32 @@ const OBJECT_CELL: f32 = 2.0;
 impl Floor {
     fn new(seed: u64, contamination: f64) -> Floor {
         let (r_min, r_max) = (0.03f32, 0.10f32);
-        // Boolean model: coverage = 1 − exp(−λ·π·E[r²]).
-        let er2 = (r_min * r_min + r_min * r_max + r_max * r_max) / 3.0;
-        let c = contamination.clamp(0.0, 0.95) as f32;
-        let nodule_density = -(1.0 - c).ln() / (std::f32::consts::PI * er2);
+        let nodule_density = density(contamination, r_min, r_max);
         let mut rng = Rng(mix(seed ^ 0x5EA));
         let shade = 0.9 + 0.2 * rng.f32();
         Floor {
             seed,
             sediment: [0.62 * shade, 0.54 * shade, 0.42 * shade],
             nodule_density,
+            along: None,
             r_min,
             r_max,
         }
+    }
+
+    /// Nodules per square metre at along-track position `y` (the coverage of [`Floor::along`] there, or the
+    /// floor's one coverage).
+    fn density_at(&self, y: f32) -> f32 {
+        let Some((c, length)) = self.along else {
+            return self.nodule_density;
+        };
+        let t = (y / length.max(1e-6)).clamp(0.0, 1.0) as f64 * 2.0;
+        let c = if t <= 1.0 {
+            c[0] + (c[1] - c[0]) * t
+        } else {
+            c[1] + (c[2] - c[1]) * (t - 1.0)
+        };
+        density(c, self.r_min, self.r_max)
     }
 
     /// Albedo (linear, per channel) at world point `(x, y)`.
@@ -458,7 +478,8 @@ impl Floor {
                     cx as f32 * NODULE_CELL / 2.5,
                     cy as f32 * NODULE_CELL / 2.5,
                 );
-                let mean = self.nodule_density * NODULE_CELL * NODULE_CELL * (0.3 + 1.4 * patch);
+                let density = self.density_at((cy as f32 + 0.5) * NODULE_CELL);
+                let mean = density * NODULE_CELL * NODULE_CELL * (0.3 + 1.4 * patch);
                 let mut rng = Rng(hash3(s ^ 0x90D, cx, cy));
                 // Poisson by inversion.
                 let u = rng.f32();
@@ -494,6 +515,14 @@ impl Floor {
             self.sediment[2] * g * (1.0 - 0.12 * tint),
         ]
     }
+}
+
+/// Nodules per square metre for a coverage `c` of discs with radii uniform in `[r_min, r_max]` (Boolean model:
+/// coverage = 1 − exp(−λ·π·E[r²])).
+fn density(c: f64, r_min: f32, r_max: f32) -> f32 {
+    let er2 = (r_min * r_min + r_min * r_max + r_max * r_max) / 3.0;
+    let c = c.clamp(0.0, 0.95) as f32;
+    -(1.0 - c).ln() / (std::f32::consts::PI * er2)
 }
 
 // ---- geometry -------------------------------------------------------------------------------------------------
@@ -1100,11 +1129,15 @@ impl Simulation {
     fn render_inner(&self, lighting: bool) -> Result<Dive> {
         self.validate()?;
         let cam = self.camera();
-        let floor = Floor::new(self.seed, self.contamination);
+        let poses = self.poses(&cam);
+        let mut floor = Floor::new(self.seed, self.contamination);
+        if let Some(c) = self.contamination_along {
+            let length = poses.last().map_or(0.0, |p| p.position[1]) as f32;
+            floor.along = Some((c, length));
+        }
         let lights = self.rig.lights(self.beam_deg);
         let alt = self.altitude as f64;
         let ppm = cam.fy / alt;
-        let poses = self.poses(&cam);
         let view = |p: &Pose, with_floor: bool| View {
             cam,
             r: p.rotation,
@@ -1368,6 +1401,30 @@ mod tests {
             let share = dark as f64 / (n * n) as f64;
             assert!((share - c).abs() < 0.05, "contamination {c}: {share}");
         }
+    }
+
+    #[test]
+    fn coverage_along_the_track_follows_the_profile() {
+        // Bare at the start, 45 % in the middle, 15 % at the end of a 30 m track: the share of dark samples over
+        // a 3 m stretch at each end and around the middle (the floor's patchiness is a factor of mean 1 over a
+        // few metres, so a stretch of 3 m along and 40 m across reads the coverage within a few per cent).
+        let mut f = Floor::new(5, 0.2);
+        f.along = Some(([0.0, 0.45, 0.15], 30.0));
+        let share = |y0: f32| {
+            let n = 200;
+            let mut dark = 0;
+            for i in 0..n {
+                for j in 0..n {
+                    let a = f.albedo(i as f32 * 0.2013, y0 + j as f32 * 0.0149);
+                    dark += (a[1] < 0.15) as usize;
+                }
+            }
+            dark as f64 / (n * n) as f64
+        };
+        let (start, middle, end) = (share(0.0), share(13.5), share(27.0));
+        assert!(start < 0.06, "start {start}");
+        assert!((middle - 0.45).abs() < 0.08, "middle {middle}");
+        assert!((end - 0.17).abs() < 0.06, "end {end}");
     }
 
     #[test]
