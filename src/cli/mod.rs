@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
+use abysslight::io::gate::{Gate, Output};
 use abysslight::run::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, CommandFactory, Parser, Subcommand};
@@ -981,6 +982,10 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
         .ok_or_else(|| Error::Usage(format!("--size {}: expected WIDTHxHEIGHT", a.size)))?;
+    let _gate = match &a.dir {
+        Some(d) => Some(Gate::open(&[Output::Folder("--dir", d)], &[])?),
+        None => None,
+    };
     let o = bench::BenchOptions {
         width: w,
         height: h,
@@ -1021,6 +1026,7 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         white_balance: a.white_balance,
         exposure: a.exposure,
     };
+    let _gate = Gate::open(&[Output::Folder("--out", &a.out)], &[])?;
     let t = std::time::Instant::now();
     if a.truth_lighting {
         sim.render_with_lighting()?.write(&a.out)?;
@@ -1067,6 +1073,25 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
             a.cell
         )));
     }
+    let mut inputs: Vec<(&str, &std::path::Path)> = sets
+        .iter()
+        .map(|(_, d)| ("photo folder", d.as_path()))
+        .collect();
+    for (what, p) in [
+        ("--truth folder", &a.truth),
+        ("--placements file", &a.placements),
+        ("--register folder", &a.register),
+        ("--mask", &a.mask),
+    ] {
+        inputs.extend(p.as_deref().map(|p| (what, p)));
+    }
+    let mut outputs = vec![Output::File("--json", &a.json)];
+    outputs.extend(
+        a.save_placements
+            .as_deref()
+            .map(|p| Output::File("--save-placements", p)),
+    );
+    let _gate = Gate::open(&outputs, &inputs)?;
     let ev = abysslight::eval::evaluate::evaluate(
         &sets,
         a.truth.as_deref(),
@@ -1095,6 +1120,7 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
         encode: a.encode,
         ..abysslight::eval::demo::demo_simulation()
     };
+    let _gate = Gate::open(&[Output::Folder("--out", &a.out)], &[])?;
     let console = Console::new(false);
     let r = abysslight::eval::demo::run_demo(&a.out, &sim, &console)?;
     print!("{}", r.evaluation.table());
@@ -1108,6 +1134,13 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
 }
 
 fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
+    let _gate = Gate::open(
+        &[Output::File("--sheet", &a.sheet)],
+        &[
+            ("survey folder", &a.survey),
+            ("corrected folder", &a.corrected),
+        ],
+    )?;
     let (img, with_factors) =
         abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
     abysslight::run::pictures::save_png(&img, &a.sheet)?;

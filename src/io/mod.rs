@@ -1,6 +1,7 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+pub mod gate;
 pub mod jpeg;
 pub mod jpeg_check;
 pub mod mask;
@@ -698,6 +699,8 @@ pub fn write_with(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>,
 ) -> Result<()> {
+    // The one gate (src/io/gate.rs): no link, special file, input or path through a link below an output folder.
+    gate::check_target(path)?;
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -724,6 +727,8 @@ pub fn write_with(
         w.flush().map_err(|e| Error::io(path, e))?;
     }
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    // Again just before the rename: the name may have been replaced while the file was written.
+    gate::check_target(path)?;
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
 }

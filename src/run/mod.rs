@@ -26,7 +26,6 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::io::find_photos;
-use crate::io::paths::check_outputs;
 use crate::method::monitor::{Summary, Thresholds};
 use crate::method::scatter::Scatter;
 use crate::run::options::Options;
@@ -241,7 +240,10 @@ pub fn estimate_scatter_file(
     memory_mib: usize,
     progress: &dyn Progress,
 ) -> Result<ScatterRun> {
-    check_outputs(&[("--out", out)], &[("water-column folder", water_column)])?;
+    let _gate = crate::io::gate::Gate::open(
+        &[crate::io::gate::Output::File("--out", out)],
+        &[("water-column folder", water_column)],
+    )?;
     let wc = find_photos(water_column)?;
     progress.stage(&format!(
         "estimating scatter S from {} water-column frames in {}",

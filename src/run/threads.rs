@@ -143,12 +143,15 @@ fn source(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Box<dyn Sourc
                 .map(|t| format!(", stop after {t} s without new files"))
                 .unwrap_or_default()
         ));
-        Box::new(WatchFolder::new(
-            &plan.survey,
-            Duration::from_millis(opts.poll_interval),
-            opts.idle_timeout.map(Duration::from_secs_f64),
-            crate::run::watch::stop_flag(),
-        ))
+        Box::new(
+            WatchFolder::new(
+                &plan.survey,
+                Duration::from_millis(opts.poll_interval),
+                opts.idle_timeout.map(Duration::from_secs_f64),
+                crate::run::watch::stop_flag(),
+            )
+            .excluding(&plan.out),
+        )
     } else {
         // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
         Box::new(FileList::expecting(
