@@ -272,8 +272,28 @@ pub fn format_of(path: &Path) -> Option<ImageFormat> {
 }
 
 /// Decode a photo into its native 8- or 16-bit samples. JPEGs are decoded strictly: damaged or truncated data is
-/// an error (lenient decoders fill the missing part with grey).
+/// an error (lenient decoders fill the missing part with grey). A decoder that panics costs this photo only: the
+/// panic is caught and reported as this file's error.
 pub fn decode(path: &Path) -> Result<Photo> {
+    guarded(path, || decode_unguarded(path))
+}
+
+/// Run a decoder call, turning a panic inside it into a decode error naming `path`.
+pub fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(Error::Decode {
+            path: path.to_owned(),
+            reason: format!("the decoder failed on this file ({what}); skipped"),
+        })
+    })
+}
+
+fn decode_unguarded(path: &Path) -> Result<Photo> {
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     if data.is_empty() {
         return Err(Error::Decode {
@@ -760,6 +780,18 @@ pub fn output_depth(format: ImageFormat, input: BitDepth) -> BitDepth {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_decoder_panic_is_that_files_error() {
+        let p = Path::new("IMG_0001.jpg");
+        let e = guarded::<()>(p, || panic!("index out of bounds")).unwrap_err();
+        let e = e.to_string();
+        assert!(
+            e.contains("IMG_0001.jpg") && e.contains("index out of bounds"),
+            "{e}"
+        );
+        assert_eq!(guarded(p, || Ok(3)).unwrap(), 3);
+    }
 
     #[test]
     fn natural_order_recursive_and_hidden_skipped() {

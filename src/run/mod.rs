@@ -125,7 +125,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     }
     progress.start(plan.chunk.len());
     let outcome = stream(opts, &plan, engine, progress)?;
-    save_pictures(opts, &plan, &outcome)?;
+    // The pictures are for people to look at: one that cannot be written (disk full) is a warning.
+    if let Err(e) = save_pictures(opts, &plan, &outcome) {
+        let m = format!("the run's pictures were not written: {e}");
+        progress.warn(&m);
+        warnings.push(m);
+    }
     let water_column_failed = errors.len();
     let mut all_errors = errors;
     all_errors.extend(survey_skipped);
@@ -173,13 +178,12 @@ fn resolve_transfer(opts: &Options, plan: &Plan) -> Result<(Options, Option<Stri
     if !opts.transfer_auto {
         return Ok((opts.clone(), None));
     }
-    let assumed = match plan.found.photos.first() {
-        Some(first) => crate::io::transfer::assume(&first.path)?,
-        None => crate::io::transfer::Assumed {
-            transfer: crate::method::transfer::Transfer::Linear,
-            why: "no photo file to read before the run (standard input or an empty folder)".into(),
-        },
-    };
+    // The first photo that can be read (an unreadable one is that photo's error, later).
+    let first = plan.found.photos.iter().take(15).map(|e| e.path.as_path());
+    let assumed = crate::io::transfer::assume_first(first).unwrap_or(crate::io::transfer::Assumed {
+        transfer: crate::method::transfer::Transfer::Linear,
+        why: "no photo file to read before the run (standard input, an empty folder or unreadable photos)".into(),
+    });
     let why = format!("{}: {}", assumed.transfer, assumed.why);
     Ok((
         Options {

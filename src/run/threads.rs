@@ -274,8 +274,8 @@ impl Feed<'_> {
                     .join("factors")
                     .join(&entry.relative)
                     .with_extension("png");
-                crate::io::save_raster_png16(&c.lit, &p)?;
-                // An 8-bit, enlarged preview beside the 16-bit data, for people to look at.
+                // An 8-bit, enlarged preview beside the 16-bit data, for people to look at. A factor image that
+                // cannot be written (disk full) is that file's error, not the mission's.
                 let preview = crate::run::pictures::factor_preview(
                     &c.lit,
                     crate::run::pictures::PREVIEW_MIN_WIDTH,
@@ -284,7 +284,12 @@ impl Feed<'_> {
                     .join("factors-preview")
                     .join(&entry.relative)
                     .with_extension("png");
-                crate::run::pictures::save_png(&preview, &pp)?;
+                if let Err(e) = crate::io::save_raster_png16(&c.lit, &p)
+                    .and_then(|()| crate::run::pictures::save_png(&preview, &pp))
+                {
+                    self.progress.file_error(&e);
+                    self.outcome.errors.push(FileError::from_error(&p, &e));
+                }
             }
             self.outcome.totals += c.stats;
             let job = WriteJob {
