@@ -1,6 +1,7 @@
 //! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
 
 mod extras;
+mod ranges;
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -986,6 +987,8 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
         Some(d) => Some(Gate::open(&[Output::Folder("--dir", d)], &[])?),
         None => None,
     };
+    ranges::within("--size (width)", w, 16, ranges::SIDE)?;
+    ranges::within("--size (height)", h, 16, ranges::SIDE)?;
     let o = bench::BenchOptions {
         width: w,
         height: h,
@@ -1006,6 +1009,12 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
+    #[rustfmt::skip]
+    ranges::simulate(a.frames, a.water_column, a.size, a.contamination, &[
+        ("--altitude", a.altitude, 0.1, 1000.0), ("--overlap", a.overlap, 0.0, 0.99), ("--fov", a.fov, 1.0, 170.0),
+        ("--beam", a.beam, 1.0, 180.0), ("--noise", a.noise, 0.0, 100.0),
+        ("--altitude-swing", a.altitude_swing.unwrap_or(0.0), 0.0, 1000.0),
+    ], a.white_balance)?;
     let sim = abysslight::eval::simulate::Simulation {
         frames: a.frames,
         water_column: a.water_column,
@@ -1067,12 +1076,9 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         mask: a.mask.clone(),
         ..Default::default()
     };
-    if !(a.cell > 0.0 && a.cell.is_finite()) {
-        return Err(Error::Usage(format!(
-            "--cell must be above 0, got {}",
-            a.cell
-        )));
-    }
+    // A cell below one unit would grow the mosaic grid without bound.
+    ranges::within("--cell", a.cell, 1.0, 1e6)?;
+    ranges::within("--eval-downsample", a.eval_downsample, 1, 64)?;
     let mut inputs: Vec<(&str, &std::path::Path)> = sets
         .iter()
         .map(|(_, d)| ("photo folder", d.as_path()))
@@ -1134,6 +1140,8 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
 }
 
 fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
+    ranges::within("--width", a.width, 16, 8192)?;
+    ranges::within("--rows", a.rows, 1, 100)?;
     let _gate = Gate::open(
         &[Output::File("--sheet", &a.sheet)],
         &[

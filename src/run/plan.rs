@@ -111,7 +111,7 @@ impl Plan {
         let photo_size = majority_size(&found.photos, 15);
         let mut chunk = opts.shard.map_or(0..total, |s| s.range(total));
         if let Some(limit) = opts.limit {
-            chunk.end = chunk.end.min(chunk.start + limit);
+            chunk.end = chunk.end.min(chunk.start.saturating_add(limit));
         }
         let first = if chunk.start > 0 {
             halo_start(&found.photos, chunk.start, window.n, photo_size)
