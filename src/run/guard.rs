@@ -377,15 +377,19 @@ mod tests {
     fn stale_temps_are_removed_and_nothing_else() {
         let d = tempfile::tempdir().unwrap();
         let out = d.path().join("out");
-        std::fs::create_dir_all(out.join("a/_abysslight")).unwrap();
+        std::fs::create_dir_all(out.join("_abysslight")).unwrap();
+        std::fs::create_dir_all(out.join("a")).unwrap();
+        // Another run's output folder nested in this one: its temp files are its own.
+        std::fs::create_dir_all(out.join("a/quick/_abysslight")).unwrap();
         let stale = [
             out.join("a/.IMG_1.jpg.x1Y2z3.abysslight-tmp"),
-            out.join("a/_abysslight/.report.json.q.abysslight-tmp"),
+            out.join("_abysslight/.report.json.q.abysslight-tmp"),
         ];
         let kept = [
             out.join("a/IMG_1.jpg"),
             out.join("a/abysslight-tmp.jpg"),
             out.join("a/.keep"),
+            out.join("a/quick/.IMG_2.jpg.r4S5t6.abysslight-tmp"),
         ];
         for p in stale.iter().chain(&kept) {
             std::fs::write(p, b"x").unwrap();
