@@ -379,7 +379,8 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
     check_size(width, height)?;
     // zune-jpeg, even strict, fills data missing at the end with grey: check that it is all there first.
-    crate::io::jpeg_check::check(data).map_err(|why| format!("incomplete JPEG: {why}"))?;
+    let non_interleaved = crate::io::jpeg_check::check_scans(data)
+        .map_err(|why| format!("incomplete JPEG: {why}"))?;
     let grey = matches!(
         dec.input_colorspace(),
         Some(ColorSpace::Luma | ColorSpace::LumaA)
@@ -390,7 +391,20 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     } else {
         ColorSpace::RGB
     }));
-    let pixels = dec.decode().map_err(damaged)?;
+    // zune-jpeg decodes a non-interleaved JPEG with subsampled chroma (one scan per component) into garbage
+    // (green); libjpeg-turbo's decoder, ported to Rust, reads it right (tests/jpeg_reference.rs).
+    let pixels = if non_interleaved {
+        let format = if grey {
+            libjpeg_turbo_rs::PixelFormat::Grayscale
+        } else {
+            libjpeg_turbo_rs::PixelFormat::Rgb
+        };
+        libjpeg_turbo_rs::decompress_to(data, format)
+            .map_err(|e| format!("damaged JPEG: {e}"))?
+            .data
+    } else {
+        dec.decode().map_err(damaged)?
+    };
     if pixels.len() != width * height * channels {
         return Err(format!(
             "damaged JPEG: decoded {} samples for {width}x{height}x{channels}",
