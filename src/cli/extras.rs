@@ -12,7 +12,10 @@ const FLAGGED_NAMED: usize = 5;
 
 /// Print the completion script for `shell` to stdout.
 pub fn completions(shell: clap_complete::Shell, cmd: &mut clap::Command) {
-    clap_complete::generate(shell, cmd, "abysslight", &mut std::io::stdout());
+    // Into a buffer first: a closed stdout (`| head`) ends the command quietly instead of a panic.
+    let mut buf = Vec::new();
+    clap_complete::generate(shell, cmd, "abysslight", &mut buf);
+    let _ = std::io::Write::write_all(&mut std::io::stdout(), &buf);
 }
 
 /// Print the man page (roff) of the whole tool, or of one subcommand, to stdout.

@@ -1,13 +1,37 @@
 //! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
 
+// Console output that never panics: a closed stdout or stderr (`abysslight ... 2>&1 | head`) must not end a
+// mission; what cannot be printed is dropped (the run report still holds it). These shadow the std macros in
+// the command's modules (declared below them).
+macro_rules! eprintln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+macro_rules! println {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+macro_rules! print {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout(), $($t)*);
+    }};
+}
+
 mod cluster;
 mod extras;
+mod ranges;
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 
+use abysslight::io::gate::{Gate, Output};
 use abysslight::run::options::{Method, Transfer};
 use abysslight::{choose_window, Error, Options, Progress, SeafloorColour, Shard};
 use clap::{Args, CommandFactory, Parser, Subcommand};
@@ -977,6 +1001,12 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
         .ok_or_else(|| Error::Usage(format!("--size {}: expected WIDTHxHEIGHT", a.size)))?;
+    let _gate = match &a.dir {
+        Some(d) => Some(Gate::open(&[Output::Folder("--dir", d)], &[])?),
+        None => None,
+    };
+    ranges::within("--size (width)", w, 16, ranges::SIDE)?;
+    ranges::within("--size (height)", h, 16, ranges::SIDE)?;
     let o = bench::BenchOptions {
         width: w,
         height: h,
@@ -1002,6 +1032,12 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
+    #[rustfmt::skip]
+    ranges::simulate(a.frames, a.water_column, a.size, a.contamination, &[
+        ("--altitude", a.altitude, 0.1, 1000.0), ("--overlap", a.overlap, 0.0, 0.99), ("--fov", a.fov, 1.0, 170.0),
+        ("--beam", a.beam, 1.0, 180.0), ("--noise", a.noise, 0.0, 100.0),
+        ("--altitude-swing", a.altitude_swing.unwrap_or(0.0), 0.0, 1000.0),
+    ], a.white_balance)?;
     let sim = abysslight::eval::simulate::Simulation {
         frames: a.frames,
         water_column: a.water_column,
@@ -1023,6 +1059,7 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         exposure: a.exposure,
         contamination_along: None,
     };
+    let _gate = Gate::open(&[Output::Folder("--out", &a.out)], &[])?;
     let t = std::time::Instant::now();
     if a.truth_lighting {
         sim.render_with_lighting()?.write(&a.out)?;
@@ -1063,12 +1100,28 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         mask: a.mask.clone(),
         ..Default::default()
     };
-    if !(a.cell > 0.0 && a.cell.is_finite()) {
-        return Err(Error::Usage(format!(
-            "--cell must be above 0, got {}",
-            a.cell
-        )));
+    // A cell below one unit would grow the mosaic grid without bound.
+    ranges::within("--cell", a.cell, 1.0, 1e6)?;
+    ranges::within("--eval-downsample", a.eval_downsample, 1, 64)?;
+    let mut inputs: Vec<(&str, &std::path::Path)> = sets
+        .iter()
+        .map(|(_, d)| ("photo folder", d.as_path()))
+        .collect();
+    for (what, p) in [
+        ("--truth folder", &a.truth),
+        ("--placements file", &a.placements),
+        ("--register folder", &a.register),
+        ("--mask", &a.mask),
+    ] {
+        inputs.extend(p.as_deref().map(|p| (what, p)));
     }
+    let mut outputs = vec![Output::File("--json", &a.json)];
+    outputs.extend(
+        a.save_placements
+            .as_deref()
+            .map(|p| Output::File("--save-placements", p)),
+    );
+    let _gate = Gate::open(&outputs, &inputs)?;
     let ev = abysslight::eval::evaluate::evaluate(
         &sets,
         a.truth.as_deref(),
@@ -1097,6 +1150,7 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
         encode: a.encode,
         ..abysslight::eval::demo::demo_simulation()
     };
+    let _gate = Gate::open(&[Output::Folder("--out", &a.out)], &[])?;
     let console = Console::new(false);
     let r = abysslight::eval::demo::run_demo(&a.out, &sim, &console)?;
     print!("{}", r.evaluation.table());
@@ -1110,6 +1164,15 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
 }
 
 fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
+    ranges::within("--width", a.width, 16, 8192)?;
+    ranges::within("--rows", a.rows, 1, 100)?;
+    let _gate = Gate::open(
+        &[Output::File("--sheet", &a.sheet)],
+        &[
+            ("survey folder", &a.survey),
+            ("corrected folder", &a.corrected),
+        ],
+    )?;
     let (img, with_factors) =
         abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
     abysslight::run::pictures::save_png(&img, &a.sheet)?;

@@ -437,7 +437,9 @@ fn save_camera_jpeg(photo: &Photo, path: &Path, quality: u8) -> Result<()> {
         libjpeg_turbo_rs::Subsampling::S420,
     )
     .map_err(|e| enc_err(e.to_string()))?;
-    std::fs::write(path, buf).map_err(|e| Error::io(path, e))
+    crate::io::write_with(path, |w| {
+        std::io::Write::write_all(w, &buf).map_err(|e| Error::io(path, e))
+    })
 }
 
 /// The generated mission: water-column frames and the distinct survey photos.

@@ -292,6 +292,17 @@ fn huffman_tables(
 /// `Ok` when the JPEG in `data` holds all its compressed data and ends with an end-of-image marker; `Err` says
 /// what is missing. See the module documentation.
 pub fn check(data: &[u8]) -> Result<(), Why> {
+    walk(data).map(|_| ())
+}
+
+/// [`check`], and whether the JPEG is a sequential (baseline or extended) one of more than one scan: a
+/// non-interleaved JPEG, one scan per component.
+pub fn check_scans(data: &[u8]) -> Result<bool, Why> {
+    walk(data).map(|(sequential, scans)| sequential && scans > 1)
+}
+
+/// The walk of [`check`]: whether the frame is sequential, and how many scans it has.
+fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
     if data.get(..2) != Some(&[0xFF, 0xD8]) {
         return Err("not a JPEG (no start-of-image marker)".into());
     }
@@ -326,7 +337,7 @@ pub fn check(data: &[u8]) -> Result<(), Why> {
                 return if scans == 0 {
                     Err("end-of-image marker before any image data".into())
                 } else {
-                    Ok(())
+                    Ok((baseline, scans))
                 };
             }
             0x01 | 0xD0..=0xD7 => continue,

@@ -1,6 +1,7 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+pub mod gate;
 pub mod jpeg;
 pub mod jpeg_check;
 pub mod mask;
@@ -271,8 +272,28 @@ pub fn format_of(path: &Path) -> Option<ImageFormat> {
 }
 
 /// Decode a photo into its native 8- or 16-bit samples. JPEGs are decoded strictly: damaged or truncated data is
-/// an error (lenient decoders fill the missing part with grey).
+/// an error (lenient decoders fill the missing part with grey). A decoder that panics costs this photo only: the
+/// panic is caught and reported as this file's error.
 pub fn decode(path: &Path) -> Result<Photo> {
+    guarded(path, || decode_unguarded(path))
+}
+
+/// Run a decoder call, turning a panic inside it into a decode error naming `path`.
+pub fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(Error::Decode {
+            path: path.to_owned(),
+            reason: format!("the decoder failed on this file ({what}); skipped"),
+        })
+    })
+}
+
+fn decode_unguarded(path: &Path) -> Result<Photo> {
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     if data.is_empty() {
         return Err(Error::Decode {
@@ -358,7 +379,8 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
     check_size(width, height)?;
     // zune-jpeg, even strict, fills data missing at the end with grey: check that it is all there first.
-    crate::io::jpeg_check::check(data).map_err(|why| format!("incomplete JPEG: {why}"))?;
+    let non_interleaved = crate::io::jpeg_check::check_scans(data)
+        .map_err(|why| format!("incomplete JPEG: {why}"))?;
     let grey = matches!(
         dec.input_colorspace(),
         Some(ColorSpace::Luma | ColorSpace::LumaA)
@@ -369,7 +391,20 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     } else {
         ColorSpace::RGB
     }));
-    let pixels = dec.decode().map_err(damaged)?;
+    // zune-jpeg decodes a non-interleaved JPEG with subsampled chroma (one scan per component) into garbage
+    // (green); libjpeg-turbo's decoder, ported to Rust, reads it right (tests/jpeg_reference.rs).
+    let pixels = if non_interleaved {
+        let format = if grey {
+            libjpeg_turbo_rs::PixelFormat::Grayscale
+        } else {
+            libjpeg_turbo_rs::PixelFormat::Rgb
+        };
+        libjpeg_turbo_rs::decompress_to(data, format)
+            .map_err(|e| format!("damaged JPEG: {e}"))?
+            .data
+    } else {
+        dec.decode().map_err(damaged)?
+    };
     if pixels.len() != width * height * channels {
         return Err(format!(
             "damaged JPEG: decoded {} samples for {width}x{height}x{channels}",
@@ -698,6 +733,8 @@ pub fn write_with(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>,
 ) -> Result<()> {
+    // The one gate (src/io/gate.rs): no link, special file, input or path through a link below an output folder.
+    gate::check_target(path)?;
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -724,6 +761,8 @@ pub fn write_with(
         w.flush().map_err(|e| Error::io(path, e))?;
     }
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    // Again just before the rename: the name may have been replaced while the file was written.
+    gate::check_target(path)?;
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
 }
@@ -755,6 +794,18 @@ pub fn output_depth(format: ImageFormat, input: BitDepth) -> BitDepth {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_decoder_panic_is_that_files_error() {
+        let p = Path::new("IMG_0001.jpg");
+        let e = guarded::<()>(p, || panic!("index out of bounds")).unwrap_err();
+        let e = e.to_string();
+        assert!(
+            e.contains("IMG_0001.jpg") && e.contains("index out of bounds"),
+            "{e}"
+        );
+        assert_eq!(guarded(p, || Ok(3)).unwrap(), 3);
+    }
 
     #[test]
     fn natural_order_recursive_and_hidden_skipped() {

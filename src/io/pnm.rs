@@ -317,6 +317,13 @@ pub fn decode_pnm(bytes: &[u8]) -> std::result::Result<Photo, String> {
 
 /// Decode a frame cut by [`FrameSplitter`].
 pub fn decode_frame(frame: &RawFrame) -> std::result::Result<Photo, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        decode_frame_unguarded(frame)
+    }))
+    .unwrap_or_else(|_| Err("the decoder failed on this frame; skipped".into()))
+}
+
+fn decode_frame_unguarded(frame: &RawFrame) -> std::result::Result<Photo, String> {
     match frame.format {
         FrameFormat::Pnm => decode_pnm(&frame.bytes),
         FrameFormat::Png => {

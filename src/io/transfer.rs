@@ -54,6 +54,17 @@ pub fn assume(path: &Path) -> Result<Assumed> {
     Ok(from_metadata(&meta, format, sixteen))
 }
 
+/// [`assume`] from the first of `paths` that can be read (an unreadable first photo is one skipped photo, not
+/// the end of the mission); `None` when none of them can.
+pub fn assume_first<'a>(paths: impl IntoIterator<Item = &'a Path>) -> Option<Assumed> {
+    paths.into_iter().find_map(|p| {
+        std::fs::File::open(p)
+            .and_then(|mut f| std::io::Read::read(&mut f, &mut [0u8; 16]))
+            .ok()
+            .and_then(|_| assume(p).ok())
+    })
+}
+
 /// [`assume`] from what was read: the metadata, the container format and whether the samples are 16-bit.
 pub fn from_metadata(meta: &Metadata, format: Option<ImageFormat>, sixteen: bool) -> Assumed {
     let said = |transfer: Transfer, why: String| Assumed { transfer, why };

@@ -1,15 +1,15 @@
 //! What a run does to its output folder before it writes: refuse a second run of the same photos at the same
 //! time, refuse mixing two sets of method options in one output folder, and clear the temp files of killed runs.
 //!
-//! - **Lock**: `<out>/_abysslight/lock` (`lock-shard-K-of-N` for a shard, so the shards of one job run side by
-//!   side) is created exclusively and holds the pid and the options fingerprint. A lock whose process is gone
-//!   (a killed run) is taken over; a live one refuses the run. Dropping the [`RunLock`] removes it.
+//! - **Lock**: `<out>/_abysslight/lock`, locked by the operating system (`flock`-style: released when the process
+//!   ends, however it ends, whatever its pid namespace): exclusively by a plain run, shared by the shards of one
+//!   job (each also holds `lock-shard-K-of-N` exclusively). A live holder refuses the run.
 //! - **Options**: `<out>/_abysslight/options.json` holds the options that decide the output pixels (the
 //!   [`fingerprint`]). A run whose fingerprint differs is refused, naming the options that differ: its photos
 //!   would mix with the earlier run's (with `--resume` it would even keep them).
 //! - **Stale temp files**: outputs are written to `.<name>.<random>.abysslight-tmp` and renamed into place; a
-//!   killed run leaves them behind. [`remove_stale_temps`] deletes them below `--out`, only when no other run
-//!   holds a lock there.
+//!   killed run leaves them behind. [`remove_stale_temps`] deletes them below `--out` (not in another run's
+//!   output folder nested in it), only when no other run is writing there.
 
 use std::path::{Path, PathBuf};
 
@@ -79,36 +79,19 @@ fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
     keys
 }
 
-/// A held lock; removed when dropped.
+/// The locks a run holds (see [`acquire`]); the operating system releases them when the process ends, however it
+/// ends (killed, crashed, in another pid namespace). The lock files stay: removing one would let a later run lock
+/// a new file while an older one still holds the removed one.
 #[derive(Debug)]
 pub struct RunLock {
     path: PathBuf,
+    _held: Vec<std::fs::File>,
 }
 
 impl RunLock {
     /// The lock file held.
     pub fn path(&self) -> &Path {
         &self.path
-    }
-}
-
-impl Drop for RunLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
-    }
-}
-
-/// Whether process `pid` is alive. On Linux from `/proc`; elsewhere every lock is taken to be live (remove a
-/// stale one by hand).
-fn alive(pid: u32) -> bool {
-    if pid == std::process::id() {
-        return true;
-    }
-    let proc = Path::new("/proc");
-    if proc.join("self").exists() {
-        proc.join(pid.to_string()).exists()
-    } else {
-        true
     }
 }
 
@@ -119,65 +102,99 @@ fn lock_name(opts: &Options) -> String {
     }
 }
 
-fn read_lock(path: &Path) -> Option<(u32, serde_json::Value)> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    let pid = v.get("pid")?.as_u64()? as u32;
-    Some((pid, v))
+/// Open (creating) a lock file in the run folder; never through a link (the run folder holds none: checked
+/// before, see [`crate::io::gate::check_work_dir`]).
+fn open_lock(path: &Path) -> Result<std::fs::File> {
+    if std::fs::symlink_metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(Error::io(
+            path,
+            std::io::Error::other("a lock file that is not a regular file; remove it"),
+        ));
+    }
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .map_err(|e| Error::io(path, e))
 }
 
-/// Take the lock of this run in `work_dir` (`<out>/_abysslight`, which must exist) and check the options
-/// against those of earlier runs into the same folder (recorded on the first run). Errors are usage errors (exit
-/// 2) that say what to do.
-pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
-    let fp = fingerprint(opts);
-    let path = work_dir.join(lock_name(opts));
-    let body = serde_json::json!({ "pid": std::process::id(), "options": fp });
-    let mut attempts = 0;
-    loop {
-        attempts += 1;
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&path)
-        {
-            Ok(f) => {
-                use std::io::Write;
-                let mut f = f;
-                f.write_all(body.to_string().as_bytes())
-                    .and_then(|()| f.sync_all())
-                    .map_err(|e| Error::io(&path, e))?;
-                break;
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && attempts < 3 => {
-                match read_lock(&path) {
-                    Some((pid, _)) if alive(pid) => {
-                        return Err(Error::Usage(format!(
-                            "{}: another abysslight run (pid {pid}) is writing these photos into {} right now; \
-                             wait for it to end (or, if it is gone, remove the lock file)",
-                            path.display(),
-                            work_dir.parent().unwrap_or(work_dir).display()
-                        )));
-                    }
-                    // A killed run's lock (or one being written this instant: retried once).
-                    _ => {
-                        if read_lock(&path).is_none() && attempts == 1 {
-                            std::thread::sleep(std::time::Duration::from_millis(50));
-                            if let Some((pid, _)) = read_lock(&path) {
-                                if alive(pid) {
-                                    continue;
-                                }
-                            }
-                        }
-                        let _ = std::fs::remove_file(&path);
-                    }
-                }
-            }
-            Err(e) => return Err(Error::io(&path, e)),
+/// Take `file`'s lock (`shared` or exclusive) without waiting; a lock held by a live run is a usage error naming
+/// the folder and the run's pid as it recorded it.
+fn try_take(file: &std::fs::File, path: &Path, shared: bool, out: &Path) -> Result<()> {
+    let got = if shared {
+        file.try_lock_shared()
+    } else {
+        file.try_lock()
+    };
+    match got {
+        Ok(()) => Ok(()),
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let who = std::fs::read_to_string(path)
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|v| v.get("pid").and_then(|p| p.as_u64()))
+                .map_or_else(String::new, |p| format!(" (pid {p} in its own namespace)"));
+            Err(Error::Usage(format!(
+                "{}: another abysslight run{who} is writing into {} right now (plain runs and shards of one job do \
+                 not mix); wait for it to end. The lock is the operating system's: it is released when that run \
+                 ends, however it ends",
+                path.display(),
+                out.display()
+            )))
         }
+        Err(std::fs::TryLockError::Error(e)) => Err(Error::io(path, e)),
     }
-    let lock = RunLock { path };
-    // The lock is held: compare the options with the recorded ones (or record them).
+}
+
+/// Record who holds `file` (for the message another run prints); information only, the lock is the OS's.
+fn record_holder(file: &std::fs::File, body: &serde_json::Value) {
+    use std::io::{Seek, Write};
+    let mut f = file;
+    let _ = f.set_len(0);
+    let _ = f.seek(std::io::SeekFrom::Start(0));
+    let _ = f.write_all(body.to_string().as_bytes());
+}
+
+/// Take the locks of this run in `work_dir` (`<out>/_abysslight`, which must exist) and check the options
+/// against those of earlier runs into the same folder (recorded on the first run). Locks (`flock`-style, held by
+/// the operating system): `lock` exclusively for a plain run; `lock` shared and `lock-shard-K-of-N` exclusively
+/// for a shard, so the shards of one job run side by side and nothing else runs with them. Errors are usage
+/// errors (exit 2) that say what to do.
+pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
+    let out = work_dir.parent().unwrap_or(work_dir);
+    let fp = fingerprint(opts);
+    let body = serde_json::json!({ "pid": std::process::id(), "options": fp });
+    let main_path = work_dir.join("lock");
+    let main = open_lock(&main_path)?;
+    try_take(&main, &main_path, opts.shard.is_some(), out)?;
+    let mut held = vec![main];
+    let path = work_dir.join(lock_name(opts));
+    if opts.shard.is_some() {
+        let own = open_lock(&path)?;
+        try_take(&own, &path, false, out)?;
+        held.push(own);
+    }
+    // A plain run holds the folder alone; shards start together and check and record the options under a short
+    // exclusive lock of their own.
+    let options_lock = match opts.shard {
+        Some(_) => {
+            let p = work_dir.join("options.lock");
+            let f = open_lock(&p)?;
+            f.lock().map_err(|e| Error::io(&p, e))?;
+            Some(f)
+        }
+        None => None,
+    };
+    check_options(opts, work_dir, &fp)?;
+    drop(options_lock);
+    record_holder(held.last().unwrap_or(&held[0]), &body);
+    Ok(RunLock { path, _held: held })
+}
+
+/// Compare the options with those recorded in `work_dir/options.json` (or record them).
+fn check_options(opts: &Options, work_dir: &Path, fp: &serde_json::Value) -> Result<()> {
     let recorded = work_dir.join("options.json");
     match std::fs::read_to_string(&recorded) {
         Ok(text) => {
@@ -186,7 +203,7 @@ pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
                     path: recorded.clone(),
                     reason: format!("unreadable record of an earlier run's options: {e}"),
                 })?;
-            let diff = differing(&old, &fp);
+            let diff = differing(&old, fp);
             if !diff.is_empty() {
                 return Err(Error::Usage(format!(
                     "{} was written by a run with other options ({} differ; recorded in {}): its photos would \
@@ -201,43 +218,34 @@ pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
                     }
                 )));
             }
+            Ok(())
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            let text = serde_json::to_string_pretty(&fp).unwrap_or_default();
+            let text = serde_json::to_string_pretty(fp).unwrap_or_default();
             crate::io::write_with(&recorded, |w| {
                 use std::io::Write;
                 w.write_all(text.as_bytes())
                     .map_err(|e| Error::io(&recorded, e))
-            })?;
+            })
         }
-        Err(e) => return Err(Error::io(&recorded, e)),
+        Err(e) => Err(Error::io(&recorded, e)),
     }
-    Ok(lock)
 }
 
-/// Whether any lock in `work_dir` other than `mine` belongs to a live process.
-pub fn other_live_locks(work_dir: &Path, mine: &Path) -> bool {
-    let Ok(rd) = std::fs::read_dir(work_dir) else {
-        return false;
-    };
-    rd.flatten().any(|e| {
-        let p = e.path();
-        p != mine
-            && e.file_name().to_string_lossy().starts_with("lock")
-            && read_lock(&p).is_some_and(|(pid, _)| alive(pid))
-    })
-}
-
-/// Delete abysslight temp files (`.<name>.<random>.abysslight-tmp`) below `out`, not following links; returns
-/// what was removed. Call it holding the lock, and only when [`other_live_locks`] is false (another shard's
-/// temp files are in use).
+/// Delete abysslight temp files (`.<name>.<random>.abysslight-tmp`) below `out`, not following links and not
+/// descending into another run's output folder (a folder below `out` with its own `_abysslight`); returns what was
+/// removed. Call it only while no other run writes into `out` ([`start`] makes sure).
 pub fn remove_stale_temps(out: &Path) -> Vec<PathBuf> {
     let mut removed = Vec::new();
-    for e in walkdir::WalkDir::new(out)
+    let walk = walkdir::WalkDir::new(out)
         .follow_links(false)
         .into_iter()
-        .flatten()
-    {
+        .filter_entry(|e| {
+            e.depth() == 0
+                || !e.file_type().is_dir()
+                || !e.path().join(crate::io::WORK_DIR).is_dir()
+        });
+    for e in walk.flatten() {
         let name = e.file_name().to_string_lossy();
         if e.file_type().is_file()
             && name.starts_with('.')
@@ -252,14 +260,23 @@ pub fn remove_stale_temps(out: &Path) -> Vec<PathBuf> {
 
 /// The start of a run into folder `out` (hook for the run): take the lock, check the options, remove stale temp
 /// files when no other run is live. Returns the lock (hold it until the report is written) and the temp files
-/// removed.
+/// removed. Every run holds `<work_dir>/active` shared while it writes; the sweep runs only when that lock can be
+/// taken exclusively (no other run of this folder is writing), before this run's own shared hold.
 pub fn start(opts: &Options, out: &Path, work_dir: &Path) -> Result<(RunLock, Vec<PathBuf>)> {
-    let lock = acquire(opts, work_dir)?;
-    let removed = if other_live_locks(work_dir, lock.path()) {
-        Vec::new()
+    let mut lock = acquire(opts, work_dir)?;
+    let active_path = work_dir.join("active");
+    let active = open_lock(&active_path)?;
+    let removed = if active.try_lock().is_ok() {
+        let removed = remove_stale_temps(out);
+        active.unlock().map_err(|e| Error::io(&active_path, e))?;
+        removed
     } else {
-        remove_stale_temps(out)
+        Vec::new()
     };
+    active
+        .lock_shared()
+        .map_err(|e| Error::io(&active_path, e))?;
+    lock._held.push(active);
     Ok((lock, removed))
 }
 
@@ -288,24 +305,27 @@ mod tests {
             e.contains("another abysslight run") && e.contains(&std::process::id().to_string()),
             "{e}"
         );
-        // Shards of one job each have their own lock.
-        let shard = Options {
-            shard: Some("2/3".parse().unwrap()),
+        // A shard does not run beside a plain run, nor a plain run beside a shard.
+        let shard = |k: &str| Options {
+            shard: Some(k.parse().unwrap()),
             ..o.clone()
         };
-        let s = acquire(&shard, &work).unwrap();
-        assert!(other_live_locks(&work, s.path()));
+        assert!(acquire(&shard("2/3"), &work).is_err());
         drop(first);
-        drop(s);
-        assert!(!work.join("lock").exists());
-        // A killed run's lock (a pid that is not running) is taken over.
-        std::fs::write(work.join("lock"), r#"{"pid": 4000000000, "options": {}}"#).unwrap();
-        if Path::new("/proc/self").exists() {
-            let again = acquire(&o, &work).unwrap();
-            assert!(std::fs::read_to_string(again.path())
-                .unwrap()
-                .contains(&std::process::id().to_string()));
-        }
+        let s2 = acquire(&shard("2/3"), &work).unwrap();
+        let s3 = acquire(&shard("3/3"), &work).unwrap();
+        assert!(
+            acquire(&shard("2/3"), &work).is_err(),
+            "one copy of a shard"
+        );
+        assert!(acquire(&o, &work).is_err());
+        drop((s2, s3));
+        // Whatever a lock file says (a killed run's pid 1 from a container), only a held lock refuses.
+        std::fs::write(work.join("lock"), r#"{"pid": 1, "options": {}}"#).unwrap();
+        let again = acquire(&o, &work).unwrap();
+        assert!(std::fs::read_to_string(again.path())
+            .unwrap()
+            .contains(&std::process::id().to_string()));
     }
 
     #[test]
@@ -349,7 +369,7 @@ mod tests {
         ] {
             let e = acquire(&other, &work).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains("other options"), "{e}");
-            assert!(!work.join("lock").exists(), "a refused run leaves no lock");
+            drop(acquire(&o, &work).expect("a refused run leaves no lock held"));
         }
     }
 
@@ -357,15 +377,19 @@ mod tests {
     fn stale_temps_are_removed_and_nothing_else() {
         let d = tempfile::tempdir().unwrap();
         let out = d.path().join("out");
-        std::fs::create_dir_all(out.join("a/_abysslight")).unwrap();
+        std::fs::create_dir_all(out.join("_abysslight")).unwrap();
+        std::fs::create_dir_all(out.join("a")).unwrap();
+        // Another run's output folder nested in this one: its temp files are its own.
+        std::fs::create_dir_all(out.join("a/quick/_abysslight")).unwrap();
         let stale = [
             out.join("a/.IMG_1.jpg.x1Y2z3.abysslight-tmp"),
-            out.join("a/_abysslight/.report.json.q.abysslight-tmp"),
+            out.join("_abysslight/.report.json.q.abysslight-tmp"),
         ];
         let kept = [
             out.join("a/IMG_1.jpg"),
             out.join("a/abysslight-tmp.jpg"),
             out.join("a/.keep"),
+            out.join("a/quick/.IMG_2.jpg.r4S5t6.abysslight-tmp"),
         ];
         for p in stale.iter().chain(&kept) {
             std::fs::write(p, b"x").unwrap();

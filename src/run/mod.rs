@@ -28,7 +28,6 @@ use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::io::find_photos;
-use crate::io::paths::check_outputs;
 use crate::method::monitor::{Summary, Thresholds};
 use crate::method::scatter::Scatter;
 use crate::run::options::Options;
@@ -97,7 +96,12 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     say_what_runs(&plan, &params, progress);
     progress.start(plan.chunk.len());
     let outcome = stream(opts, &plan, engine, progress)?;
-    save_pictures(opts, &plan, &outcome)?;
+    // The pictures are for people to look at: one that cannot be written (disk full) is a warning.
+    if let Err(e) = save_pictures(opts, &plan, &outcome) {
+        let m = format!("the run's pictures were not written: {e}");
+        progress.warn(&m);
+        warnings.push(m);
+    }
     let before = BeforeStream {
         scatter,
         transfer_assumed,
@@ -267,7 +271,10 @@ pub fn estimate_scatter_file(
     memory_mib: usize,
     progress: &dyn Progress,
 ) -> Result<ScatterRun> {
-    check_outputs(&[("--out", out)], &[("water-column folder", water_column)])?;
+    let _gate = crate::io::gate::Gate::open(
+        &[crate::io::gate::Output::File("--out", out)],
+        &[("water-column folder", water_column)],
+    )?;
     let wc = find_photos(water_column)?;
     progress.stage(&format!(
         "estimating scatter S from {} water-column frames in {}",

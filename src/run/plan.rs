@@ -5,7 +5,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::io::paths::{check_no_links_below, check_outputs};
+use crate::io::paths::check_no_links_below;
 use crate::io::{
     self, decode_expecting, find_photos, find_photos_excluding, majority_size, Entry, Found,
     WORK_DIR,
@@ -50,6 +50,8 @@ pub struct Plan {
     pub work_dir: Option<PathBuf>,
     /// What the user should know before the run starts.
     pub warnings: Vec<String>,
+    /// The write gate of the run (src/io/gate.rs), open while the plan lives.
+    pub gate: crate::io::gate::Gate,
 }
 
 impl Plan {
@@ -75,7 +77,7 @@ impl Plan {
             ));
         }
         // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
-        check_run_paths(opts)?;
+        let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
         let found = if streaming {
             if opts.watch && !survey.is_dir() {
@@ -111,7 +113,7 @@ impl Plan {
         let photo_size = majority_size(&found.photos, 15);
         let mut chunk = opts.shard.map_or(0..total, |s| s.range(total));
         if let Some(limit) = opts.limit {
-            chunk.end = chunk.end.min(chunk.start + limit);
+            chunk.end = chunk.end.min(chunk.start.saturating_add(limit));
         }
         let first = if chunk.start > 0 {
             halo_start(&found.photos, chunk.start, window.n, photo_size)
@@ -155,6 +157,7 @@ impl Plan {
             skipped_existing,
             work_dir,
             warnings,
+            gate,
         })
     }
 
@@ -301,15 +304,16 @@ impl Plan {
                 None => (water(), "water-column frames"),
             },
         };
-        let assumed = match (opts.transfer, self.found.photos.first()) {
-            (Some(_), _) => None,
-            (None, Some(first)) => Some(crate::io::transfer::assume(&first.path)?),
-            (None, None) => Some(crate::io::transfer::Assumed {
+        // The first photo that can be read (an unreadable one is that photo's error, later).
+        let first = self.found.photos.iter().take(15).map(|e| e.path.as_path());
+        let assumed = opts.transfer.is_none().then(|| {
+            crate::io::transfer::assume_first(first).unwrap_or(crate::io::transfer::Assumed {
                 transfer: Transfer::Linear,
-                why: "no photo file to read before the run (standard input or an empty folder)"
+                why: "no photo file to read before the run (standard input, an empty folder or unreadable \
+                      photos)"
                     .into(),
-            }),
-        };
+            })
+        });
         Ok(MissionFacts {
             facts: Facts {
                 size,
@@ -397,29 +401,33 @@ fn roles(
 }
 
 /// The path checks of a correction run, before anything is written: `--out` (unless `-`) and `--report` against
-/// every input (survey unless `-`, water column, scatter image, mask), and `<out>/_abysslight` not a link.
-pub fn check_run_paths(opts: &Options) -> Result<()> {
+/// every input (survey unless `-`, water column, scatter image, mask), `<out>/_abysslight` not a link, `--report`
+/// a writable regular file; then the write gate of the run (src/io/gate.rs) is open.
+pub fn check_run_paths(opts: &Options) -> Result<crate::io::gate::Gate> {
+    use crate::io::gate::{Gate, Output};
     let dash = |p: &&Path| *p != Path::new("-");
-    let mut inputs: Vec<(&str, &Path)> = Vec::new();
-    for (what, p) in [
+    let inputs: Vec<(&str, &Path)> = [
         ("survey folder", opts.survey.as_deref().filter(dash)),
         ("water-column folder", opts.water_column.as_deref()),
         ("scatter image", opts.scatter.as_deref()),
         ("mask", opts.mask.as_deref()),
-    ] {
-        if let Some(p) = p {
-            inputs.push((what, p));
-        }
-    }
-    let mut outputs: Vec<(&str, &Path)> = Vec::new();
+    ]
+    .into_iter()
+    .filter_map(|(what, p)| p.map(|p| (what, p)))
+    .collect();
+    let mut outputs = Vec::new();
     if let Some(out) = opts.out.as_deref().filter(dash) {
-        outputs.push(("--out", out));
-        check_no_links_below(out, &out.join(crate::io::WORK_DIR).join("report.json"))?;
+        outputs.push(Output::Folder("--out", out));
     }
     if let Some(r) = opts.report.as_deref() {
-        outputs.push(("--report", r));
+        outputs.push(Output::File("--report", r));
     }
-    check_outputs(&outputs, &inputs)
+    let gate = Gate::open(&outputs, &inputs)?;
+    if let Some(out) = opts.out.as_deref().filter(dash) {
+        check_no_links_below(out, &out.join(crate::io::WORK_DIR).join("report.json"))?;
+        crate::io::gate::check_work_dir(&out.join(crate::io::WORK_DIR))?;
+    }
+    Ok(gate)
 }
 
 /// True when `path` holds an output of an earlier run. Outputs are only ever renamed into place once complete,
@@ -462,6 +470,7 @@ fn halo_start(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::paths::check_outputs;
 
     #[test]
     fn output_inside_input_is_refused() {

@@ -154,12 +154,15 @@ fn source(opts: &Options, plan: &Plan, progress: &dyn Progress) -> Box<dyn Sourc
                 .map(|t| format!(", stop after {t} s without new files"))
                 .unwrap_or_default()
         ));
-        Box::new(WatchFolder::new(
-            &plan.survey,
-            Duration::from_millis(opts.poll_interval),
-            opts.idle_timeout.map(Duration::from_secs_f64),
-            crate::run::watch::stop_flag(),
-        ))
+        Box::new(
+            WatchFolder::new(
+                &plan.survey,
+                Duration::from_millis(opts.poll_interval),
+                opts.idle_timeout.map(Duration::from_secs_f64),
+                crate::run::watch::stop_flag(),
+            )
+            .excluding(&plan.out),
+        )
     } else {
         // Two decoders on two cores: one alone would have to keep up with everything else on a shared core.
         Box::new(FileList::expecting(
@@ -282,8 +285,8 @@ impl Feed<'_> {
                     .join("factors")
                     .join(&entry.relative)
                     .with_extension("png");
-                crate::io::save_raster_png16(&c.lit, &p)?;
-                // An 8-bit, enlarged preview beside the 16-bit data, for people to look at.
+                // An 8-bit, enlarged preview beside the 16-bit data, for people to look at. A factor image that
+                // cannot be written (disk full) is that file's error, not the mission's.
                 let preview = crate::run::pictures::factor_preview(
                     &c.lit,
                     crate::run::pictures::PREVIEW_MIN_WIDTH,
@@ -292,7 +295,12 @@ impl Feed<'_> {
                     .join("factors-preview")
                     .join(&entry.relative)
                     .with_extension("png");
-                crate::run::pictures::save_png(&preview, &pp)?;
+                if let Err(e) = crate::io::save_raster_png16(&c.lit, &p)
+                    .and_then(|()| crate::run::pictures::save_png(&preview, &pp))
+                {
+                    self.progress.file_error(&e);
+                    self.outcome.errors.push(FileError::from_error(&p, &e));
+                }
             }
             self.outcome.totals += c.stats;
             let job = WriteJob {

@@ -26,7 +26,7 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant, SystemTime};
 
 use crate::error::{Error, Result};
-use crate::io::{decode, find_photos, Entry};
+use crate::io::{decode, find_photos_excluding, Entry};
 use crate::method::raster::Photo;
 use crate::run::source::{Item, Role, Source};
 
@@ -42,6 +42,8 @@ type Stamp = (u64, Option<SystemTime>);
 /// Watches a folder (recursively, as a batch run scans it) and yields photos once they are complete.
 pub struct WatchFolder {
     dir: PathBuf,
+    /// Folders whose photos are never taken, even through a link in `dir` (the output folder).
+    exclude: Vec<PathBuf>,
     poll: Duration,
     idle: Option<Duration>,
     stop: Arc<AtomicBool>,
@@ -65,6 +67,7 @@ impl WatchFolder {
     pub fn new(dir: &Path, poll: Duration, idle: Option<Duration>, stop: Arc<AtomicBool>) -> Self {
         WatchFolder {
             dir: dir.to_owned(),
+            exclude: Vec::new(),
             poll,
             idle,
             stop,
@@ -79,9 +82,17 @@ impl WatchFolder {
         }
     }
 
+    /// Never take photos reached through a link into `out` (the output folder), as a batch run skips them:
+    /// outputs read back as inputs would feed the run its own outputs, without end.
+    pub fn excluding(mut self, out: &Path) -> Self {
+        self.exclude.push(out.to_owned());
+        self
+    }
+
     /// One scan: note new and changed files; take those unchanged since the last scan.
     fn scan(&mut self) {
-        let Ok(found) = find_photos(&self.dir) else {
+        let exclude: Vec<&Path> = self.exclude.iter().map(PathBuf::as_path).collect();
+        let Ok(found) = find_photos_excluding(&self.dir, &exclude) else {
             return;
         };
         for entry in found.photos {
