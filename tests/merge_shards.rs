@@ -201,7 +201,8 @@ fn a_missing_or_unfinished_shard_is_named() {
     // The rerun takes the stale locks over; then the merge goes through.
     std::fs::remove_file(work.join("lock-shard-2-of-4")).unwrap();
     run_shard(root, "out", 3, 4, opts(root, "out"));
-    assert!(!work.join("lock-shard-3-of-4").exists());
+    // Its lock file stays (the lock is the operating system's, released when the run ended); its report is newer.
+    assert!(work.join("lock-shard-3-of-4").exists());
     assert_eq!(merge_shards(&root.join("out")).unwrap().frames, 23);
     // Reports of another shard count in the same folder.
     std::fs::copy(

@@ -1,8 +1,8 @@
 //! `abysslight merge-shards OUT`: the mission's report and pictures from the runs of `--shard 1/N` … `N/N` into
 //! one `--out`, as one run over the whole survey would have written them.
 //!
-//! Each shard leaves `_abysslight/report-shard-K-of-N.json` (and, while it runs, `lock-shard-K-of-N`). The merge
-//! checks that every shard `1..=N` finished (a report and no lock), that they ran with the same options (those
+//! Each shard leaves `_abysslight/report-shard-K-of-N.json` and its lock file `lock-shard-K-of-N`. The merge
+//! checks that every shard `1..=N` finished (a report newer than its lock file, which no live run holds), that they ran with the same options (those
 //! that decide the output pixels: [`fingerprint`]), the same version and the same survey; then it writes
 //! `_abysslight/report.json` with every photo counted once (the shards' frames, in mission order), the errors and
 //! warnings of every shard (those every shard saw, such as a bad water-column frame, once), the counts summed,
@@ -175,7 +175,7 @@ fn shard_problem(
     lock: Option<&PathBuf>,
 ) -> Option<String> {
     let rerun = format!("rerun it (abysslight correct <the same arguments> --shard {k}/{n}, or resubmit array task {k})");
-    if let Some(lock) = lock {
+    if let Some(lock) = lock.filter(|l| unfinished(l, report)) {
         let pid = std::fs::read_to_string(lock)
             .ok()
             .and_then(|t| serde_json::from_str::<Value>(&t).ok())
@@ -190,6 +190,19 @@ fn shard_problem(
     report
         .is_none()
         .then(|| format!("shard {k}/{n} is missing: no report-shard-{k}-of-{n}.json; {rerun}"))
+}
+
+/// A shard whose lock file is held by a live run (the lock is the operating system's: [`crate::run::guard`]), or
+/// was taken after its report was written (a rerun that was killed over the report of an earlier one), or that
+/// has no report, has not finished. The lock file itself stays after a run.
+fn unfinished(lock: &Path, report: Option<&PathBuf>) -> bool {
+    let held = std::fs::File::open(lock)
+        .is_ok_and(|f| matches!(f.try_lock_shared(), Err(std::fs::TryLockError::WouldBlock)));
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    held || match report {
+        Some(r) => modified(lock) > modified(r),
+        None => true,
+    }
 }
 
 /// The fingerprint of a report's options, or why it cannot be read.
