@@ -169,18 +169,11 @@ impl Plan {
         Ok(())
     }
 
-    /// What the run would read and write, in words (`correct --dry-run`).
-    pub fn describe(&self, opts: &Options) -> Result<String> {
-        let facts = self.facts(opts)?;
-        let given = opts.params()?;
-        let params = given.resolved(&facts.facts);
-        let mut s = String::new();
-        let mut line = |l: String| {
-            s.push_str(&l);
-            s.push('\n');
-        };
+    /// The survey part of [`Plan::describe`]: what is read, what is written, and the disk it takes.
+    fn describe_survey(&self) -> Vec<String> {
+        let mut lines = Vec::new();
         if self.streaming {
-            line(format!(
+            lines.push(format!(
                 "survey: {} (photos as they come)",
                 if self.stdin {
                     "frames on stdin".to_string()
@@ -189,7 +182,7 @@ impl Plan {
                 }
             ));
         } else {
-            line(format!(
+            lines.push(format!(
                 "survey: {} photos in {}{}",
                 self.found.photos.len(),
                 self.survey.display(),
@@ -208,7 +201,7 @@ impl Plan {
                 .iter()
                 .filter(|i| i.role == Role::Write && self.output_path(&i.entry).exists())
                 .count();
-            line(format!(
+            lines.push(format!(
                 "to correct: {count} photos (photos {}..{} of {}); read for the windows only: {}",
                 self.chunk.start + 1,
                 self.chunk.end,
@@ -216,21 +209,37 @@ impl Plan {
                 self.items.len() - count - self.skipped_existing
             ));
             if self.skipped_existing > 0 {
-                line(format!(
+                lines.push(format!(
                     "--resume: {} outputs exist and are kept",
                     self.skipped_existing
                 ));
             }
             if existing > 0 {
-                line(format!(
+                lines.push(format!(
                     "note: {existing} of these outputs exist already and would be overwritten (--resume keeps \
                      them)"
                 ));
             }
-            line(format!(
+            lines.push(format!(
                 "disk: about {:.1} MB of outputs (inputs' size; JPEG outputs can be larger)",
                 bytes as f64 / 1e6
             ));
+        }
+        lines
+    }
+
+    /// What the run would read and write, in words (`correct --dry-run`).
+    pub fn describe(&self, opts: &Options) -> Result<String> {
+        let facts = self.facts(opts)?;
+        let given = opts.params()?;
+        let params = given.resolved(&facts.facts);
+        let mut s = String::new();
+        let mut line = |l: String| {
+            s.push_str(&l);
+            s.push('\n');
+        };
+        for l in self.describe_survey() {
+            line(l);
         }
         line(format!(
             "output: {}",
