@@ -3,6 +3,8 @@
 
 #![cfg(unix)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -14,25 +16,7 @@ fn s(p: &Path) -> &str {
 
 /// `root/survey` (6 photos) and `root/water` (3 frames).
 fn mission(root: &Path) -> (PathBuf, PathBuf) {
-    let survey = root.join("survey");
-    let water = root.join("water");
-    for d in [&survey, &water] {
-        std::fs::create_dir_all(d).unwrap();
-    }
-    for i in 0..6u32 {
-        image::RgbImage::from_fn(32, 24, |x, y| {
-            let v = ((x * 7 + y * 13 + i * 31) % 200 + 30) as u8;
-            image::Rgb([v, v / 2, 255 - v])
-        })
-        .save(survey.join(format!("IMG_{i:04}.png")))
-        .unwrap();
-    }
-    for i in 0..3u8 {
-        image::RgbImage::from_pixel(32, 24, image::Rgb([10 + i, 12, 14]))
-            .save(water.join(format!("wc{i}.png")))
-            .unwrap();
-    }
-    (survey, water)
+    common::tiny_mission(root, 6)
 }
 
 fn report(out: &Path) -> serde_json::Value {

@@ -4,6 +4,8 @@
 
 #![cfg(unix)]
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::hash::{Hash, Hasher};
 use std::os::unix::fs::FileTypeExt;
@@ -57,24 +59,7 @@ impl Site {
     fn new() -> Site {
         let d = tempfile::tempdir().unwrap();
         let root = d.path().canonicalize().unwrap();
-        let survey = root.join("survey");
-        let water = root.join("water");
-        for dir in [&survey, &water] {
-            std::fs::create_dir_all(dir).unwrap();
-        }
-        for i in 0..6u32 {
-            image::RgbImage::from_fn(32, 24, |x, y| {
-                let v = ((x * 7 + y * 13 + i * 31) % 200 + 30) as u8;
-                image::Rgb([v, v / 2, 255 - v])
-            })
-            .save(survey.join(format!("IMG_{i:04}.png")))
-            .unwrap();
-        }
-        for i in 0..3u8 {
-            image::RgbImage::from_pixel(32, 24, image::Rgb([10 + i, 12, 14]))
-                .save(water.join(format!("wc{i}.png")))
-                .unwrap();
-        }
+        let (survey, water) = common::tiny_mission(&root, 6);
         let corrected = root.join("corrected");
         let o = abysslight(&[
             "correct",

@@ -247,3 +247,27 @@ pub fn scaled_error(got: &[Vec<f32>], truth: &[Vec<f32>]) -> f64 {
     }
     err / mag
 }
+
+/// A tiny mission on disk for the tests of files and runs: `root/survey` (`photos` 32×24 PNGs of a varied
+/// pattern) and `root/water` (3 dark frames). Returns both folders.
+pub fn tiny_mission(root: &Path, photos: u32) -> (PathBuf, PathBuf) {
+    let survey = root.join("survey");
+    let water = root.join("water");
+    for d in [&survey, &water] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    for i in 0..photos {
+        image::RgbImage::from_fn(32, 24, |x, y| {
+            let v = ((x * 7 + y * 13 + i * 31) % 200 + 30) as u8;
+            image::Rgb([v, v / 2, 255 - v])
+        })
+        .save(survey.join(format!("IMG_{i:04}.png")))
+        .unwrap();
+    }
+    for i in 0..3u8 {
+        image::RgbImage::from_pixel(32, 24, image::Rgb([10 + i, 12, 14]))
+            .save(water.join(format!("wc{i}.png")))
+            .unwrap();
+    }
+    (survey, water)
+}
