@@ -392,7 +392,7 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
         ColorSpace::RGB
     }));
     // zune-jpeg decodes a non-interleaved JPEG with subsampled chroma (one scan per component) into garbage
-    // (green); libjpeg-turbo's decoder, ported to Rust, reads it right (tests/jpeg_reference.rs).
+    // (green); libjpeg-turbo's decoder, ported to Rust, reads it right (tests/integration/jpeg_reference.rs).
     let pixels = if non_interleaved {
         let format = if grey {
             libjpeg_turbo_rs::PixelFormat::Grayscale

@@ -218,7 +218,7 @@ pub enum BlockRule {
     Paper,
     /// The paper's 8 with a mask: overlays that change from frame to frame (counters, clocks) are partly missed by
     /// `--mask-auto`, and a block of 8 has enough seafloor beside them to outvote the missed pixels (with blocks of
-    /// 4, masked text on a 128×96 test dive came out 210–236 instead of white: tests/field.rs).
+    /// 4, masked text on a 128×96 test dive came out 210–236 instead of white: tests/integration/field.rs).
     Masked,
     /// [`auto_block`] of the photos' size.
     Size,

@@ -1,7 +1,7 @@
 //! `merge-shards`: the report and pictures of a sharded mission, as one run writes them; and refusals that name
 //! the shard that is missing, unfinished or ran with other options. Also `--cruise` through the library.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

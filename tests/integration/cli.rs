@@ -1,6 +1,6 @@
 //! The `abysslight` binary as a user runs it: exit codes, messages, config files, refusals.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

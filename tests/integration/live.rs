@@ -1,7 +1,7 @@
 //! Live and video input: `--watch` on a folder written while abysslight runs, and frames through a pipe
 //! (`--survey - --out -`). No ffmpeg needed: the tests make their own frames.
 
-mod common;
+use crate::common;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

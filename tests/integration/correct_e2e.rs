@@ -1,6 +1,6 @@
 //! `correct` end to end on small synthetic dives with known albedo, light pattern and backscatter.
 
-mod common;
+use crate::common;
 
 use abysslight::io::decode;
 use abysslight::method::raster::{BitDepth, Samples};

@@ -1,6 +1,6 @@
 //! Real-footage problems on synthetic dives: burned-in overlays and laser dots (masks), gamma-encoded photos.
 
-mod common;
+use crate::common;
 
 use abysslight::io::decode;
 use abysslight::method::mask::Mask;

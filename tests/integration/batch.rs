@@ -1,6 +1,6 @@
 //! Running unattended: bad files, interruption and resume, sharding.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

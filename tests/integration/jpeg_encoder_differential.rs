@@ -120,7 +120,7 @@ fn scalar_and_simd_encoders_write_the_same_bytes() {
     let status = std::process::Command::new(std::env::current_exe().unwrap())
         .args([
             "--exact",
-            "scalar_and_simd_encoders_write_the_same_bytes",
+            "jpeg_encoder_differential::scalar_and_simd_encoders_write_the_same_bytes",
             "--test-threads",
             "1",
         ])

@@ -1,0 +1,27 @@
+//! The integration tests: one binary (as ripgrep has), one module per subject. Each module makes its own small
+//! synthetic photos; those that need `../shared/data/real` are `#[ignore]`d with the reason.
+
+mod common;
+
+mod abyss_quality;
+mod batch;
+mod cli;
+mod correct_e2e;
+mod defaults;
+mod engine;
+mod faults;
+mod field;
+mod flag_ranges;
+mod hardening;
+mod jpeg_encoder_differential;
+mod jpeg_like_input;
+mod jpeg_reference;
+mod live;
+mod merge_shards;
+mod metadata;
+mod nodules;
+mod real_photos;
+mod run_locks;
+mod simulate_evaluate;
+mod threads_identical;
+mod write_gate;
