@@ -7,14 +7,14 @@
 
 use std::time::Instant;
 
-use abysslight::method::correct::{correct_with_offset, Blend};
-use abysslight::method::noise::Blended;
-use abysslight::method::raster::{Layout, Raster};
-use abysslight::method::scatter::Prepared;
-use abysslight::method::transfer::{Curve, Transfer};
+use abysslight::kernels::Blended;
+use abysslight::kernels::Prepared;
+use abysslight::kernels::{correct_with_offset, Blend};
+use abysslight::{kernels::Curve, Transfer};
+use abysslight::{Layout, Raster};
 
 /// Best wall time (ms) of 7 corrections of `photo`, with the noise-aware blend when `blend`.
-fn time<T: abysslight::method::raster::Sample + Clone + Send + Sync>(
+fn time<T: abysslight::Sample + Clone + Send + Sync>(
     photo: &[T],
     layout: Layout,
     transfer: Transfer,
@@ -81,7 +81,7 @@ fn main() {
         .map(|i| (15_000 + (i % 97) * 200) as u16 + (next() % 10_000) as u16)
         .collect();
     let p8: Vec<u8> = codes.iter().map(|&v| (v >> 8) as u8).collect();
-    let (cpu, cores, rustc) = abysslight::eval::bench::machine();
+    let (cpu, cores, rustc) = abysslight::eval::machine();
     println!(
         "correction kernel, 4000x3000 RGB, one thread, best of 7 ({cpu}, {cores} cores, {rustc})"
     );

@@ -18,14 +18,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let rows: usize = args.get(3).map_or(Ok(4), |s| s.parse())?;
     let width: u32 = args.get(4).map_or(Ok(480), |s| s.parse())?;
-    let (sheet, with_factors) = abysslight::run::pictures::before_after_sheet(
+    let (sheet, with_factors) = abysslight::eval::before_after_sheet(
         &PathBuf::from(&args[0]),
         &PathBuf::from(&args[1]),
         rows,
         width,
     )?;
     let path = PathBuf::from(&args[2]);
-    abysslight::run::pictures::save_png(&sheet, &path)?;
+    abysslight::eval::save_png(&sheet, &path)?;
     let columns = if with_factors {
         "input | corrected | F·C"
     } else {

@@ -36,11 +36,11 @@ use abysslight::eval::matrix::{
     self, load_set, signal_mask, window_floor, DIVES, HELD_OUT, NODULES, NODULES_HELD_OUT,
 };
 use abysslight::eval::simulate::Dive;
-use abysslight::method::factor::auto_block;
-use abysslight::method::raster::Raster;
-use abysslight::method::transfer::Transfer;
-use abysslight::run::options::{Method, Options};
+use abysslight::kernels::auto_block;
+use abysslight::Raster;
+use abysslight::Transfer;
 use abysslight::{correct_mission, Silent};
+use abysslight::{Method, Options};
 
 /// The seed of a set's `index`-th dive in seed set `offset`.
 type SeedOf = fn(usize, u64) -> u64;
@@ -433,7 +433,7 @@ fn main() {
 }
 
 /// Photos flagged by the monitor (share and the count of each kind) and the windows used.
-fn flag_summary(report: &abysslight::run::report::Report) -> String {
+fn flag_summary(report: &abysslight::Report) -> String {
     let mut kinds: std::collections::BTreeMap<&str, usize> = Default::default();
     let mut flagged = 0;
     for f in &report.frames {

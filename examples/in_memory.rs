@@ -7,8 +7,8 @@
 
 use abysslight::eval::evaluate::albedo_error;
 use abysslight::eval::simulate::Simulation;
-use abysslight::method::engine::{Engine, Params};
-use abysslight::method::scatter::Scatter;
+use abysslight::Scatter;
+use abysslight::{Engine, Params};
 use abysslight::{Photo, Raster};
 
 fn main() -> Result<(), abysslight::Error> {

@@ -11,9 +11,9 @@
 
 use std::path::PathBuf;
 
-use abysslight::method::transfer::Transfer;
-use abysslight::run::options::Options;
-use abysslight::run::report::Silent;
+use abysslight::Options;
+use abysslight::Silent;
+use abysslight::Transfer;
 
 struct Set {
     name: &'static str,
@@ -144,7 +144,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..Options::default()
         };
         let started = std::time::Instant::now();
-        let report = abysslight::run::correct_mission(&opts, &Silent)?;
+        let report = abysslight::correct_mission(&opts, &Silent)?;
         let flagged = report
             .frames
             .iter()
@@ -154,10 +154,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for f in report.frames.iter().flat_map(|f| &f.health.flags) {
             *kinds.entry(f.kind()).or_default() += 1;
         }
-        let (sheet, _) =
-            abysslight::run::pictures::before_after_sheet(&survey, &corrected, 4, 360)?;
+        let (sheet, _) = abysslight::eval::before_after_sheet(&survey, &corrected, 4, 360)?;
         let sheet_path = out.join(format!("{}.png", set.name));
-        abysslight::run::pictures::save_png(&sheet, &sheet_path)?;
+        abysslight::eval::save_png(&sheet, &sheet_path)?;
         println!(
             "{:<18} {:>4} photos, {:>3} failed, {:>3} flagged {:?}, {:>6.1} s -> {}  ({})",
             set.name,

@@ -2,14 +2,18 @@
 //! Köser et al., "Robustly Removing Deep Sea Lighting Effects for Visual Mapping of Abyssal Plains".
 //!
 //! A pixel sees `I = A·F + S`: seafloor albedo `A` times a factor image `F` (light cones, attenuation, vehicle
-//! pose) plus additive backscatter `S`. The crate is layered; each layer uses only those before it:
+//! pose) plus additive backscatter `S`. What a caller needs is at the crate root:
 //!
-//! - [`method`]: the paper on photos in memory — `S` ([`method::scatter`]), block and temporal medians, the
-//!   sliding window, `F` ([`method::factor`]), `A` ([`method::correct`]), and the [`Engine`] that runs them over a
-//!   stream of photos with memory bounded by the window;
+//! - a whole mission from folders to folders, as `abysslight correct` runs it: [`Options`] (the command line's
+//!   options, with its defaults), [`correct_mission`], its [`Report`] ([`report`] has the parts) and
+//!   [`Progress`]; [`merge_shards`] and [`cruise`] for cluster runs;
+//! - the method on photos in memory: a [`Scatter`] (`S` from water-column frames), [`Params`] (the method's
+//!   settings; [`Options::params`] maps a run's options onto them, [`Params::resolved`] resolves every `auto`), the
+//!   [`Engine`] that runs the sliding window over a stream of [`Photo`]s with memory bounded by the window;
+//! - the window rule of the paper: [`p_half`] and [`choose_window`];
+//! - [`kernels`]: the method's steps one by one (medians, `F`, the correction), for callers who want one alone;
 //! - [`io`]: finding, decoding and writing photos (atomically, with their metadata);
-//! - [`run`]: a whole mission from folders to folders as `abysslight correct` runs it ([`correct_mission`]);
-//! - [`eval`]: a renderer of dives with known truth, scores, the demo and the speed bench.
+//! - [`eval`]: a renderer of dives with known truth and the scores the project measures itself with.
 //!
 //! In memory, without files:
 //!
@@ -53,19 +57,27 @@ extern crate self as abysslight;
 #[cfg(feature = "cli")]
 #[doc(hidden)]
 pub mod cli;
-pub mod error;
+mod error;
 pub mod eval;
 pub mod io;
-pub mod method;
-pub mod run;
+pub mod kernels;
+pub(crate) mod method;
+pub(crate) mod run;
 
 pub use error::{Error, Result};
 pub use io::metadata::Metadata;
+pub use method::baseline::Method;
 pub use method::engine::{Corrected, Engine, Use};
-pub use method::params::{Params, SeafloorColour};
-pub use method::raster::{Photo, Raster};
+pub use method::mask::Mask;
+pub use method::params::{BlockRule, Facts, Params, SeafloorColour, Steps};
+pub use method::raster::{BitDepth, Layout, Photo, Raster, Sample, Samples};
 pub use method::scatter::Scatter;
+pub use method::transfer::Transfer;
 pub use method::window::{choose_window, p_half};
 pub use run::correct_mission;
-pub use run::options::{Options, Shard};
+pub use run::cruise;
+pub use run::merge::merge_shards;
+pub use run::options::{limits, Options, Shard};
+pub use run::report;
+#[doc(no_inline)]
 pub use run::report::{Progress, Report, Silent};

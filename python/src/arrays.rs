@@ -1,7 +1,7 @@
 //! numpy arrays to and from the library's photos, rasters and masks.
 
-use abysslight::method::mask::Mask;
-use abysslight::method::raster::{Layout, Samples};
+use abysslight::Mask;
+use abysslight::{Layout, Samples};
 use abysslight::{Photo, Raster};
 use numpy::ndarray::IxDyn;
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};

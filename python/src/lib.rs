@@ -2,7 +2,7 @@
 //!
 //! A thin layer over the library. Options are parsed by the command line's own parser
 //! ([`abysslight::cli::correct_options`]), so their names, defaults and error messages are the command's; the
-//! engine's parameters come from them as a run builds them ([`abysslight::run::options::Options::params`]). Long work
+//! engine's parameters come from them as a run builds them ([`abysslight::Options::params`]). Long work
 //! runs with the GIL released. Errors come back as `TypeError`/`ValueError`/`OSError`, never as a panic.
 
 mod arrays;
@@ -157,7 +157,7 @@ fn entry(path: PathBuf) -> Entry {
 #[pyclass(module = "abysslight._abysslight", frozen)]
 #[derive(Clone)]
 struct Mask {
-    inner: abysslight::method::mask::Mask,
+    inner: abysslight::Mask,
 }
 
 #[pymethods]
@@ -171,7 +171,7 @@ impl Mask {
     /// A mask image (white: ignored), as `--mask` reads it (e.g. a run's `_abysslight/mask-auto.png`).
     #[staticmethod]
     fn load(path: PathBuf) -> PyResult<Mask> {
-        abysslight::method::mask::Mask::load(&path)
+        abysslight::Mask::load(&path)
             .map(|inner| Mask { inner })
             .map_err(to_py)
     }
@@ -253,7 +253,7 @@ impl Engine {
         let opts = engine_kwargs(options)?;
         // Arrays carry no file facts: `transfer="auto"` (the default) is what `--transfer auto` assumes for a
         // file that declares nothing, linear; the engine resolves it (`Params::resolved`).
-        if opts.method == abysslight::run::options::Method::Mean {
+        if opts.method == abysslight::Method::Mean {
             return Err(PyValueError::new_err(
                 "method=\"mean\" needs the whole mission's mean image before the first photo; use correct()",
             ));
@@ -411,8 +411,7 @@ fn simulate(
     encode: &str,
     noise: f32,
 ) -> PyResult<PyObject> {
-    let encode: abysslight::run::options::Transfer =
-        encode.parse().map_err(PyValueError::new_err)?;
+    let encode: abysslight::Transfer = encode.parse().map_err(PyValueError::new_err)?;
     if !(bit_depth == 8 || bit_depth == 16) {
         return Err(PyValueError::new_err(format!(
             "bit_depth must be 8 or 16, got {bit_depth}"

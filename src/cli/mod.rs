@@ -1,4 +1,7 @@
 //! Command-line definition (clap) and the glue from flags to [`abysslight::Options`].
+//!
+//! Its doc comments are the `--help` text, written for a terminal (`<out>/…` is a placeholder, not HTML).
+#![allow(rustdoc::invalid_html_tags)]
 
 // Console output that never panics: a closed stdout or stderr (`abysslight ... 2>&1 | head`) must not end a
 // mission; what cannot be printed is dropped (the run report still holds it). These shadow the std macros in

@@ -26,8 +26,6 @@ pub struct DemoReport {
     pub evaluation: Evaluation,
     /// The contact sheet written (`out/contact-sheet.png`).
     pub sheet: PathBuf,
-    /// The scores as JSON (`out/scores.json`).
-    pub scores_json: PathBuf,
     /// The scores as a Markdown table (`out/scores.md`).
     pub scores_md: PathBuf,
     /// Wall-clock seconds of the whole demo.
@@ -150,7 +148,6 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
     Ok(DemoReport {
         evaluation,
         sheet,
-        scores_json,
         scores_md,
         seconds: started.elapsed().as_secs_f64(),
     })

@@ -39,7 +39,7 @@ pub struct Placement {
 }
 
 /// Parse a placement file's text (see the module docs). `path` is only used in error messages.
-pub fn parse_placements(text: &str, path: &Path) -> Result<Vec<Placement>> {
+pub(crate) fn parse_placements(text: &str, path: &Path) -> Result<Vec<Placement>> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.split('#').next().unwrap_or("").trim();
@@ -88,7 +88,7 @@ pub fn parse_placements(text: &str, path: &Path) -> Result<Vec<Placement>> {
 }
 
 /// The text of a placement file with one homography per photo.
-pub fn placements_text<'a>(rows: impl Iterator<Item = (&'a str, &'a [f64; 9])>) -> String {
+pub(crate) fn placements_text<'a>(rows: impl Iterator<Item = (&'a str, &'a [f64; 9])>) -> String {
     let mut s = String::from(
         "# abysslight placements: NAME and the homography photo pixel -> mosaic (row-major), or NAME TX TY\n",
     );
@@ -387,7 +387,7 @@ pub struct EvalSettings {
     /// Transfer curve of the photos (all sets). Default: the simulated dive's encoding, else linear.
     pub transfer: Option<Transfer>,
     /// Register the photos of this folder (the raw photos) and use the placements found for the consistency
-    /// metric of every set (see [`crate::eval::register`]).
+    /// metric of every set (see `register`).
     pub register: Option<PathBuf>,
     /// Write the placements found by `register` here (the placement file format).
     pub save_placements: Option<PathBuf>,
@@ -428,7 +428,7 @@ pub struct Scores {
     pub residual_pattern: Option<f64>,
     /// RMS difference over overlaps divided by the standard deviation of all pixels; `None` without placements.
     pub consistency: Option<f64>,
-    /// RMS difference over overlaps divided by the mean of all pixels (see [`consistency_parts`]).
+    /// RMS difference over overlaps divided by the mean of all pixels (see `consistency_parts`).
     pub overlap_difference: Option<f64>,
 }
 
@@ -497,7 +497,7 @@ fn truth_file(p: &Path) -> PathBuf {
 /// Set the pixels `mask` ignores to NaN in every channel: the consistency metric leaves out every mosaic cell
 /// observation that touches one, and them from the photos' mean and standard deviation. A mask of another size than
 /// the photo, or one that ignores every pixel, is an error naming the mask (`path`), as for `correct --mask`.
-pub fn leave_out(r: &mut Raster, mask: &Mask, path: &Path) -> Result<()> {
+pub(crate) fn leave_out(r: &mut Raster, mask: &Mask, path: &Path) -> Result<()> {
     mask.check(r.layout(), path)?;
     let c = r.channels;
     for (px, &ignore) in r.data.chunks_exact_mut(c).zip(&mask.ignore) {
@@ -509,12 +509,12 @@ pub fn leave_out(r: &mut Raster, mask: &Mask, path: &Path) -> Result<()> {
 }
 
 /// Decode a photo and undo its transfer curve.
-pub fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
+pub(crate) fn load_linear(path: &Path, transfer: Transfer) -> Result<Raster> {
     Ok(Raster::from_photo_linear(&decode(path)?, transfer))
 }
 
 /// Box average by `k` (the right and bottom remainders dropped); `k = 1` returns a copy.
-pub fn reduce(r: &Raster, k: usize) -> Raster {
+pub(crate) fn reduce(r: &Raster, k: usize) -> Raster {
     if k <= 1 {
         return r.clone();
     }
@@ -782,6 +782,23 @@ mod tests {
     use super::*;
 
     const ID: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+    #[test]
+    fn placement_file_formats_and_errors() {
+        let p = std::path::Path::new("placements.txt");
+        let v = parse_placements(
+            "# comment\nimg1.png 10 -5\n\nimg2.png 1 0 3 0 1 4 0 0 1  # homography\n",
+            p,
+        )
+        .unwrap();
+        assert_eq!(v.len(), 2);
+        assert_eq!(v[0].h, [1.0, 0.0, 10.0, 0.0, 1.0, -5.0, 0.0, 0.0, 1.0]);
+        assert_eq!(v[1].h, [1.0, 0.0, 3.0, 0.0, 1.0, 4.0, 0.0, 0.0, 1.0]);
+        for bad in ["img 1 2 3", "img a b", "img 0 0 0 0 0 0 0 0 0", ""] {
+            let e = parse_placements(bad, p).unwrap_err().to_string();
+            assert!(e.contains("placements.txt"), "{bad:?}: {e}");
+        }
+    }
 
     #[test]
     fn overlap_difference_by_hand() {

@@ -1,8 +1,14 @@
 //! Evaluation: a renderer of dives with known ground truth, the scores, the demo and the speed bench.
 
-pub mod bench;
-pub mod demo;
+pub(crate) mod bench;
+pub(crate) mod demo;
 pub mod evaluate;
+/// The dive matrix: the simulated dives the project scores itself on (`examples/dive_matrix.rs`, the quality
+/// tests). A harness of the project's own, public for the example and the tests, not part of the API.
+#[doc(hidden)]
 pub mod matrix;
-pub mod register;
+pub(crate) mod register;
 pub mod simulate;
+
+pub use crate::run::pictures::{before_after_sheet, save_png};
+pub use bench::{machine, noisy_photo, synthetic_photo};

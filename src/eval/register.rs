@@ -25,12 +25,13 @@ use crate::eval::evaluate::Placement;
 use crate::method::matching::{
     match_pair, reduction, remove_fixed_pattern, texture, Match, Texture,
 };
+#[cfg(test)]
 use crate::method::raster::Raster;
 
 /// Vertical distance, in photo heights, between chains of placements that could not be joined.
 const CHAIN_GAP: f64 = 100.0;
 
-/// What [`register_rasters`] and [`register_folder`] found: one placement per photo (translations, in full-resolution pixels) and the match of
+/// What [`register_folder`] found: one placement per photo (translations, in full-resolution pixels) and the match of
 /// each photo against the previous one (`None` for the first).
 #[derive(Debug, Clone)]
 pub struct Registration {
@@ -51,6 +52,7 @@ impl Registration {
 
 /// Register a sequence of photos (in order; all of one size): chain the accepted consecutive matches into
 /// placements. `names` label the placements.
+#[cfg(test)]
 pub fn register_rasters(names: &[String], photos: &[Raster]) -> Registration {
     assert_eq!(names.len(), photos.len(), "one name per photo");
     let Some(first) = photos.first() else {

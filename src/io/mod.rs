@@ -1,15 +1,15 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
-pub mod gate;
-pub mod jpeg;
-pub mod jpeg_check;
-pub mod mask;
-pub mod metadata;
-pub mod paths;
-pub mod pnm;
-pub mod scatter;
-pub mod transfer;
+pub(crate) mod gate;
+pub(crate) mod jpeg;
+pub(crate) mod jpeg_check;
+pub(crate) mod mask;
+pub(crate) mod metadata;
+pub(crate) mod paths;
+pub(crate) mod pnm;
+pub(crate) mod scatter;
+pub(crate) mod transfer;
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -18,14 +18,16 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, ImageFormat};
 
 use crate::error::{Error, Result};
-pub use crate::io::jpeg::Subsampling;
-use crate::method::raster::{BitDepth, Layout, Photo, Raster, Samples};
+pub use crate::io::jpeg::{parse as jpeg_coding, JpegCoding, Subsampling};
+pub use crate::io::jpeg_check::check as check_jpeg;
+pub use crate::io::pnm::{decode_frame, FrameSplitter};
+use crate::method::raster::{Layout, Photo, Raster, Samples};
 
 /// File name extensions taken as photos (case-insensitive).
-pub const PHOTO_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "tif", "tiff"];
+pub(crate) const PHOTO_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "tif", "tiff"];
 
 /// Name of the folder inside the output folder that holds the report and the estimates.
-pub const WORK_DIR: &str = "_abysslight";
+pub(crate) const WORK_DIR: &str = "_abysslight";
 
 /// A photo found in an input folder.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -100,7 +102,7 @@ fn skip_entry(
 
 /// [`find_photos`], and entries reached through symbolic links that lead into one of `exclude` (the output
 /// folder: a survey link pointing at `--out` must not read old outputs back as photos) are skipped entries.
-pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
+pub(crate) fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
     let meta = std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
     if !meta.is_dir() {
         return Err(Error::Usage(format!("{}: not a folder", dir.display())));
@@ -190,10 +192,10 @@ pub fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
 
 /// Largest photo abysslight decodes, in pixels (2^28 = 268 MP, e.g. 16384 × 16384). A header declaring more is
 /// an error before anything is allocated.
-pub const MAX_PIXELS: u64 = 1 << 28;
+pub(crate) const MAX_PIXELS: u64 = 1 << 28;
 
 /// Width and height from a photo's header, reading only the header.
-pub fn header_size(path: &Path) -> Result<(usize, usize)> {
+pub(crate) fn header_size(path: &Path) -> Result<(usize, usize)> {
     let reader = image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| Error::io(path, e))?;
@@ -267,7 +269,7 @@ pub(crate) fn read_full(r: &mut impl std::io::Read, buf: &mut [u8]) -> std::io::
 }
 
 /// Image format of a path, from its extension.
-pub fn format_of(path: &Path) -> Option<ImageFormat> {
+pub(crate) fn format_of(path: &Path) -> Option<ImageFormat> {
     ImageFormat::from_path(path).ok()
 }
 
@@ -279,7 +281,7 @@ pub fn decode(path: &Path) -> Result<Photo> {
 }
 
 /// Run a decoder call, turning a panic inside it into a decode error naming `path`.
-pub fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+pub(crate) fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
         let what = panic
             .downcast_ref::<&str>()
@@ -339,7 +341,7 @@ fn decode_unguarded(path: &Path) -> Result<Photo> {
 
 /// Limits for the `image` decoders: the largest photo of [`MAX_PIXELS`] at 16-bit RGBA, and no side longer than
 /// that many pixels.
-pub fn decode_limits() -> image::Limits {
+pub(crate) fn decode_limits() -> image::Limits {
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(1 << 20);
     limits.max_image_height = Some(1 << 20);
@@ -485,7 +487,7 @@ fn merge_alpha<T: Copy>(c: &[T], a: &[T], colour: usize) -> Vec<T> {
 }
 
 /// Convert a [`Photo`] back into an `image` buffer.
-pub fn photo_to_dynamic(photo: &Photo) -> DynamicImage {
+pub(crate) fn photo_to_dynamic(photo: &Photo) -> DynamicImage {
     let (w, h) = (photo.layout.width as u32, photo.layout.height as u32);
     let ch = photo.layout.channels;
     let bad = "photo buffer does not match its layout";
@@ -703,7 +705,7 @@ pub fn write_atomic(photo: &Photo, path: &Path, settings: EncodeSettings) -> Res
 
 /// Like [`write_atomic`], and carries `meta` into the output as far as its format allows (see
 /// [`crate::io::metadata`]). Returns what could not be carried, each a short sentence; that never fails the write.
-pub fn write_atomic_with_metadata(
+pub(crate) fn write_atomic_with_metadata(
     photo: &Photo,
     path: &Path,
     settings: EncodeSettings,
@@ -729,7 +731,7 @@ pub fn write_atomic_with_metadata(
 }
 
 /// Atomically create `path` from what `fill` writes: temp file in the same folder, sync, rename.
-pub fn write_with(
+pub(crate) fn write_with(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<&File>) -> Result<()>,
 ) -> Result<()> {
@@ -768,7 +770,7 @@ pub fn write_with(
 }
 
 /// Save a raster in `[0, 1]` as a 16-bit PNG (atomically).
-pub fn save_raster_png16(raster: &Raster, path: &Path) -> Result<()> {
+pub(crate) fn save_raster_png16(raster: &Raster, path: &Path) -> Result<()> {
     let photo = Photo {
         layout: raster.layout(),
         samples: Samples::U16(raster.to_u16()),
@@ -778,17 +780,9 @@ pub fn save_raster_png16(raster: &Raster, path: &Path) -> Result<()> {
 }
 
 /// Load an image as a normalised raster (for a saved scatter image).
-pub fn load_raster(path: &Path) -> Result<Raster> {
+pub(crate) fn load_raster(path: &Path) -> Result<Raster> {
     let photo = decode(path)?;
     Ok(Raster::from_photo(&photo))
-}
-
-/// Bit depth a format can hold for a given input depth (JPEG only holds 8 bits).
-pub fn output_depth(format: ImageFormat, input: BitDepth) -> BitDepth {
-    match format {
-        ImageFormat::Jpeg => BitDepth::Eight,
-        _ => input,
-    }
 }
 
 #[cfg(test)]

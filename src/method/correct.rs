@@ -69,7 +69,7 @@ pub struct Blend<'a> {
     /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`crate::method::noise::Blended`]);
     /// `None`: no blend, `A = (I − k·S)/F`.
     pub fields: Option<&'a Blended>,
-    /// `k`: the scale of `S`, one per channel ([`crate::method::refine::backscatter_scale`]).
+    /// `k`: the scale of `S`, one per channel (`backscatter_scale`).
     pub scatter_scale: &'a [f32],
 }
 

@@ -2,8 +2,8 @@
 //! corrected once the window around them is complete.
 //!
 //! ```
-//! use abysslight::method::engine::{Engine, Params};
-//! use abysslight::method::raster::{Layout, Photo, Samples};
+//! use abysslight::{Engine, Params};
+//! use abysslight::{Layout, Photo, Samples};
 //!
 //! let layout = Layout { width: 32, height: 24, channels: 3 };
 //! let photo = |level: u8| Photo { layout, samples: Samples::U8(vec![level; 32 * 24 * 3]), alpha: None };
@@ -95,7 +95,7 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1000.0
 }
 
-/// The method of Köser et al. on a stream of photos (see the [module documentation](self)).
+/// The method of Köser et al. on a stream of photos (see the module documentation).
 pub struct Engine<T> {
     params: Params,
     /// `S` at full resolution, prepared for the correction pass.
@@ -305,6 +305,7 @@ impl<T> Engine<T> {
 
     /// Check a photo against the mission's size (the first photo sets it).
     fn accept(&mut self, photo: &Photo) -> Result<()> {
+        photo.check()?;
         match self.layout {
             Some(l) if l != photo.layout => Err(Error::Mismatch {
                 path: Default::default(),

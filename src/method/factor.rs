@@ -22,13 +22,13 @@ pub const AUTO_MAX_BLOCK: usize = 8;
 pub const AUTO_MIN_BLOCK: usize = 4;
 
 /// The block size `K` that `--downsample auto` takes for photos of `width`×`height`: about
-/// [`AUTO_BLOCKS_ACROSS`] blocks across the longer side, from [`AUTO_MIN_BLOCK`] to [`AUTO_MAX_BLOCK`] pixels.
+/// `AUTO_BLOCKS_ACROSS` blocks across the longer side, from `AUTO_MIN_BLOCK` to `AUTO_MAX_BLOCK` pixels.
 pub fn auto_block(width: usize, height: usize) -> usize {
     (width.max(height) / AUTO_BLOCKS_ACROSS).clamp(AUTO_MIN_BLOCK, AUTO_MAX_BLOCK)
 }
 
 /// `F = (M − S_low) / C` per channel (`S_low = 0` when there is no scatter estimate). Not floored: the floor is
-/// applied per full-resolution pixel in [`crate::method::correct`].
+/// applied per full-resolution pixel in `correct`.
 pub fn factor(m: &Raster, s_low: Option<&Raster>, colour: &[f32]) -> Raster {
     let c = m.channels;
     assert_eq!(colour.len(), c, "one seafloor colour component per channel");

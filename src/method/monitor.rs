@@ -70,9 +70,9 @@ pub enum Flag {
     /// `F` holds the scene instead of only the lighting: the window holds too little seafloor at some pixels, or
     /// the camera hardly moves.
     SceneInFactor {
-        /// Fine structure of `F` (see [`roughness`]).
+        /// Fine structure of `F` (its roughness).
         roughness: f32,
-        /// Share of the photo's fine structure left after the correction (see [`PhotoFit`]).
+        /// Share of the photo's fine structure left after the correction (see `PhotoFit`).
         texture_kept: f32,
     },
     /// The whole photo is brighter or darker than its window predicts while the lighting pattern stays: an
@@ -179,7 +179,7 @@ pub struct Health {
     /// only the factor-image figures were observed).
     pub level: f32,
     /// Share of the photo's fine structure (texture) left after the correction: about 1 when `F` is smooth,
-    /// small when `F` copies the scene (see [`PhotoFit`]).
+    /// small when `F` copies the scene (see `PhotoFit`).
     pub texture_kept: f32,
     /// Mean relative change of `F` from the previous photo.
     pub factor_change: f32,
@@ -187,11 +187,11 @@ pub struct Health {
     /// channel below the average share in units of the average) against what the mission so far predicts from
     /// `F`'s overall level (altitude changes the level and, through attenuation, the colour together).
     pub colour_shift: f32,
-    /// Fine structure in `F` (see [`roughness`]): lights make smooth patterns, a window short of seafloor leaves
+    /// Fine structure in `F` (its roughness): lights make smooth patterns, a window short of seafloor leaves
     /// the scene in `F`.
     pub roughness: f32,
     /// Shift from the previous photo, in blocks, found by phase correlation of the block medians' texture
-    /// (see [`crate::eval::register`]); `None` for the first photo or images too small.
+    /// (see `register`); `None` for the first photo or images too small.
     pub motion: Option<f32>,
     /// Correlation of the two texture images at that shift (how sure the match is).
     pub motion_ncc: Option<f32>,
@@ -204,6 +204,7 @@ pub struct Health {
 
 /// Share of blocks of `low` (the photo's own block medians, linear) whose ratio to `M − S` (i.e. the corrected
 /// value relative to `C`) is off by more than `deviation`. `NaN` (masked) blocks are not counted.
+#[cfg(test)]
 pub fn contamination(
     low: &Raster,
     m_minus_s: &Raster,
@@ -478,6 +479,7 @@ pub const MIN_ROUGHNESS_SIZE: (usize, usize) = (32, 24);
 /// makes the output look flat. Pixels below a tenth of the 99th percentile (unlit corners) are not counted.
 /// Factor images smaller than [`MIN_ROUGHNESS_SIZE`] get 0: on a handful of pixels the curvature of the light
 /// cone itself cannot be told from texture.
+#[cfg(test)]
 pub fn roughness(f: &Raster) -> f32 {
     Scratch::default().roughness(f)
 }

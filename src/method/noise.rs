@@ -149,7 +149,7 @@ fn stats<T: Sample>(v: &[T], l: Layout, k: usize, stride: usize, curve: &Curve) 
 }
 
 impl NoiseModel {
-    /// Fit the model per channel to block statistics (from [`block_stats`]) and `F` at block resolution. The noise
+    /// Fit the model per channel to block statistics (from `block_stats`) and `F` at block resolution. The noise
     /// grows with the light a sample gathers (shot noise: a red channel's noise follows its backscatter across the
     /// frame), so `σ²` is a line in the block's level `L`: over the dimmest 10 % of the blocks (by `F`), `σ²` is the
     /// median of `diag − τ_d²F²` at their median level, and the slope is the difference between the medians of
@@ -275,7 +275,7 @@ impl NoiseModel {
         noise_line(s2, b, l0, l)
     }
 
-    /// The model with each channel's texture `τ_c` at most [`TEXTURE_SPREAD`] times the median channel's relative
+    /// The model with each channel's texture `τ_c` at most `TEXTURE_SPREAD` times the median channel's relative
     /// texture `τ/C` (times its own `C`), counting the channels whose texture was measured (`τ² > 0`). A channel
     /// starved of light measures its texture as `(var − σ²)/F²` with a tiny `F`: a noise level that differs by a
     /// few per cent between its dimmest blocks (where `σ²` is read) and its brightest (shot noise on a strong
@@ -505,7 +505,7 @@ pub const LEVEL_MIN: f32 = 1e-3;
 /// turning red.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Blended {
-    /// `A_low` per block and channel (linear, at least [`LEVEL_MIN`]).
+    /// `A_low` per block and channel (linear, at least `LEVEL_MIN`).
     pub level: Raster,
     /// `w` per block and channel.
     pub weight: Raster,

@@ -221,6 +221,7 @@ impl SpotPath {
     }
 
     /// Photos counted.
+    #[cfg(test)]
     pub fn photos(&self) -> usize {
         self.photos
     }

@@ -118,7 +118,7 @@ pub struct Params {
     /// Photos in the sliding window, `n` (odd). Default: 7.
     pub window: usize,
     /// Contamination rate `c`, the share of non-seafloor pixels, when known: with [`Method::Abyss`] the window's
-    /// `M` is its `(1 + c)/2` quantile ([`window_quantile`]) and the near window is the 5 % window of `c`. It does
+    /// `M` is its `(1 + c)/2` quantile (`window_quantile`) and the near window is the 5 % window of `c`. It does
     /// not change `window` (`--contamination` chooses the window in
     /// [`Options::params`](crate::run::options::Options::params)). Default: none.
     pub contamination: Option<f64>,
@@ -145,26 +145,26 @@ pub struct Params {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Steps {
     /// Fill the window's `M` where bright spots that move — laser dots, highlights — held more than half of the
-    /// window at a block ([`crate::method::outliers`]). Default: false.
+    /// window at a block (`outliers`). Default: false.
     pub bright_spots: bool,
     /// Photos in the near window whose `M`'s smooth shape bends the window's
-    /// ([`crate::method::refine::near_shape`]); `Some(0)`, or a length not shorter than `window`: off; `None` is
+    /// (`near_shape`); `Some(0)`, or a length not shorter than `window`: off; `None` is
     /// `auto`: [`crate::method::window::near_window`]. Default: `None` (auto: 5 inside the default window).
     pub near_window: Option<usize>,
     /// The scale of the water-column `S` for the survey photos; `None` estimates it per window
-    /// ([`crate::method::refine::backscatter_scale`]). Default: `Some(1.0)` (`S` as measured: the estimate is
+    /// (`backscatter_scale`). Default: `Some(1.0)` (`S` as measured: the estimate is
     /// biased low on red-starved channels).
     pub backscatter_scale: Option<f32>,
     /// One robust gain per photo and channel against its window's `M`. Default: true.
     pub photo_gain: bool,
     /// The floor of `F` as a share of the photo's lit level, with a smooth hand-over
-    /// ([`crate::method::refine::soft_floor`]). Default: 0.001.
+    /// (`soft_floor`). Default: 0.001.
     pub relative_floor: f32,
     /// Blend dim regions towards their local level by their signal-to-noise ratio instead of amplifying noise
-    /// ([`crate::method::noise`]). Default: true.
+    /// (`noise`). Default: true.
     pub denoise: bool,
     /// With `denoise`: even out the blend's block levels across light levels
-    /// ([`crate::method::noise::level_by_light`]), so dim regions are not left darker than lit ones. Default: true.
+    /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
 }
 
@@ -205,7 +205,7 @@ pub struct Facts {
     pub size: Option<(usize, usize)>,
     /// Static pixels are masked (`--mask`, `--mask-auto`).
     pub masked: bool,
-    /// The curve the photos' files declare (`--transfer auto`: [`crate::io::transfer::assume`]), when read.
+    /// The curve the photos' files declare (`--transfer auto`: `assume`), when read.
     pub transfer: Option<Transfer>,
 }
 
@@ -278,7 +278,7 @@ impl Params {
         }
     }
 
-    /// The quantile the window takes as `M` ([`window_quantile`]).
+    /// The quantile the window takes as `M` (`window_quantile`).
     pub fn window_quantile(&self) -> f32 {
         window_quantile(self.method, self.contamination) as f32
     }

@@ -148,6 +148,42 @@ pub struct Photo {
 }
 
 impl Photo {
+    /// A caller's photo as the method needs it: a size of at least 1×1, 1 to 4 channels, as many samples as the
+    /// layout says, and an alpha plane (if any) of one sample per pixel of the same depth. The engine and
+    /// [`crate::Scatter::from_frames`] refuse other photos with this error rather than panic on them.
+    pub fn check(&self) -> Result<(), crate::Error> {
+        let l = self.layout;
+        let pixels = l.width.checked_mul(l.height);
+        let wanted = pixels.and_then(|p| p.checked_mul(l.channels));
+        let problem = if l.width == 0 || l.height == 0 {
+            Some(format!("the photo is {l}: no pixels"))
+        } else if !(1..=4).contains(&l.channels) {
+            Some(format!(
+                "the photo has {} channels (1 to 4 are taken)",
+                l.channels
+            ))
+        } else if wanted != Some(self.samples.len()) {
+            Some(format!(
+                "the photo is {l} but holds {} samples",
+                self.samples.len()
+            ))
+        } else if let Some(a) = &self.alpha {
+            (pixels != Some(a.len()) || a.depth() != self.depth()).then(|| {
+                format!(
+                    "its alpha plane holds {} {}-bit samples for {l}",
+                    a.len(),
+                    a.depth().bits()
+                )
+            })
+        } else {
+            None
+        };
+        match problem {
+            Some(reason) => Err(crate::Error::Usage(reason)),
+            None => Ok(()),
+        }
+    }
+
     /// Bit depth of the samples.
     pub fn depth(&self) -> BitDepth {
         self.samples.depth()

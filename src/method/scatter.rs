@@ -55,6 +55,12 @@ impl Scatter {
     /// `S` from water-column frames in memory: the per-sample median. Every frame must have the first one's size
     /// and bit depth. `None` when `frames` is empty.
     pub fn from_frames(frames: &[Photo]) -> Result<Option<Scatter>> {
+        for (i, p) in frames.iter().enumerate() {
+            p.check().map_err(|e| Error::Mismatch {
+                path: PathBuf::from(format!("water-column frame {i}")),
+                reason: e.to_string(),
+            })?;
+        }
         if let Some(first) = frames.first() {
             if let Some((i, p)) = frames
                 .iter()

@@ -98,7 +98,7 @@ pub fn p_quantile_dark(n: usize, q: f64, c: f64) -> f64 {
 /// The smallest odd window whose `q` quantile breaks down ([`p_quantile_dark`]) with probability at most `risk`
 /// at contamination `c`, counting `photos_per_sample` photos for one independent sample (a camera that moves
 /// less than a dark object's extent between photos sees it again: its photos are not independent samples).
-/// `None` when no window up to [`MAX_WINDOW`] photos does.
+/// `None` when no window up to `MAX_WINDOW` photos does.
 ///
 /// With the `(1 + c)/2` quantile the window needs far fewer photos than the median's rule ([`choose_window`]):
 /// at `c = 0.4`, 21 instead of 129 for a 1 % risk.
@@ -136,12 +136,12 @@ pub const NEAR_RISK: f64 = 0.05;
 pub const NEAR_MIN: usize = 5;
 
 /// The near window of `--method abyss` for a mission whose window is `n`: with a contamination rate `c`, the
-/// smallest odd window with `P_half ≤` [`NEAR_RISK`], at least [`NEAR_MIN`]; without one, [`NEAR_MIN`]. `None`
+/// smallest odd window with `P_half ≤` `NEAR_RISK`, at least `NEAR_MIN`; without one, `NEAR_MIN`. `None`
 /// when that is not shorter than `n` (nothing to follow that the window does not already follow).
 ///
 /// The window's `n` is chosen so that its median almost never breaks; over that many photos the lights'
 /// footprint moves with the vehicle's altitude and roll. The near window's `M` follows it, and only its smooth
-/// shape is taken ([`crate::method::refine::near_shape`]), so its more frequent local breakdowns are outvoted.
+/// shape is taken (`near_shape`), so its more frequent local breakdowns are outvoted.
 pub fn near_window(n: usize, contamination: Option<f64>) -> Option<usize> {
     let near = match contamination {
         Some(c) => choose_window(c, NEAR_RISK).map_or(n, |w| w.n.max(NEAR_MIN)),

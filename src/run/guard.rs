@@ -84,15 +84,7 @@ fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
 /// a new file while an older one still holds the removed one.
 #[derive(Debug)]
 pub struct RunLock {
-    path: PathBuf,
     _held: Vec<std::fs::File>,
-}
-
-impl RunLock {
-    /// The lock file held.
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
 }
 
 fn lock_name(opts: &Options) -> String {
@@ -190,7 +182,7 @@ pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
     check_options(opts, work_dir, &fp)?;
     drop(options_lock);
     record_holder(held.last().unwrap_or(&held[0]), &body);
-    Ok(RunLock { path, _held: held })
+    Ok(RunLock { _held: held })
 }
 
 /// Compare the options with those recorded in `work_dir/options.json` (or record them).
@@ -322,8 +314,8 @@ mod tests {
         drop((s2, s3));
         // Whatever a lock file says (a killed run's pid 1 from a container), only a held lock refuses.
         std::fs::write(work.join("lock"), r#"{"pid": 1, "options": {}}"#).unwrap();
-        let again = acquire(&o, &work).unwrap();
-        assert!(std::fs::read_to_string(again.path())
+        let _again = acquire(&o, &work).unwrap();
+        assert!(std::fs::read_to_string(work.join("lock"))
             .unwrap()
             .contains(&std::process::id().to_string()));
     }

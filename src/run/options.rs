@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 pub use crate::method::baseline::Method;
+pub use crate::method::params::SeafloorColour;
 use crate::method::params::{Params, Steps};
-pub use crate::method::params::{SeafloorColour, DEFAULT_GREY};
 pub use crate::method::transfer::Transfer;
 use crate::method::window::{choose_window, p_half, WindowChoice};
 
@@ -91,7 +91,7 @@ pub struct Options {
     #[serde(default, deserialize_with = "number_or_auto")]
     pub downsample: Option<usize>,
     /// `method = abyss`: photos in the near window, whose `M`'s smooth shape bends the window's so `F` follows the
-    /// lights as the vehicle's altitude and roll change ([`crate::method::refine::near_shape`]); 0 turns it off, and
+    /// lights as the vehicle's altitude and roll change (`near_shape`); 0 turns it off, and
     /// a near window not shorter than the window is not used. `None` (`auto`):
     /// [`crate::method::window::near_window`] (the 5 % window of `contamination`, at least 5; 5 without one).
     /// Default: `None` (auto). In a TOML file a number or `"auto"`.
@@ -130,7 +130,7 @@ pub struct Options {
     pub shard: Option<Shard>,
     /// How stored values relate to light: `srgb`, `linear` or `gamma:G`; estimation and correction run in linear
     /// light. `None` (`auto`) takes the curve the first survey photo's file declares (PNG `cICP`/`sRGB`/`gAMA`, ICC
-    /// profile, EXIF `ColorSpace`; a JPEG without any is sRGB, anything else linear: [`crate::io::transfer`]); the
+    /// profile, EXIF `ColorSpace`; a JPEG without any is sRGB, anything else linear: `transfer`); the
     /// run says what it assumed and why, and records the curve in its report. Default: `None` (auto). In a TOML
     /// file a curve or `"auto"`.
     #[serde(with = "curve_or_auto")]
@@ -143,13 +143,13 @@ pub struct Options {
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
     /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
-    /// [`crate::method::refine`]), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
+    /// `refine`), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
     /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
     pub method: Method,
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
     pub degree: usize,
     /// Watch the survey folder during a dive: correct photos as they arrive (each once the `n/2` photos after it
-    /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See [`crate::run::watch`].
+    /// are complete) until stopped (SIGINT/SIGTERM in the CLI) or `idle_timeout`. See `watch`.
     /// Default: false.
     pub watch: bool,
     /// With `watch`: stop after this many seconds without a new or changed file. Default: none (until stopped).
@@ -162,7 +162,7 @@ pub struct Options {
     /// Where to write the run report (JSON). Default: `<out>/_abysslight/report.json`; none when `out` is `-`.
     pub report: Option<PathBuf>,
     /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
-    /// with a smooth hand-over ([`crate::method::refine::soft_floor`]). Default: 0.001 (measured on the dive matrix,
+    /// with a smooth hand-over (`soft_floor`). Default: 0.001 (measured on the dive matrix,
     /// docs/evaluation.md).
     #[serde(default = "default_relative_floor")]
     pub relative_floor: f32,
@@ -171,21 +171,21 @@ pub struct Options {
     pub photo_gain: bool,
     /// `method = abyss`: scale of the water-column `S` for the survey photos (the water column is deeper than the
     /// camera's altitude, so its backscatter can be stronger than the survey's); `None` (`auto`) estimates it per
-    /// window from how the seafloor's contrast follows the light ([`crate::method::refine::backscatter_scale`]).
+    /// window from how the seafloor's contrast follows the light (`backscatter_scale`).
     /// Default: 1, `S` as measured (the estimate is biased low on red-starved channels, which tints dark objects
     /// red; docs/evaluation.md).
     #[serde(default = "default_scale")]
     pub backscatter_scale: Option<f32>,
     /// `method = abyss`: blend dim regions towards their local level by their signal-to-noise ratio (measured on
-    /// each photo) instead of amplifying noise ([`crate::method::noise`]). Default: true.
+    /// each photo) instead of amplifying noise (`noise`). Default: true.
     #[serde(default = "default_true")]
     pub denoise: bool,
     /// `method = abyss` with `denoise`: even out the blend's block levels across light levels, so that dim regions
-    /// come out as bright as lit ones ([`crate::method::noise::level_by_light`]). Default: true.
+    /// come out as bright as lit ones (`level_by_light`). Default: true.
     #[serde(default = "default_true")]
     pub level_by_light: bool,
     /// `method = abyss`: fill the window's `M` where bright spots that move — laser dots, specular highlights —
-    /// held more than half of the window at a block ([`crate::method::outliers`]). Default: false (it keeps the
+    /// held more than half of the window at a block (`outliers`). Default: false (it keeps the
     /// dots at their full brightness, which raises the overlap difference: docs/evaluation.md).
     #[serde(default)]
     pub bright_spots: bool,
@@ -445,13 +445,13 @@ pub mod limits {
 
 impl Options {
     /// The block size `K`: `downsample`, or the paper's 8 where `auto` has not been resolved (a run resolves it
-    /// from the photos' size before it starts: [`crate::run::plan::Plan::downsample`]).
+    /// from the photos' size before it starts: `Plan::downsample`).
     pub fn block(&self) -> usize {
         self.downsample
             .unwrap_or(crate::method::factor::AUTO_MAX_BLOCK)
     }
 
-    /// The quantile the window takes over its photos ([`crate::method::params::window_quantile`]).
+    /// The quantile the window takes over its photos (`window_quantile`).
     pub fn window_quantile(&self) -> f64 {
         crate::method::params::window_quantile(self.method, self.contamination)
     }
@@ -651,7 +651,7 @@ mod tests {
         assert!((h.0[2] - 96.0 / 255.0).abs() < 1e-6);
         assert_eq!(
             "grey".parse::<SeafloorColour>().unwrap().0,
-            [DEFAULT_GREY; 3]
+            [crate::method::params::DEFAULT_GREY; 3]
         );
         assert_eq!("gray:0.5".parse::<SeafloorColour>().unwrap().0, [0.5; 3]);
         let b: SeafloorColour = "138,117,96".parse().unwrap();

@@ -51,7 +51,7 @@ pub struct Plan {
     /// What the user should know before the run starts.
     pub warnings: Vec<String>,
     /// The write gate of the run (src/io/gate.rs), open while the plan lives.
-    pub gate: crate::io::gate::Gate,
+    pub _gate: crate::io::gate::Gate,
 }
 
 impl Plan {
@@ -157,7 +157,7 @@ impl Plan {
             skipped_existing,
             work_dir,
             warnings,
-            gate,
+            _gate: gate,
         })
     }
 

@@ -1,12 +1,13 @@
 //! The run report (`_abysslight/report.json`) and the [`Progress`] hooks a front end uses to show a run.
 
+pub use crate::method::monitor::{Flag, Health, Summary};
+pub use crate::method::window::WindowChoice;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
 use crate::error::Error;
 use crate::method::raster::Layout;
-use crate::method::window::WindowChoice;
 use crate::run::options::Options;
 
 /// Receives what happens during a run. The library prints nothing itself; the CLI draws a progress bar on a

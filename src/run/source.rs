@@ -53,12 +53,8 @@ pub struct FileList {
 }
 
 impl FileList {
-    /// One decoder thread.
-    pub fn new(items: Vec<Item>) -> Self {
-        Self::parallel(items, 1)
-    }
-
     /// `decoders` decoder threads (at least one).
+    #[cfg(test)]
     pub fn parallel(items: Vec<Item>, decoders: usize) -> Self {
         Self::expecting(items, decoders, None)
     }

@@ -7,8 +7,8 @@ use abysslight::eval::evaluate::{
 };
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::{Exposure, Rig, Simulation, Water};
-use abysslight::method::baseline::Method;
-use abysslight::method::transfer::Transfer;
+use abysslight::Method;
+use abysslight::Transfer;
 use abysslight::{correct_mission, Options, Raster, Silent};
 
 /// A small abyssal dive like a02 of the matrix: aft lights, clear ocean water (red ~0.4/m), 6 m ± 0.6 m,

@@ -3,8 +3,8 @@
 use crate::common;
 
 use abysslight::io::decode;
-use abysslight::method::raster::{BitDepth, Samples};
 use abysslight::{correct_mission, Options, Silent};
+use abysslight::{BitDepth, Samples};
 use common::*;
 
 fn run(opts: &Options) -> abysslight::Report {
@@ -211,7 +211,7 @@ fn short_mission_uses_all_photos_and_warns() {
 /// pixels), the paper's 8 for the paper as published; a given size is kept. The report records what was used.
 #[test]
 fn automatic_block_size_follows_the_photo_size_and_the_method() {
-    use abysslight::run::options::Method;
+    use abysslight::Method;
     let cases: [(usize, usize, Method, Option<usize>, usize); 8] = [
         (96, 24, Method::Abyss, None, 4),
         (97, 24, Method::Abyss, None, 8), // with --mask-auto (below)

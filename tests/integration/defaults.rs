@@ -5,11 +5,11 @@
 use std::path::Path;
 use std::process::Command;
 
-use abysslight::method::engine::Engine;
-use abysslight::method::params::{Params, Steps};
-use abysslight::method::raster::{Photo, Samples};
-use abysslight::method::transfer::Transfer;
-use abysslight::run::options::{Method, Options};
+use abysslight::Engine;
+use abysslight::Transfer;
+use abysslight::{Method, Options};
+use abysslight::{Params, Steps};
+use abysslight::{Photo, Samples};
 use abysslight::{Scatter, SeafloorColour};
 
 fn run(args: &[&str], cwd: &Path) {
@@ -286,7 +286,7 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
 
 #[test]
 fn auto_settings_resolve_in_one_place() {
-    use abysslight::method::params::{BlockRule, Facts};
+    use abysslight::{BlockRule, Facts};
     let p = Params::default();
     let facts = |size, masked| Facts {
         size,
@@ -348,7 +348,7 @@ fn auto_settings_resolve_in_one_place() {
     let short = Params { window: 5, ..p };
     assert_eq!(short.near_window(), None);
     // The engine resolves the mask rule too: a masked mission in memory keeps the paper's 8.
-    let mask = abysslight::method::mask::Mask {
+    let mask = abysslight::Mask {
         width: 320,
         height: 240,
         ignore: vec![false; 320 * 240],

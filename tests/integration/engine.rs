@@ -3,10 +3,10 @@
 
 use abysslight::eval::evaluate::albedo_error;
 use abysslight::eval::simulate::Simulation;
-use abysslight::method::engine::{Engine, Params, Use};
-use abysslight::method::raster::{Layout, Photo, Raster, Samples};
-use abysslight::method::scatter::Scatter;
 use abysslight::Error;
+use abysslight::Scatter;
+use abysslight::{Engine, Params, Use};
+use abysslight::{Layout, Photo, Raster, Samples};
 
 fn small_dive(seed: u64, frames: usize) -> abysslight::eval::simulate::Dive {
     Simulation {
@@ -53,7 +53,7 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
         // Params::default() blocks are auto, as the command line's: 4 for photos 128 wide.
         assert_eq!(
             c.factor.width,
-            128 / abysslight::method::factor::auto_block(128, 96)
+            128 / abysslight::kernels::auto_block(128, 96)
         );
         assert!(c.health.contamination < 0.4, "{:?}", c.health);
     }
@@ -158,7 +158,7 @@ fn engine_and_folder_run_give_the_same_photos() {
         Params {
             window: 5,
             // The folder run's `--downsample auto` for photos of this size (the engine takes a block size).
-            downsample: abysslight::method::factor::auto_block(96, 64),
+            downsample: abysslight::kernels::auto_block(96, 64),
             ..Params::default()
         },
         scatter.as_ref(),
@@ -190,7 +190,7 @@ fn engine_and_folder_run_give_the_same_photos() {
 /// vehicle bounced).
 #[test]
 fn a_wandering_laser_dot_leaves_no_stain_where_it_is_not() {
-    use abysslight::method::baseline::Method;
+    use abysslight::Method;
     let (w, h, frames) = (128usize, 96usize, 15usize);
     let (ay, ax, bx, r) = (48.0f32, 40.0f32, 56.0f32, 3.5f32);
     let photo = |k: usize| {
@@ -250,7 +250,7 @@ fn a_wandering_laser_dot_leaves_no_stain_where_it_is_not() {
                 method: Method::Abyss,
                 window: 9,
                 downsample: 4,
-                steps: abysslight::method::params::Steps {
+                steps: abysslight::Steps {
                     bright_spots,
                     ..Default::default()
                 },

@@ -3,13 +3,15 @@
 use crate::common;
 
 use abysslight::io::decode;
-use abysslight::method::mask::Mask;
-use abysslight::method::raster::{Photo, Samples};
+use abysslight::Mask;
 use abysslight::{correct_mission, Options, Silent};
+use abysslight::{Photo, Samples};
 use common::*;
 
 const W: usize = 128;
 const H: usize = 96;
+/// Blocks around a bright spot that `--mask-auto` also leaves out (the library's rule: two on each side).
+const SPOT_GROW: usize = 2;
 
 /// Overlay: a text box in the top-left corner (static pattern plus digits that change every frame) and three
 /// laser dots.
@@ -199,7 +201,7 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
 /// half of it, so without a mask the window's median takes the dot into `F` at A (a dark stain there in the photos
 /// whose dot is at B) and, more faintly, at B. `--mask-auto` finds A as a static pixel (it is there in most
 /// photos of every third of the mission) and B as a place bright spots come back to more often than chance
-/// ([`abysslight::method::outliers::SpotPath`]; without it B keeps its stain, checked), leaves both out of every
+/// (the bright spots' path; without it B keeps its stain, checked), leaves both out of every
 /// median, and no stain is left at either.
 #[test]
 fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
@@ -282,7 +284,7 @@ fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
                 );
             }
             // Nothing else: a spot's blocks (8 pixels) and the two around it.
-            let k = 8 * (1 + abysslight::method::outliers::SPOT_GROW);
+            let k = 8 * (1 + SPOT_GROW);
             for i in (0..W * H).filter(|&i| found.ignore[i]) {
                 let (x, y) = (i % W, i / W);
                 assert!(
@@ -346,7 +348,7 @@ fn seafloor_colour_change_half_way_is_flagged() {
             .health
             .flags
             .iter()
-            .any(|f| matches!(f, abysslight::method::monitor::Flag::ColourShift { .. })),
+            .any(|f| matches!(f, abysslight::report::Flag::ColourShift { .. })),
         "{:?}",
         r.frames[25].health.flags
     );

@@ -240,7 +240,7 @@ fn truncated_and_zero_padded_jpegs_are_errors_naming_the_file() {
     let d = tempfile::tempdir().unwrap();
     for restart in [None, Some(4)] {
         let good = jpeg(96, 64, restart);
-        abysslight::io::jpeg_check::check(&good).unwrap();
+        abysslight::io::check_jpeg(&good).unwrap();
         let p = d.path().join("good.jpg");
         std::fs::write(&p, &good).unwrap();
         assert!(decode(&p).is_ok());
@@ -306,8 +306,7 @@ fn real_jpegs_pass_and_their_truncations_fail() {
     for p in files.iter().step_by(step) {
         let bytes = std::fs::read(p).unwrap();
         let t = std::time::Instant::now();
-        abysslight::io::jpeg_check::check(&bytes)
-            .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        abysslight::io::check_jpeg(&bytes).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         t_check += t.elapsed().as_secs_f64();
         if step == 1 {
             // The measurement for the report: the check's share of a whole decode (which includes it).
@@ -325,7 +324,7 @@ fn real_jpegs_pass_and_their_truncations_fail() {
         }
         for bad in bad {
             assert!(
-                abysslight::io::jpeg_check::check(&bad).is_err(),
+                abysslight::io::check_jpeg(&bad).is_err(),
                 "{}: truncation not noticed",
                 p.display()
             );
@@ -586,10 +585,10 @@ proptest! {
         let o = Options { window: Some(window), downsample: Some(downsample), factor_floor: floor, idle_timeout: Some(idle),
                           poll_interval: poll, watch: true, ..Options::default() };
         if o.validate().is_ok() {
-            prop_assert!(window % 2 == 1 && window <= abysslight::run::options::limits::WINDOW);
-            prop_assert!((1..=abysslight::run::options::limits::DOWNSAMPLE).contains(&downsample));
+            prop_assert!(window % 2 == 1 && window <= abysslight::limits::WINDOW);
+            prop_assert!((1..=abysslight::limits::DOWNSAMPLE).contains(&downsample));
             prop_assert!(floor > 0.0 && floor <= 1.0);
-            prop_assert!((0.0..=abysslight::run::options::limits::IDLE_TIMEOUT_S).contains(&idle));
+            prop_assert!((0.0..=abysslight::limits::IDLE_TIMEOUT_S).contains(&idle));
             prop_assert!(poll >= 1);
             // What the watch does with them must not panic.
             let _ = std::time::Duration::from_secs_f64(idle);

@@ -6,9 +6,9 @@
 
 use std::path::Path;
 
-use abysslight::eval::bench::noisy_photo;
+use abysslight::eval::noisy_photo;
 use abysslight::io::{self, EncodeSettings, Subsampling};
-use abysslight::method::raster::{Layout, Photo, Samples};
+use abysslight::{Layout, Photo, Samples};
 
 /// Photos of odd and even sizes, RGB and grey, with the bench's texture and noise; each with the settings it is
 /// encoded with.

@@ -4,8 +4,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use abysslight::eval::bench::synthetic_photo;
-use abysslight::io::jpeg::{parse, JpegCoding};
+use abysslight::eval::synthetic_photo;
+use abysslight::io::{jpeg_coding as parse, JpegCoding};
 use abysslight::io::{write_atomic, EncodeSettings, Subsampling};
 use abysslight::{correct_mission, Options, Silent};
 

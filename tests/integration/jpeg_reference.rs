@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use abysslight::method::raster::Samples;
+use abysslight::Samples;
 
 fn reference(data: &[u8], channels: usize) -> Vec<u8> {
     let format = if channels == 1 {

@@ -9,8 +9,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use abysslight::io::decode;
-use abysslight::io::pnm::{decode_frame, FrameSplitter};
-use abysslight::method::raster::{Layout, Photo, Samples};
+use abysslight::io::{decode_frame, FrameSplitter};
+use abysslight::{Layout, Photo, Samples};
 use common::*;
 
 fn bin() -> Command {

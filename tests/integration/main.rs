@@ -4,6 +4,7 @@
 mod common;
 
 mod abyss_quality;
+mod api;
 mod batch;
 mod cli;
 mod correct_e2e;

@@ -6,7 +6,7 @@ use crate::common;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use abysslight::run::merge::merge_shards;
+use abysslight::merge_shards;
 use abysslight::{correct_mission, Options, Photo, Shard, Silent};
 use common::*;
 use serde_json::Value;
@@ -50,7 +50,7 @@ fn report(dir: &Path) -> Value {
 /// `photo` twice as bright: an exposure jump the monitor flags.
 fn brighter(photo: &Photo) -> Photo {
     let mut p = photo.clone();
-    if let abysslight::method::raster::Samples::U8(v) = &mut p.samples {
+    if let abysslight::Samples::U8(v) = &mut p.samples {
         for s in v.iter_mut() {
             *s = s.saturating_mul(2);
         }
@@ -284,7 +284,7 @@ fn a_cruise_is_corrected_dive_by_dive() {
         );
     }
     std::fs::create_dir_all(root.join("cruise/notes")).unwrap();
-    let dives = abysslight::run::cruise::find_dives(&root.join("cruise")).unwrap();
+    let dives = abysslight::cruise::find_dives(&root.join("cruise")).unwrap();
     let names: Vec<&str> = dives.iter().map(|d| d.name.as_str()).collect();
     assert_eq!(
         names,
@@ -296,8 +296,7 @@ fn a_cruise_is_corrected_dive_by_dive() {
         window: Some(5),
         ..Options::default()
     };
-    let results =
-        abysslight::run::cruise::correct_cruise(&base, &root.join("cruise"), &Silent).unwrap();
+    let results = abysslight::cruise::correct_cruise(&base, &root.join("cruise"), &Silent).unwrap();
     for (dive, r) in results {
         let r = r.unwrap();
         assert_eq!((r.corrected, r.scatter.frames), (9, 5), "{}", dive.name);
@@ -315,6 +314,6 @@ fn a_cruise_is_corrected_dive_by_dive() {
             outputs(&root.join("alone").join(&dive.name))
         );
     }
-    let e = abysslight::run::cruise::find_dives(&root.join("cruise/notes")).unwrap_err();
+    let e = abysslight::cruise::find_dives(&root.join("cruise/notes")).unwrap_err();
     assert!(e.to_string().contains("no dives"), "{e}");
 }

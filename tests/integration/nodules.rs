@@ -3,7 +3,7 @@
 
 use abysslight::eval::evaluate::{albedo_error_where, residual_pattern_where};
 use abysslight::eval::matrix;
-use abysslight::method::baseline::Method;
+use abysslight::Method;
 use abysslight::{correct_mission, Options, Silent};
 
 /// (albedo error, residual pattern) on the samples with signal of `dive` corrected with `opts` into `out`.

@@ -1,15 +1,12 @@
 //! The simulator, the metrics of `evaluate` (each against a hand-computed case) and the comparison of the
 //! correction methods on small simulated dives.
 
-use std::path::Path;
-
 use abysslight::eval::evaluate::{
-    albedo_error, consistency, evaluate, parse_placements, residual_pattern,
-    residual_pattern_where, EvalSettings,
+    albedo_error, consistency, evaluate, residual_pattern, residual_pattern_where, EvalSettings,
 };
 use abysslight::eval::simulate::Simulation;
-use abysslight::method::baseline::Method;
-use abysslight::method::raster::Raster;
+use abysslight::Method;
+use abysslight::Raster;
 use abysslight::{correct_mission, Options, Silent};
 
 fn translation(tx: f64, ty: f64) -> [f64; 9] {
@@ -112,23 +109,6 @@ fn consistency_by_hand() {
     assert!((c - 1.0).abs() < 1e-6, "{c}");
 }
 
-#[test]
-fn placement_file_formats_and_errors() {
-    let p = Path::new("placements.txt");
-    let v = parse_placements(
-        "# comment\nimg1.png 10 -5\n\nimg2.png 1 0 3 0 1 4 0 0 1  # homography\n",
-        p,
-    )
-    .unwrap();
-    assert_eq!(v.len(), 2);
-    assert_eq!(v[0].h, translation(10.0, -5.0));
-    assert_eq!(v[1].h, translation(3.0, 4.0));
-    for bad in ["img 1 2 3", "img a b", "img 0 0 0 0 0 0 0 0 0", ""] {
-        let e = parse_placements(bad, p).unwrap_err().to_string();
-        assert!(e.contains("placements.txt"), "{bad:?}: {e}");
-    }
-}
-
 fn small(seed: u64) -> Simulation {
     Simulation {
         frames: 20,
@@ -209,7 +189,7 @@ fn simulated_truth_placements_give_consistent_albedo() {
 /// ignores every pixel, or of another size, is an error naming it.
 #[test]
 fn an_evaluation_mask_leaves_pixels_out_of_the_consistency_only() {
-    use abysslight::method::mask::Mask;
+    use abysslight::Mask;
     let d = six_photo_dive();
     let mut half = Mask::empty(96, 72);
     for (i, m) in half.ignore.iter_mut().enumerate() {

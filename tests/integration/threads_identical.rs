@@ -3,9 +3,9 @@
 
 use std::path::Path;
 
-use abysslight::eval::bench::synthetic_photo;
+use abysslight::eval::synthetic_photo;
 use abysslight::io::{write_atomic, EncodeSettings};
-use abysslight::run::options::Transfer;
+use abysslight::Transfer;
 use abysslight::{correct_mission, Options, Silent};
 
 fn mission(dir: &Path) {

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use abysslight::io::{write_atomic, EncodeSettings};
-use abysslight::method::raster::{Layout, Photo, Samples};
+use abysslight::{Layout, Photo, Samples};
 
 /// xorshift64*: deterministic, dependency-free test randomness.
 pub struct Rng(u64);
