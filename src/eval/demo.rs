@@ -9,7 +9,7 @@ use image::{Rgb, RgbImage};
 
 use crate::error::{Error, Result};
 use crate::eval::evaluate::{evaluate, EvalSettings, Evaluation};
-use crate::eval::simulate::Simulation;
+use crate::eval::simulate::{Simulation, Truth};
 use crate::io::decode;
 use crate::method::baseline::Method;
 use crate::method::raster::Raster;
@@ -79,6 +79,27 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
         dive.display()
     ));
     let truth = sim.write(&dive)?;
+    let sets = correct_all(out, &dive, sim, progress)?;
+    progress.stage("scoring against the true albedo");
+    let evaluation = evaluate(&sets, Some(&dive), None, &EvalSettings::default())?;
+    let scores_md = save_scores(out, &evaluation)?;
+    let sheet = contact_sheet(out, &dive, &truth, &sets, &evaluation, sim)?;
+    Ok(DemoReport {
+        evaluation,
+        sheet,
+        scores_md,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Correct the simulated dive in `dive` with every method into `out/<method>/`: the sets to score, labelled,
+/// the raw photos first.
+fn correct_all(
+    out: &Path,
+    dive: &Path,
+    sim: &Simulation,
+    progress: &dyn Progress,
+) -> Result<Vec<(String, PathBuf)>> {
     let methods = [
         Method::Mean,
         Method::Polynomial,
@@ -100,8 +121,11 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
         crate::correct_mission(&opts, &crate::Silent)?;
         sets.push((m.to_string(), out.join(m.to_string())));
     }
-    progress.stage("scoring against the true albedo");
-    let evaluation = evaluate(&sets, Some(&dive), None, &EvalSettings::default())?;
+    Ok(sets)
+}
+
+/// Write the scores to `out/scores.json` and, as a table with its legend, `out/scores.md`; returns the latter.
+fn save_scores(out: &Path, evaluation: &Evaluation) -> Result<PathBuf> {
     let scores_json = out.join("scores.json");
     evaluation.save_json(&scores_json)?;
     let scores_md = out.join("scores.md");
@@ -110,7 +134,19 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
         w.write_all(format!("{}{SCORES_LEGEND}", evaluation.table()).as_bytes())
             .map_err(|e| Error::io(&scores_md, e))
     })?;
-    // Contact sheet: three photos spread over the dive.
+    Ok(scores_md)
+}
+
+/// Draw the contact sheet into `out/contact-sheet.png`: three photos spread over the dive in `dive`, one row each,
+/// in every set and the true albedo, each column captioned with its set's scores.
+fn contact_sheet(
+    out: &Path,
+    dive: &Path,
+    truth: &Truth,
+    sets: &[(String, PathBuf)],
+    evaluation: &Evaluation,
+    sim: &Simulation,
+) -> Result<PathBuf> {
     let n = truth.poses.len();
     let picks: Vec<usize> = if n >= 3 {
         vec![n / 6, n / 2, n - 1 - n / 6]
@@ -121,7 +157,7 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
     for &i in &picks {
         let name = &truth.poses[i].file;
         let mut row = Vec::new();
-        for (_, folder) in &sets {
+        for (_, folder) in sets {
             row.push(display(&decode(&folder.join(name))?, sim.encode, None));
         }
         let albedo = decode(&dive.join("truth").join("albedo").join(name))?;
@@ -145,12 +181,7 @@ pub fn run_demo(out: &Path, sim: &Simulation, progress: &dyn Progress) -> Result
     let sheet_img = sheet(&labels, &scores, &rows, sim);
     let sheet = out.join("contact-sheet.png");
     save_png(&sheet_img, &sheet)?;
-    Ok(DemoReport {
-        evaluation,
-        sheet,
-        scores_md,
-        seconds: started.elapsed().as_secs_f64(),
-    })
+    Ok(sheet)
 }
 
 /// An RGB picture for people: linearised with `transfer`, optionally scaled so each channel's median is `level`,

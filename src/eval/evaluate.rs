@@ -17,6 +17,7 @@
 //! photo folder.
 
 use std::io::Write;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -276,59 +277,91 @@ pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option
     let per_photo: Vec<Vec<CellObservation>> = photos
         .par_iter()
         .zip(h)
-        .map(|(p, h)| {
-            let inv = invert3(h).expect("placement homography is invertible");
-            let (w, hh) = (p.width as f64, p.height as f64);
-            let corners = [(0.0, 0.0), (w, 0.0), (0.0, hh), (w, hh)].map(|(u, v)| apply_h(h, u, v));
-            let lo_x = corners.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
-            let hi_x = corners
-                .iter()
-                .map(|c| c.0)
-                .fold(f64::NEG_INFINITY, f64::max);
-            let lo_y = corners.iter().map(|c| c.1).fold(f64::INFINITY, f64::min);
-            let hi_y = corners
-                .iter()
-                .map(|c| c.1)
-                .fold(f64::NEG_INFINITY, f64::max);
-            let inside = |(u, v): (f64, f64)| u >= 0.0 && v >= 0.0 && u <= w && v <= hh;
-            let mut out = Vec::new();
-            for cy in (lo_y / cell).floor() as i64..=(hi_y / cell).floor() as i64 {
-                for cx in (lo_x / cell).floor() as i64..=(hi_x / cell).floor() as i64 {
-                    let (x0, y0) = (cx as f64 * cell, cy as f64 * cell);
-                    let covered = [
-                        (x0, y0),
-                        (x0 + cell, y0),
-                        (x0, y0 + cell),
-                        (x0 + cell, y0 + cell),
-                    ]
-                    .into_iter()
-                    .all(|(x, y)| inside(apply_h(&inv, x, y)));
-                    if !covered {
-                        continue;
-                    }
-                    let mut mean = vec![0.0f64; c];
-                    for sy in 0..CELL_SAMPLES {
-                        for sx in 0..CELL_SAMPLES {
-                            let x = x0 + (sx as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
-                            let y = y0 + (sy as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
-                            let (u, v) = apply_h(&inv, x, y);
-                            for (ch, m) in mean.iter_mut().enumerate() {
-                                *m += sample(p, u, v, ch);
-                            }
-                        }
-                    }
-                    for m in &mut mean {
-                        *m /= (CELL_SAMPLES * CELL_SAMPLES) as f64;
-                    }
-                    // A cell touching a masked pixel (NaN) is not observed.
-                    if mean.iter().all(|m| m.is_finite()) {
-                        out.push(((cx, cy), mean));
+        .map(|(p, h)| cell_means(p, h, cell, c))
+        .collect();
+    let (ss, n) = overlap_squares(&per_photo, c)?;
+    let (s1, s2, m) = pixel_sums(photos, c);
+    let (mut total, mut relative) = (0.0, 0.0);
+    for ch in 0..c {
+        let rms = (ss[ch] / n as f64).sqrt();
+        let mean = s1[ch] / m as f64;
+        let sd = (s2[ch] / m as f64 - mean * mean).max(0.0).sqrt();
+        total += rms / sd.max(1e-30);
+        relative += rms / mean.abs().max(1e-30);
+    }
+    Some((total / c as f64, relative / c as f64))
+}
+
+/// The mosaic cells photo `p` (placed by `h`) may touch: the inclusive cell ranges `(x, y)` spanned by the
+/// bounding box of its placed corners.
+fn cell_span(p: &Raster, h: &[f64; 9], cell: f64) -> (RangeInclusive<i64>, RangeInclusive<i64>) {
+    let (w, hh) = (p.width as f64, p.height as f64);
+    let corners = [(0.0, 0.0), (w, 0.0), (0.0, hh), (w, hh)].map(|(u, v)| apply_h(h, u, v));
+    let lo_x = corners.iter().map(|c| c.0).fold(f64::INFINITY, f64::min);
+    let hi_x = corners
+        .iter()
+        .map(|c| c.0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let lo_y = corners.iter().map(|c| c.1).fold(f64::INFINITY, f64::min);
+    let hi_y = corners
+        .iter()
+        .map(|c| c.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    (
+        (lo_x / cell).floor() as i64..=(hi_x / cell).floor() as i64,
+        (lo_y / cell).floor() as i64..=(hi_y / cell).floor() as i64,
+    )
+}
+
+/// Photo `p`'s mean over each of its first `c` channels in every mosaic cell it covers completely (placement
+/// `h`), sampled on a [`CELL_SAMPLES`]² grid; a cell touching a masked pixel (NaN) is left out.
+fn cell_means(p: &Raster, h: &[f64; 9], cell: f64, c: usize) -> Vec<CellObservation> {
+    let inv = invert3(h).expect("placement homography is invertible");
+    let (w, hh) = (p.width as f64, p.height as f64);
+    let inside = |(u, v): (f64, f64)| u >= 0.0 && v >= 0.0 && u <= w && v <= hh;
+    let (xs, ys) = cell_span(p, h, cell);
+    let mut out = Vec::new();
+    for cy in ys {
+        for cx in xs.clone() {
+            let (x0, y0) = (cx as f64 * cell, cy as f64 * cell);
+            let covered = [
+                (x0, y0),
+                (x0 + cell, y0),
+                (x0, y0 + cell),
+                (x0 + cell, y0 + cell),
+            ]
+            .into_iter()
+            .all(|(x, y)| inside(apply_h(&inv, x, y)));
+            if !covered {
+                continue;
+            }
+            let mut mean = vec![0.0f64; c];
+            for sy in 0..CELL_SAMPLES {
+                for sx in 0..CELL_SAMPLES {
+                    let x = x0 + (sx as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
+                    let y = y0 + (sy as f64 + 0.5) / CELL_SAMPLES as f64 * cell;
+                    let (u, v) = apply_h(&inv, x, y);
+                    for (ch, m) in mean.iter_mut().enumerate() {
+                        *m += sample(p, u, v, ch);
                     }
                 }
             }
-            out
-        })
-        .collect();
+            for m in &mut mean {
+                *m /= (CELL_SAMPLES * CELL_SAMPLES) as f64;
+            }
+            // A cell touching a masked pixel (NaN) is not observed.
+            if mean.iter().all(|m| m.is_finite()) {
+                out.push(((cx, cy), mean));
+            }
+        }
+    }
+    out
+}
+
+/// Over the cells seen by two photos or more: per channel, the sum of squared differences of the photos' cell
+/// means from their cell's average, and the number of observations in those cells. `None` when no cell is seen
+/// twice.
+fn overlap_squares(per_photo: &[Vec<CellObservation>], c: usize) -> Option<(Vec<f64>, usize)> {
     let mut cells: std::collections::HashMap<(i64, i64), CellSums> =
         std::collections::HashMap::new();
     for obs in per_photo.iter().flatten() {
@@ -351,7 +384,12 @@ pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option
     if n == 0 {
         return None;
     }
-    // Standard deviation of all observed pixels, per channel.
+    Some((ss, n))
+}
+
+/// Per channel, the sum and sum of squares of all observed (finite) pixels of all photos, and their count: the
+/// standard deviation and mean the overlap differences are divided by.
+fn pixel_sums(photos: &[Raster], c: usize) -> (Vec<f64>, Vec<f64>, usize) {
     let (mut s1, mut s2, mut m) = (vec![0.0f64; c], vec![0.0f64; c], 0usize);
     for p in photos {
         for px in p
@@ -366,15 +404,7 @@ pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option
             m += 1;
         }
     }
-    let (mut total, mut relative) = (0.0, 0.0);
-    for ch in 0..c {
-        let rms = (ss[ch] / n as f64).sqrt();
-        let mean = s1[ch] / m as f64;
-        let sd = (s2[ch] / m as f64 - mean * mean).max(0.0).sqrt();
-        total += rms / sd.max(1e-30);
-        relative += rms / mean.abs().max(1e-30);
-    }
-    Some((total / c as f64, relative / c as f64))
+    (s1, s2, m)
 }
 
 /// Settings of [`evaluate`].

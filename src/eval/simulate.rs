@@ -723,83 +723,12 @@ struct Rendered {
 /// Render a frame in linear light.
 fn render(view: &View, exposure: f32, lighting: bool) -> Rendered {
     let (w, h) = (view.cam.width, view.cam.height);
-    let eta = view.water.attenuation;
     // Backscatter is smooth: computed on a coarse grid and interpolated.
-    let step = 4usize;
-    let (gw, gh) = (w.div_ceil(step) + 1, h.div_ceil(step) + 1);
-    let grid: Vec<[f32; 3]> = (0..gw * gh)
-        .into_par_iter()
-        .map(|i| {
-            let (gx, gy) = ((i % gw) * step, (i / gw) * step);
-            let d = view.ray(gx as f32 + 0.5, gy as f32 + 0.5);
-            let len = match view.floor {
-                Some(_) if d[2] < -1e-3 => (-view.c[2] / d[2]).min(OPEN_WATER),
-                _ => OPEN_WATER,
-            };
-            view.backscatter(d, len)
-        })
-        .collect();
+    let grid = BackscatterGrid::new(view, 4);
     let mut img = Raster::filled(w, h, 3, 0.0);
     let mut alb = view.floor.map(|_| Raster::filled(w, h, 3, 0.0));
     let mut fac = (lighting && view.floor.is_some()).then(|| Raster::filled(w, h, 3, 0.0));
     let mut bsc = lighting.then(|| Raster::filled(w, h, 3, 0.0));
-    let body = |y: usize,
-                row: &mut [f32],
-                mut arow: Option<&mut [f32]>,
-                mut frow: Option<&mut [f32]>,
-                mut srow: Option<&mut [f32]>| {
-        for x in 0..w {
-            let (fx, fy) = (x as f32 / step as f32, y as f32 / step as f32);
-            let (x0, y0) = (fx as usize, fy as usize);
-            let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
-            let g = |xx: usize, yy: usize| grid[yy * gw + xx];
-            let mut px = [0.0f32; 3];
-            for (ch, p) in px.iter_mut().enumerate() {
-                let a = g(x0, y0)[ch] + (g(x0 + 1, y0)[ch] - g(x0, y0)[ch]) * tx;
-                let b = g(x0, y0 + 1)[ch] + (g(x0 + 1, y0 + 1)[ch] - g(x0, y0 + 1)[ch]) * tx;
-                *p = a + (b - a) * ty;
-            }
-            if let Some(sr) = srow.as_deref_mut() {
-                for ch in 0..3 {
-                    sr[x * 3 + ch] = px[ch] * exposure;
-                }
-            }
-            if let Some(floor) = view.floor {
-                let d = view.ray(x as f32 + 0.5, y as f32 + 0.5);
-                let t = -view.c[2] / d[2];
-                let q = [view.c[0] + t * d[0], view.c[1] + t * d[1], 0.0];
-                let a = floor.albedo(q[0], q[1]);
-                let mut e = [0.0f32; 3];
-                for l in &view.lights {
-                    let (r, dir, _) = l.reach(q);
-                    let cos_inc = (-dir[2]).max(0.0);
-                    for ch in 0..3 {
-                        e[ch] += r[ch] * cos_inc;
-                    }
-                }
-                let cos_cam = dot(d, mat_vec(&view.r, [0.0, 0.0, 1.0])).max(0.0);
-                let vignette = cos_cam.powi(4);
-                for ch in 0..3 {
-                    px[ch] +=
-                        a[ch] * e[ch] / std::f32::consts::PI * (-eta[ch] * t).exp() * vignette;
-                }
-                if let Some(fr) = frow.as_deref_mut() {
-                    for ch in 0..3 {
-                        fr[x * 3 + ch] = e[ch] / std::f32::consts::PI
-                            * (-eta[ch] * t).exp()
-                            * vignette
-                            * exposure;
-                    }
-                }
-                if let Some(ar) = arow.as_deref_mut() {
-                    ar[x * 3..x * 3 + 3].copy_from_slice(&a);
-                }
-            }
-            for ch in 0..3 {
-                row[x * 3 + ch] = px[ch] * exposure;
-            }
-        }
-    };
     fn rows(r: &mut Option<Raster>, w: usize, h: usize) -> Vec<Option<&mut [f32]>> {
         match r {
             Some(r) => r.data.chunks_mut(w * 3).map(Some).collect(),
@@ -817,12 +746,146 @@ fn render(view: &View, exposure: f32, lighting: bool) -> Rendered {
         .zip(fr)
         .zip(sr)
         .enumerate()
-        .for_each(|(y, (((row, a), f), s))| body(y, row, a, f, s));
+        .for_each(|(y, (((img, albedo), factor), backscatter))| {
+            let out = RowOut {
+                img,
+                albedo,
+                factor,
+                backscatter,
+            };
+            render_row(view, &grid, exposure, y, out)
+        });
     Rendered {
         img,
         albedo: alb,
         factor: fac,
         backscatter: bsc,
+    }
+}
+
+/// A view's backscatter on a coarse grid (every `step` pixels, one node beyond each border), interpolated per
+/// pixel: backscatter is smooth.
+struct BackscatterGrid {
+    nodes: Vec<[f32; 3]>,
+    cols: usize,
+    step: usize,
+}
+
+impl BackscatterGrid {
+    /// Integrate the backscatter along the ray of every grid node (to the floor, or through open water).
+    fn new(view: &View, step: usize) -> Self {
+        let (w, h) = (view.cam.width, view.cam.height);
+        let (gw, gh) = (w.div_ceil(step) + 1, h.div_ceil(step) + 1);
+        let nodes: Vec<[f32; 3]> = (0..gw * gh)
+            .into_par_iter()
+            .map(|i| {
+                let (gx, gy) = ((i % gw) * step, (i / gw) * step);
+                let d = view.ray(gx as f32 + 0.5, gy as f32 + 0.5);
+                let len = match view.floor {
+                    Some(_) if d[2] < -1e-3 => (-view.c[2] / d[2]).min(OPEN_WATER),
+                    _ => OPEN_WATER,
+                };
+                view.backscatter(d, len)
+            })
+            .collect();
+        BackscatterGrid {
+            nodes,
+            cols: gw,
+            step,
+        }
+    }
+
+    /// Bilinear interpolation of the grid at pixel `(x, y)`.
+    fn at(&self, x: usize, y: usize) -> [f32; 3] {
+        let step = self.step;
+        let (fx, fy) = (x as f32 / step as f32, y as f32 / step as f32);
+        let (x0, y0) = (fx as usize, fy as usize);
+        let (tx, ty) = (fx - x0 as f32, fy - y0 as f32);
+        let g = |xx: usize, yy: usize| self.nodes[yy * self.cols + xx];
+        let mut px = [0.0f32; 3];
+        for (ch, p) in px.iter_mut().enumerate() {
+            let a = g(x0, y0)[ch] + (g(x0 + 1, y0)[ch] - g(x0, y0)[ch]) * tx;
+            let b = g(x0, y0 + 1)[ch] + (g(x0 + 1, y0 + 1)[ch] - g(x0, y0 + 1)[ch]) * tx;
+            *p = a + (b - a) * ty;
+        }
+        px
+    }
+}
+
+/// One image row of a [`Rendered`] frame: the radiance, and the rows of the truths being rendered.
+struct RowOut<'a> {
+    img: &'a mut [f32],
+    albedo: Option<&'a mut [f32]>,
+    factor: Option<&'a mut [f32]>,
+    backscatter: Option<&'a mut [f32]>,
+}
+
+/// Where the ray of a pixel meets the floor: the albedo there, the irradiance of all lights (with their angle of
+/// incidence), the ray's length and the camera's vignetting (cos⁴ off axis).
+struct FloorHit {
+    albedo: [f32; 3],
+    irradiance: [f32; 3],
+    t: f32,
+    vignette: f32,
+}
+
+/// The floor as seen through pixel `(x, y)` of `view`.
+fn floor_hit(view: &View, floor: &Floor, x: usize, y: usize) -> FloorHit {
+    let d = view.ray(x as f32 + 0.5, y as f32 + 0.5);
+    let t = -view.c[2] / d[2];
+    let q = [view.c[0] + t * d[0], view.c[1] + t * d[1], 0.0];
+    let a = floor.albedo(q[0], q[1]);
+    let mut e = [0.0f32; 3];
+    for l in &view.lights {
+        let (r, dir, _) = l.reach(q);
+        let cos_inc = (-dir[2]).max(0.0);
+        for ch in 0..3 {
+            e[ch] += r[ch] * cos_inc;
+        }
+    }
+    let cos_cam = dot(d, mat_vec(&view.r, [0.0, 0.0, 1.0])).max(0.0);
+    FloorHit {
+        albedo: a,
+        irradiance: e,
+        t,
+        vignette: cos_cam.powi(4),
+    }
+}
+
+/// Render row `y` of `view` into `out`: backscatter from `grid`, plus the lit floor when in view; all after
+/// `exposure`.
+fn render_row(view: &View, grid: &BackscatterGrid, exposure: f32, y: usize, mut out: RowOut) {
+    let eta = view.water.attenuation;
+    for x in 0..view.cam.width {
+        let mut px = grid.at(x, y);
+        if let Some(sr) = out.backscatter.as_deref_mut() {
+            for ch in 0..3 {
+                sr[x * 3 + ch] = px[ch] * exposure;
+            }
+        }
+        if let Some(floor) = view.floor {
+            let FloorHit {
+                albedo: a,
+                irradiance: e,
+                t,
+                vignette,
+            } = floor_hit(view, floor, x, y);
+            for ch in 0..3 {
+                px[ch] += a[ch] * e[ch] / std::f32::consts::PI * (-eta[ch] * t).exp() * vignette;
+            }
+            if let Some(fr) = out.factor.as_deref_mut() {
+                for ch in 0..3 {
+                    fr[x * 3 + ch] =
+                        e[ch] / std::f32::consts::PI * (-eta[ch] * t).exp() * vignette * exposure;
+                }
+            }
+            if let Some(ar) = out.albedo.as_deref_mut() {
+                ar[x * 3..x * 3 + 3].copy_from_slice(&a);
+            }
+        }
+        for (o, v) in out.img[x * 3..x * 3 + 3].iter_mut().zip(px) {
+            *o = v * exposure;
+        }
     }
 }
 
@@ -907,6 +970,45 @@ pub struct Dive {
     pub factor: Vec<Raster>,
     /// True backscatter `S` of each survey photo with [`Simulation::render_with_lighting`]; empty otherwise.
     pub backscatter: Vec<Raster>,
+}
+
+/// The survey photos of a dive with their truths (see [`Dive`]).
+struct SurveyFrames {
+    survey: Vec<Photo>,
+    albedo: Vec<Raster>,
+    factor: Vec<Raster>,
+    backscatter: Vec<Raster>,
+}
+
+/// The view of camera `cam` with the rig's `lights` at pose `p`, of `floor` if given (else open water).
+fn pose_view<'a>(
+    cam: Camera,
+    lights: &[Light],
+    p: &Pose,
+    floor: Option<&'a Floor>,
+    water: Water,
+) -> View<'a> {
+    View {
+        cam,
+        r: p.rotation,
+        c: [
+            p.position[0] as f32,
+            p.position[1] as f32,
+            p.position[2] as f32,
+        ],
+        lights: world_lights(
+            lights,
+            &p.rotation,
+            [
+                p.position[0] as f32,
+                p.position[1] as f32,
+                p.position[2] as f32,
+            ],
+            water.attenuation,
+        ),
+        floor,
+        water,
+    }
 }
 
 impl Simulation {
@@ -1126,38 +1228,19 @@ impl Simulation {
         (water, names)
     }
 
+    /// Render the dive: survey photos with their true albedo (and with `lighting`, their true `F` and `S`), then
+    /// the water column.
     fn render_inner(&self, lighting: bool) -> Result<Dive> {
         self.validate()?;
         let cam = self.camera();
         let poses = self.poses(&cam);
-        let mut floor = Floor::new(self.seed, self.contamination);
-        if let Some(c) = self.contamination_along {
-            let length = poses.last().map_or(0.0, |p| p.position[1]) as f32;
-            floor.along = Some((c, length));
-        }
+        let floor = self.floor(&poses);
         let lights = self.rig.lights(self.beam_deg);
         let alt = self.altitude as f64;
         let ppm = cam.fy / alt;
-        let view = |p: &Pose, with_floor: bool| View {
-            cam,
-            r: p.rotation,
-            c: [
-                p.position[0] as f32,
-                p.position[1] as f32,
-                p.position[2] as f32,
-            ],
-            lights: world_lights(
-                &lights,
-                &p.rotation,
-                [
-                    p.position[0] as f32,
-                    p.position[1] as f32,
-                    p.position[2] as f32,
-                ],
-                self.water.attenuation,
-            ),
-            floor: if with_floor { Some(&floor) } else { None },
-            water: self.water,
+        let view = |p: &Pose, with_floor: bool| {
+            let floor = if with_floor { Some(&floor) } else { None };
+            pose_view(cam, &lights, p, floor, self.water)
         };
         // Exposure: from the view of a level camera at the mean altitude (see [`Exposure`]).
         let level = Pose {
@@ -1167,42 +1250,9 @@ impl Simulation {
         };
         let probe = view(&level, true);
         let eta = self.water.attenuation;
-        let wb = self.white_balance;
         let exposure = self.exposure_gain(&probe, &floor);
-        let bits = self.bit_depth;
-        let mut survey = Vec::with_capacity(self.frames);
-        let mut albedo = Vec::with_capacity(self.frames);
-        let (mut factors, mut scatters) = (Vec::new(), Vec::new());
         let particles = particle_count(self.width, self.height);
-        let with_wb = |mut r: Raster| {
-            for (i, v) in r.data.iter_mut().enumerate() {
-                *v *= wb[i % 3];
-            }
-            r
-        };
-        for (i, p) in poses.iter().enumerate() {
-            let Rendered {
-                mut img,
-                albedo: alb,
-                factor,
-                backscatter,
-            } = render(&view(p, true), exposure, lighting);
-            let mut prng = Rng(mix(self.seed ^ 0x5A11 ^ ((i as u64) << 20)));
-            add_particles(&mut img, &mut prng, particles / 2);
-            survey.push(finish(
-                &img,
-                mix(self.seed ^ 0xF00 ^ i as u64),
-                self.noise,
-                bits,
-                self.encode,
-                wb,
-            ));
-            albedo.push(alb.expect("survey frames see the floor"));
-            if let (Some(f), Some(s)) = (factor, backscatter) {
-                factors.push(with_wb(f));
-                scatters.push(with_wb(s));
-            }
-        }
+        let frames = self.survey_frames(&poses, |p| view(p, true), exposure, lighting);
         // Water column: the same rig and camera on the way down, open water in view.
         let (water, names) = if self.water_column > 0 {
             let base = render(&view(&level, false), exposure, false).img;
@@ -1222,12 +1272,74 @@ impl Simulation {
         };
         Ok(Dive {
             truth,
-            survey,
+            survey: frames.survey,
             water,
-            albedo,
-            factor: factors,
-            backscatter: scatters,
+            albedo: frames.albedo,
+            factor: frames.factor,
+            backscatter: frames.backscatter,
         })
+    }
+
+    /// The seafloor of the dive; with `contamination_along`, its contamination changes along the track up to the
+    /// last pose.
+    fn floor(&self, poses: &[Pose]) -> Floor {
+        let mut floor = Floor::new(self.seed, self.contamination);
+        if let Some(c) = self.contamination_along {
+            let length = poses.last().map_or(0.0, |p| p.position[1]) as f32;
+            floor.along = Some((c, length));
+        }
+        floor
+    }
+
+    /// Render the survey photos, one per pose (`view` gives each pose's view of the floor): particles, noise and
+    /// encoding added to each, with its true albedo and, with `lighting`, its true `F` and `S` (white-balanced).
+    fn survey_frames<'f>(
+        &self,
+        poses: &[Pose],
+        view: impl Fn(&Pose) -> View<'f>,
+        exposure: f32,
+        lighting: bool,
+    ) -> SurveyFrames {
+        let wb = self.white_balance;
+        let mut frames = SurveyFrames {
+            survey: Vec::with_capacity(self.frames),
+            albedo: Vec::with_capacity(self.frames),
+            factor: Vec::new(),
+            backscatter: Vec::new(),
+        };
+        let particles = particle_count(self.width, self.height);
+        let with_wb = |mut r: Raster| {
+            for (i, v) in r.data.iter_mut().enumerate() {
+                *v *= wb[i % 3];
+            }
+            r
+        };
+        for (i, p) in poses.iter().enumerate() {
+            let Rendered {
+                mut img,
+                albedo: alb,
+                factor,
+                backscatter,
+            } = render(&view(p), exposure, lighting);
+            let mut prng = Rng(mix(self.seed ^ 0x5A11 ^ ((i as u64) << 20)));
+            add_particles(&mut img, &mut prng, particles / 2);
+            frames.survey.push(finish(
+                &img,
+                mix(self.seed ^ 0xF00 ^ i as u64),
+                self.noise,
+                self.bit_depth,
+                self.encode,
+                wb,
+            ));
+            frames
+                .albedo
+                .push(alb.expect("survey frames see the floor"));
+            if let (Some(f), Some(s)) = (factor, backscatter) {
+                frames.factor.push(with_wb(f));
+                frames.backscatter.push(with_wb(s));
+            }
+        }
+        frames
     }
 
     /// Render the dive and write it to `out` (see the module docs for the layout).

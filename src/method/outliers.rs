@@ -54,7 +54,22 @@ fn spots_where(low: &Raster, keep: impl Fn(usize, &[f32]) -> bool) -> Vec<bool> 
     }
     let r = ((w.max(h) as f64 / 32.0).round() as usize).max(2);
     let local = local_level(low, r);
-    let lit: Vec<f32> = (0..c)
+    let bright = bright_blocks(low, &local);
+    if !bright.contains(&true) {
+        return Vec::new();
+    }
+    let spots = compact_groups(&bright, w, h, |b| keep(b, &local[b * c..(b + 1) * c]));
+    if !spots.contains(&true) {
+        return Vec::new();
+    }
+    // With the blocks around them: the glare around a dot lifts them by less than the ratio.
+    grow(&spots, w, h, SPOT_GROW)
+}
+
+/// Per channel, the lit level of `low`: the 99th percentile of its finite blocks (0 when there are none).
+fn lit_levels(low: &Raster) -> Vec<f32> {
+    let c = low.channels;
+    (0..c)
         .map(|ch| {
             let mut v: Vec<f32> = low.data[ch..]
                 .iter()
@@ -68,23 +83,30 @@ fn spots_where(low: &Raster, keep: impl Fn(usize, &[f32]) -> bool) -> Vec<bool> 
                 quantile(&mut v, 0.99)
             }
         })
-        .collect();
+        .collect()
+}
+
+/// The blocks of `low` that are bright in some channel: at least [`SPOT_RATIO`] times the `local` level, and above
+/// it by [`SPOT_MARGIN`] of the brightest channel's lit level.
+fn bright_blocks(low: &Raster, local: &[f32]) -> Vec<bool> {
+    let c = low.channels;
+    let lit = lit_levels(low);
     // The margin against the brightest channel's lit level: a channel starved of light (red at depth) has noise
     // that doubles its dim blocks and rises by a tenth of its own small lit level.
     let top = lit.iter().copied().fold(0.0f32, f32::max);
-    let bright: Vec<bool> = (0..w * h)
+    (0..low.width * low.height)
         .map(|b| {
             (0..c).any(|ch| {
                 let (v, l) = (low.data[b * c + ch], local[b * c + ch]);
                 v.is_finite() && l.is_finite() && v >= SPOT_RATIO * l && v - l >= SPOT_MARGIN * top
             })
         })
-        .collect();
+        .collect()
+}
 
-    if !bright.contains(&true) {
-        return Vec::new();
-    }
-    // Compact groups only.
+/// The `bright` blocks (of a `w`×`h` grid) in compact 8-connected groups — at most [`SPOT_MAX_SHARE`] of the
+/// blocks — that pass `keep(block)`; larger groups are lighting, not spots.
+fn compact_groups(bright: &[bool], w: usize, h: usize, keep: impl Fn(usize) -> bool) -> Vec<bool> {
     let max_blocks = ((w * h) as f32 * SPOT_MAX_SHARE).ceil() as usize;
     let mut seen = vec![false; w * h];
     let mut spots = vec![false; w * h];
@@ -112,15 +134,15 @@ fn spots_where(low: &Raster, keep: impl Fn(usize, &[f32]) -> bool) -> Vec<bool> 
         }
         if members.len() <= max_blocks {
             for &b in &members {
-                spots[b] = keep(b, &local[b * c..(b + 1) * c]);
+                spots[b] = keep(b);
             }
         }
     }
-    if !spots.contains(&true) {
-        return Vec::new();
-    }
-    // With the blocks around them: the glare around a dot lifts them by less than the ratio.
-    let g = SPOT_GROW;
+    spots
+}
+
+/// The `spots` (of a `w`×`h` grid) with every block within `g` of them (a square).
+fn grow(spots: &[bool], w: usize, h: usize, g: usize) -> Vec<bool> {
     let mut out = vec![false; w * h];
     for b in (0..w * h).filter(|&b| spots[b]) {
         let (x, y) = (b % w, b / w);

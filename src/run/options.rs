@@ -534,8 +534,16 @@ impl Options {
         }
     }
 
-    /// Range checks of every numeric option, each error naming its flag. Part of [`Options::validate`].
+    /// Range checks of every numeric option, each error naming its flag. Part of [`Options::validate`]. The checks
+    /// run in a fixed order and the first failure is reported.
     pub fn check_ranges(&self) -> Result<(), Error> {
+        self.check_estimate_ranges()?;
+        self.check_run_ranges()
+    }
+
+    /// Range checks of the options of the estimates of `S` and `F`: window, contamination, risk, downsampling,
+    /// near window, factor floor.
+    fn check_estimate_ranges(&self) -> Result<(), Error> {
         let usage = |m: String| Err(Error::Usage(m));
         if let Some(n) = self.window {
             if n == 0 || n % 2 == 0 || n > limits::WINDOW {
@@ -577,6 +585,13 @@ impl Options {
                 self.factor_floor
             ));
         }
+        Ok(())
+    }
+
+    /// Range checks of the remaining numeric options: JPEG quality, threads, polynomial degree, watch timing,
+    /// scatter memory, shard, seafloor colour.
+    fn check_run_ranges(&self) -> Result<(), Error> {
+        let usage = |m: String| Err(Error::Usage(m));
         if let Some(q) = self.jpeg_quality.filter(|q| !(1..=100).contains(q)) {
             return usage(format!("--jpeg-quality must be 1 to 100, got {q}"));
         }

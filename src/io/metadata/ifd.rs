@@ -240,60 +240,69 @@ pub fn read_ifd(
     keep: &dyn Fn(usize, u16) -> bool,
     problems: &mut Vec<String>,
 ) -> Result<(Ifd, u32), String> {
-    let mut visited = vec![offset];
-    read_ifd_at(src, order, offset, 0, keep, problems, &mut visited)
+    let mut walk = IfdWalk {
+        src,
+        order,
+        keep,
+        problems,
+        visited: vec![offset],
+    };
+    walk.ifd_at(offset, 0)
 }
 
-fn read_ifd_at(
-    src: &mut dyn Source,
+/// What travels down the recursive read of an IFD and its sub-IFDs (see [`read_ifd`]).
+struct IfdWalk<'a, 's> {
+    src: &'a mut (dyn Source + 's),
     order: Order,
-    offset: u32,
-    depth: usize,
-    keep: &dyn Fn(usize, u16) -> bool,
-    problems: &mut Vec<String>,
-    visited: &mut Vec<u32>,
-) -> Result<(Ifd, u32), String> {
-    let len = src.len().map_err(|e| e.to_string())?;
-    let mut n = [0u8; 2];
-    src.read_at(offset as u64, &mut n)
-        .map_err(|_| format!("IFD at offset {offset} lies past the end ({len} bytes)"))?;
-    let count = order.u16(&n) as usize;
-    let mut table = vec![0u8; count * 12 + 4];
-    src.read_at(offset as u64 + 2, &mut table)
-        .map_err(|_| format!("IFD at offset {offset} with {count} entries is cut off"))?;
-    let next = order.u32(&table[count * 12..]);
-    let mut ifd = Ifd::default();
-    for raw in table[..count * 12].chunks_exact(12) {
+    keep: &'a dyn Fn(usize, u16) -> bool,
+    problems: &'a mut Vec<String>,
+    /// Offsets of the IFDs read so far: a pointer back to one of them is a loop.
+    visited: Vec<u32>,
+}
+
+impl IfdWalk<'_, '_> {
+    /// The IFD at `offset`, `depth` levels below the first, and the offset of the next IFD in its chain.
+    fn ifd_at(&mut self, offset: u32, depth: usize) -> Result<(Ifd, u32), String> {
+        let order = self.order;
+        let len = self.src.len().map_err(|e| e.to_string())?;
+        let mut n = [0u8; 2];
+        self.src
+            .read_at(offset as u64, &mut n)
+            .map_err(|_| format!("IFD at offset {offset} lies past the end ({len} bytes)"))?;
+        let count = order.u16(&n) as usize;
+        let mut table = vec![0u8; count * 12 + 4];
+        self.src
+            .read_at(offset as u64 + 2, &mut table)
+            .map_err(|_| format!("IFD at offset {offset} with {count} entries is cut off"))?;
+        let next = order.u32(&table[count * 12..]);
+        let mut ifd = Ifd::default();
+        for raw in table[..count * 12].chunks_exact(12) {
+            if let Some(entry) = self.entry(raw, depth, len) {
+                ifd.set(entry);
+            }
+        }
+        Ok((ifd, next))
+    }
+
+    /// The entry `raw` (12 bytes of an IFD at `depth`; the source is `len` bytes) with its value and, for a
+    /// pointer tag, its sub-IFD. `None` when `keep` does not want it, or when it cannot be read (the reason in
+    /// `problems`).
+    fn entry(&mut self, raw: &[u8], depth: usize, len: u64) -> Option<Entry> {
+        let order = self.order;
         let tag = order.u16(&raw[0..2]);
-        if !keep(depth, tag) {
-            continue;
+        if !(self.keep)(depth, tag) {
+            return None;
         }
         let kind = order.u16(&raw[2..4]);
         let n = order.u32(&raw[4..8]);
         let Some((_, component)) = type_sizes(kind) else {
-            problems.push(format!(
+            self.problems.push(format!(
                 "tag {tag:#06x} has unknown field type {kind}; left out"
             ));
-            continue;
+            return None;
         };
         let size = n as u64 * component as u64;
-        let value = if size <= 4 {
-            raw[8..8 + size as usize].to_vec()
-        } else {
-            let at = order.u32(&raw[8..12]) as u64;
-            if size > MAX_VALUE || at + size > len {
-                problems.push(format!(
-                    "tag {tag:#06x}: {size}-byte value at offset {at} lies past the end ({len} bytes); left out"
-                ));
-                continue;
-            }
-            let mut v = vec![0u8; size as usize];
-            if let Err(e) = src.read_at(at, &mut v) {
-                problems.push(format!("tag {tag:#06x}: {e}; left out"));
-                continue;
-            }
-            v
-        };
+        let value = self.value(raw, tag, size, len)?;
         let mut entry = Entry {
             tag,
             kind,
@@ -302,33 +311,62 @@ fn read_ifd_at(
             sub: None,
         };
         if matches!(tag, EXIF_IFD | GPS_IFD | INTEROP_IFD) {
-            let Some(at) = entry
-                .uint(order)
-                .filter(|_| matches!(kind, TYPE_LONG | TYPE_IFD))
-            else {
-                problems.push(format!(
-                    "tag {tag:#06x} is not a valid IFD pointer; left out"
-                ));
-                continue;
-            };
-            if depth + 1 >= MAX_DEPTH || visited.contains(&at) {
-                problems.push(format!(
-                    "tag {tag:#06x} points to a loop or too deep; left out"
-                ));
-                continue;
-            }
-            visited.push(at);
-            match read_ifd_at(src, order, at, depth + 1, keep, problems, visited) {
-                Ok((sub, _)) => entry.sub = Some(sub),
-                Err(e) => {
-                    problems.push(format!("sub-IFD of tag {tag:#06x}: {e}; left out"));
-                    continue;
-                }
+            entry.sub = Some(self.sub_ifd(&entry, depth)?);
+        }
+        Some(entry)
+    }
+
+    /// The `size`-byte value of entry `raw` (tag `tag`): in the entry itself up to four bytes, else at the offset
+    /// it holds. `None` when it lies past the end or cannot be read (the reason in `problems`).
+    fn value(&mut self, raw: &[u8], tag: u16, size: u64, len: u64) -> Option<Vec<u8>> {
+        if size <= 4 {
+            return Some(raw[8..8 + size as usize].to_vec());
+        }
+        let at = self.order.u32(&raw[8..12]) as u64;
+        if size > MAX_VALUE || at + size > len {
+            self.problems.push(format!(
+                "tag {tag:#06x}: {size}-byte value at offset {at} lies past the end ({len} bytes); left out"
+            ));
+            return None;
+        }
+        let mut v = vec![0u8; size as usize];
+        if let Err(e) = self.src.read_at(at, &mut v) {
+            self.problems.push(format!("tag {tag:#06x}: {e}; left out"));
+            return None;
+        }
+        Some(v)
+    }
+
+    /// The sub-IFD that the pointer `entry` (in an IFD at `depth`) points to. `None` when the pointer is not a
+    /// valid offset, leads back to an IFD already read or too deep, or the sub-IFD cannot be read (the reason in
+    /// `problems`).
+    fn sub_ifd(&mut self, entry: &Entry, depth: usize) -> Option<Ifd> {
+        let (tag, kind) = (entry.tag, entry.kind);
+        let Some(at) = entry
+            .uint(self.order)
+            .filter(|_| matches!(kind, TYPE_LONG | TYPE_IFD))
+        else {
+            self.problems.push(format!(
+                "tag {tag:#06x} is not a valid IFD pointer; left out"
+            ));
+            return None;
+        };
+        if depth + 1 >= MAX_DEPTH || self.visited.contains(&at) {
+            self.problems.push(format!(
+                "tag {tag:#06x} points to a loop or too deep; left out"
+            ));
+            return None;
+        }
+        self.visited.push(at);
+        match self.ifd_at(at, depth + 1) {
+            Ok((sub, _)) => Some(sub),
+            Err(e) => {
+                self.problems
+                    .push(format!("sub-IFD of tag {tag:#06x}: {e}; left out"));
+                None
             }
         }
-        ifd.set(entry);
     }
-    Ok((ifd, next))
 }
 
 fn pad_to_word(out: &mut Vec<u8>) {

@@ -35,98 +35,141 @@ pub(super) fn read(mut r: impl Read, meta: &mut Metadata) {
         meta.problems.push("JPEG: no start-of-image marker".into());
         return;
     }
-    let mut icc_chunks: Vec<(u8, u8, Vec<u8>)> = Vec::new();
-    let mut photoshop: Vec<u8> = Vec::new();
-    loop {
-        let mut b = [0u8; 1];
-        if r.read_exact(&mut b).is_err() {
-            meta.problems
-                .push("JPEG: file ends before the image data".into());
-            break;
-        }
-        if b[0] != 0xff {
-            meta.problems
-                .push("JPEG: stray bytes between segments; stopped reading metadata there".into());
-            break;
-        }
-        let mut marker = 0xff;
-        while marker == 0xff {
-            if r.read_exact(&mut b).is_err() {
-                break;
-            }
-            marker = b[0];
-        }
+    let mut pieces = Pieces::default();
+    while let Some(marker) = read_marker(&mut r, meta) {
         match marker {
             SOS | EOI | 0xff => break,
             0x01 | 0xd0..=0xd8 => continue,
             _ => {}
         }
-        let mut len = [0u8; 2];
-        if r.read_exact(&mut len).is_err() || u16::from_be_bytes(len) < 2 {
-            meta.problems
-                .push(format!("JPEG: segment {marker:#04x} has no valid length"));
+        let Some(payload) = read_payload(&mut r, marker, meta) else {
+            break;
+        };
+        take_segment(marker, &payload, meta, &mut pieces);
+    }
+    pieces.finish(meta);
+}
+
+/// The next marker: `0xff`, any fill bytes, then the marker code (`0xff` when the stream ends inside the fill).
+/// `None` (the reason in `problems`) when the stream ends or holds stray bytes where a marker belongs.
+fn read_marker(r: &mut impl Read, meta: &mut Metadata) -> Option<u8> {
+    let mut b = [0u8; 1];
+    if r.read_exact(&mut b).is_err() {
+        meta.problems
+            .push("JPEG: file ends before the image data".into());
+        return None;
+    }
+    if b[0] != 0xff {
+        meta.problems
+            .push("JPEG: stray bytes between segments; stopped reading metadata there".into());
+        return None;
+    }
+    let mut marker = 0xff;
+    while marker == 0xff {
+        if r.read_exact(&mut b).is_err() {
             break;
         }
-        let mut payload = vec![0u8; u16::from_be_bytes(len) as usize - 2];
-        if r.read_exact(&mut payload).is_err() {
-            meta.problems
-                .push(format!("JPEG: segment {marker:#04x} is cut off"));
-            break;
-        }
-        match marker {
-            APP1 if payload.starts_with(EXIF_ID) => {
-                if meta.exif.is_none() {
-                    meta.exif = Some(payload[EXIF_ID.len()..].to_vec());
-                } else {
-                    meta.problems
-                        .push("JPEG: a second EXIF segment was ignored".into());
-                }
-            }
-            APP1 if payload.starts_with(XMP_ID) => {
-                if meta.xmp.is_none() {
-                    meta.xmp = Some(payload[XMP_ID.len()..].to_vec());
-                } else {
-                    meta.problems
-                        .push("JPEG: a second XMP segment was ignored".into());
-                }
-            }
-            APP1 if payload.starts_with(XMP_EXT_ID) => meta
-                .xmp_extension
-                .push(payload[XMP_EXT_ID.len()..].to_vec()),
-            APP2 if payload.starts_with(ICC_ID) && payload.len() >= ICC_ID.len() + 2 => {
-                let at = ICC_ID.len();
-                icc_chunks.push((payload[at], payload[at + 1], payload[at + 2..].to_vec()));
-            }
-            APP13 if payload.starts_with(PHOTOSHOP_ID) => {
-                photoshop.extend_from_slice(&payload[PHOTOSHOP_ID.len()..])
-            }
-            COM => meta.text.push(Text {
-                keyword: "Comment".into(),
-                text: decode_text(&payload),
-            }),
-            _ => {}
-        }
+        marker = b[0];
     }
-    if !icc_chunks.is_empty() {
-        icc_chunks.sort_by_key(|c| c.0);
-        let count = icc_chunks[0].1 as usize;
-        let complete = count == icc_chunks.len()
-            && icc_chunks
-                .iter()
-                .enumerate()
-                .all(|(i, c)| c.0 as usize == i + 1 && c.1 as usize == count);
-        if complete {
-            meta.icc = Some(icc_chunks.into_iter().flat_map(|c| c.2).collect());
-        } else {
-            meta.problems.push(format!(
-                "JPEG: ICC profile chunks are incomplete or inconsistent ({} found, numbered {:?}); profile left out",
-                icc_chunks.len(),
-                icc_chunks.iter().map(|c| (c.0, c.1)).collect::<Vec<_>>()
-            ));
-        }
+    Some(marker)
+}
+
+/// The payload of the segment with marker `marker`: its 16-bit length, then that many bytes less two. `None` (the
+/// reason in `problems`) when the length is invalid or the payload cut off.
+fn read_payload(r: &mut impl Read, marker: u8, meta: &mut Metadata) -> Option<Vec<u8>> {
+    let mut len = [0u8; 2];
+    if r.read_exact(&mut len).is_err() || u16::from_be_bytes(len) < 2 {
+        meta.problems
+            .push(format!("JPEG: segment {marker:#04x} has no valid length"));
+        return None;
     }
-    if !photoshop.is_empty() {
-        meta.photoshop = Some(photoshop);
+    let mut payload = vec![0u8; u16::from_be_bytes(len) as usize - 2];
+    if r.read_exact(&mut payload).is_err() {
+        meta.problems
+            .push(format!("JPEG: segment {marker:#04x} is cut off"));
+        return None;
+    }
+    Some(payload)
+}
+
+/// Metadata that comes in pieces over several segments, put together after the last one.
+#[derive(Default)]
+struct Pieces {
+    /// ICC profile chunks: (sequence number, count, bytes).
+    icc_chunks: Vec<(u8, u8, Vec<u8>)>,
+    /// Photoshop resource blocks, in file order.
+    photoshop: Vec<u8>,
+}
+
+/// Take what one segment holds: EXIF, XMP and comments into `meta`, ICC and Photoshop pieces into `pieces`; other
+/// segments are skipped.
+fn take_segment(marker: u8, payload: &[u8], meta: &mut Metadata, pieces: &mut Pieces) {
+    match marker {
+        APP1 if payload.starts_with(EXIF_ID) => {
+            if meta.exif.is_none() {
+                meta.exif = Some(payload[EXIF_ID.len()..].to_vec());
+            } else {
+                meta.problems
+                    .push("JPEG: a second EXIF segment was ignored".into());
+            }
+        }
+        APP1 if payload.starts_with(XMP_ID) => {
+            if meta.xmp.is_none() {
+                meta.xmp = Some(payload[XMP_ID.len()..].to_vec());
+            } else {
+                meta.problems
+                    .push("JPEG: a second XMP segment was ignored".into());
+            }
+        }
+        APP1 if payload.starts_with(XMP_EXT_ID) => meta
+            .xmp_extension
+            .push(payload[XMP_EXT_ID.len()..].to_vec()),
+        APP2 if payload.starts_with(ICC_ID) && payload.len() >= ICC_ID.len() + 2 => {
+            let at = ICC_ID.len();
+            pieces
+                .icc_chunks
+                .push((payload[at], payload[at + 1], payload[at + 2..].to_vec()));
+        }
+        APP13 if payload.starts_with(PHOTOSHOP_ID) => pieces
+            .photoshop
+            .extend_from_slice(&payload[PHOTOSHOP_ID.len()..]),
+        COM => meta.text.push(Text {
+            keyword: "Comment".into(),
+            text: decode_text(payload),
+        }),
+        _ => {}
+    }
+}
+
+impl Pieces {
+    /// Put the pieces into `meta`: the ICC profile when its chunks are complete and consistent (else a problem),
+    /// the Photoshop blocks when there are any.
+    fn finish(self, meta: &mut Metadata) {
+        let Pieces {
+            mut icc_chunks,
+            photoshop,
+        } = self;
+        if !icc_chunks.is_empty() {
+            icc_chunks.sort_by_key(|c| c.0);
+            let count = icc_chunks[0].1 as usize;
+            let complete = count == icc_chunks.len()
+                && icc_chunks
+                    .iter()
+                    .enumerate()
+                    .all(|(i, c)| c.0 as usize == i + 1 && c.1 as usize == count);
+            if complete {
+                meta.icc = Some(icc_chunks.into_iter().flat_map(|c| c.2).collect());
+            } else {
+                meta.problems.push(format!(
+                    "JPEG: ICC profile chunks are incomplete or inconsistent ({} found, numbered {:?}); profile left out",
+                    icc_chunks.len(),
+                    icc_chunks.iter().map(|c| (c.0, c.1)).collect::<Vec<_>>()
+                ));
+            }
+        }
+        if !photoshop.is_empty() {
+            meta.photoshop = Some(photoshop);
+        }
     }
 }
 

@@ -114,27 +114,8 @@ fn exif_tags(blob: &[u8], order: ifd::Order, dropped: &mut Vec<String>) -> Resul
 /// Give `encoded` (a TIFF file with one image, as the `tiff` crate writes it) the metadata: a new first IFD is
 /// appended, holding the encoder's tags plus the metadata tags, and the header is pointed at it.
 pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>) -> Vec<u8> {
-    let mut src: &[u8] = &encoded;
-    let mut problems = Vec::new();
-    let parsed = read_header(&mut src).and_then(|(order, at)| {
-        let (ifd0, next) = read_ifd(&mut src, order, at, &|_, _| true, &mut problems)?;
-        Ok((order, ifd0, next))
-    });
-    let (order, mut ifd0, next) = match parsed {
-        Ok(p) if problems.is_empty() => p,
-        Ok(_) => {
-            dropped.push(format!(
-                "output TIFF could not be re-read ({}); metadata not carried",
-                problems.join("; ")
-            ));
-            return encoded;
-        }
-        Err(e) => {
-            dropped.push(format!(
-                "output TIFF could not be re-read ({e}); metadata not carried"
-            ));
-            return encoded;
-        }
+    let Some((order, mut ifd0, next)) = reread(&encoded, dropped) else {
+        return encoded;
     };
     let before = ifd0.clone();
     if let Some(blob) = &meta.exif {
@@ -149,6 +130,55 @@ pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>
             Err(e) => dropped.push(format!("EXIF block not carried: {e}")),
         }
     }
+    set_metadata_tags(&mut ifd0, meta);
+    note_not_carried(meta, dropped);
+    if ifd0 == before {
+        return encoded;
+    }
+    let mut out = encoded;
+    let len = out.len();
+    match write_ifd(&mut out, order, &ifd0, next) {
+        Ok(at) => {
+            out[4..8].copy_from_slice(&order.put_u32(at));
+            out
+        }
+        Err(e) => {
+            out.truncate(len);
+            dropped.push(format!("metadata not carried: {e}"));
+            out
+        }
+    }
+}
+
+/// The byte order, first IFD and next-IFD offset of the encoder's output, read back. `None` (the reason in
+/// `dropped`) when it cannot be read whole.
+fn reread(encoded: &[u8], dropped: &mut Vec<String>) -> Option<(ifd::Order, Ifd, u32)> {
+    let mut src: &[u8] = encoded;
+    let mut problems = Vec::new();
+    let parsed = read_header(&mut src).and_then(|(order, at)| {
+        let (ifd0, next) = read_ifd(&mut src, order, at, &|_, _| true, &mut problems)?;
+        Ok((order, ifd0, next))
+    });
+    match parsed {
+        Ok(p) if problems.is_empty() => Some(p),
+        Ok(_) => {
+            dropped.push(format!(
+                "output TIFF could not be re-read ({}); metadata not carried",
+                problems.join("; ")
+            ));
+            None
+        }
+        Err(e) => {
+            dropped.push(format!(
+                "output TIFF could not be re-read ({e}); metadata not carried"
+            ));
+            None
+        }
+    }
+}
+
+/// Set the XMP, ICC, IPTC and Photoshop tags of `ifd0` from `meta` (those it has).
+fn set_metadata_tags(ifd0: &mut Ifd, meta: &Metadata) {
     let photoshop = meta.photoshop.as_deref().map(photoshop_for_output);
     // IPTC as Photoshop and ExifTool write it: LONGs holding the record's bytes, zero-padded to a multiple of 4.
     let iptc = meta.iptc.as_ref().map(|v| {
@@ -166,6 +196,10 @@ pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>
             ifd0.set(Entry::new(tag, kind, v.clone()));
         }
     }
+}
+
+/// Say in `dropped` which parts of `meta` a TIFF file has no place for: text entries, PNG chunks, extended XMP.
+fn note_not_carried(meta: &Metadata, dropped: &mut Vec<String>) {
     if !meta.text.is_empty() {
         dropped.push(format!(
             "{} text entr{} (PNG text, JPEG comments) have no place in TIFF; not carried",
@@ -178,21 +212,5 @@ pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>
     }
     if !meta.xmp_extension.is_empty() {
         dropped.push("JPEG extended-XMP segments have no place in TIFF; not carried".into());
-    }
-    if ifd0 == before {
-        return encoded;
-    }
-    let mut out = encoded;
-    let len = out.len();
-    match write_ifd(&mut out, order, &ifd0, next) {
-        Ok(at) => {
-            out[4..8].copy_from_slice(&order.put_u32(at));
-            out
-        }
-        Err(e) => {
-            out.truncate(len);
-            dropped.push(format!("metadata not carried: {e}"));
-            out
-        }
     }
 }
