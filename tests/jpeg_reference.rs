@@ -65,3 +65,46 @@ fn every_valid_variant_decodes_as_the_reference_decoder_does() {
     }
     assert!(bad.is_empty(), "{}", bad.join("\n"));
 }
+
+/// A progressive JPEG cut inside any of its scans and closed with an end-of-image marker is refused (before:
+/// accepted at almost every cut point, the rows after the cut left coarse or grey); the uncut file decodes.
+#[test]
+fn a_progressive_jpeg_cut_inside_a_scan_is_refused() {
+    let (w, h) = (64u16, 48u16);
+    let px: Vec<u8> = (0..w as u32 * h as u32 * 3)
+        .map(|i| ((i * 2654435761u32) >> 24) as u8 / 2 + (i % 97) as u8)
+        .collect();
+    let mut full = Vec::new();
+    let mut enc = jpeg_encoder::Encoder::new(&mut full, 90);
+    enc.set_progressive(true);
+    enc.encode(&px, w, h, jpeg_encoder::ColorType::Rgb).unwrap();
+    let d = tempfile::tempdir().unwrap();
+    let path = d.path().join("p.jpg");
+    std::fs::write(&path, &full).unwrap();
+    abysslight::io::decode(&path).expect("the uncut progressive JPEG must decode");
+    // Each scan's compressed data: from the end of its header to the next marker (not a stuffed byte or a restart).
+    let sos: Vec<usize> = (0..full.len() - 1)
+        .filter(|&i| full[i] == 0xFF && full[i + 1] == 0xDA)
+        .collect();
+    assert!(sos.len() >= 4, "not progressive: {} scans", sos.len());
+    let mut accepted = Vec::new();
+    for &s in &sos {
+        let start = s + 2 + u16::from_be_bytes([full[s + 2], full[s + 3]]) as usize;
+        let end = (start..full.len() - 1)
+            .find(|&i| full[i] == 0xFF && full[i + 1] != 0 && !(0xD0..=0xD7).contains(&full[i + 1]))
+            .unwrap();
+        for k in 1..4 {
+            let cut = start + (end - start) * k / 4;
+            if cut <= start {
+                continue;
+            }
+            let mut bytes = full[..cut].to_vec();
+            bytes.extend_from_slice(&[0xFF, 0xD9]);
+            std::fs::write(&path, &bytes).unwrap();
+            if abysslight::io::decode(&path).is_ok() {
+                accepted.push(format!("scan at byte {s}, cut at {cut} of {start}..{end}"));
+            }
+        }
+    }
+    assert!(accepted.is_empty(), "accepted:\n{}", accepted.join("\n"));
+}
