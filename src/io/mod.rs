@@ -1,6 +1,8 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+#[cfg(test)]
+mod fuzz;
 pub mod gate;
 pub mod jpeg;
 pub mod jpeg_check;

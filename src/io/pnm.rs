@@ -385,7 +385,7 @@ pub fn decode_frame(frame: &RawFrame) -> std::result::Result<Photo, String> {
     .unwrap_or_else(|_| Err("the decoder failed on this frame; skipped".into()))
 }
 
-fn decode_frame_unguarded(frame: &RawFrame) -> std::result::Result<Photo, String> {
+pub(crate) fn decode_frame_unguarded(frame: &RawFrame) -> std::result::Result<Photo, String> {
     match frame.format {
         FrameFormat::Pnm => decode_pnm(&frame.bytes),
         FrameFormat::Png => {
