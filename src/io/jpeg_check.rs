@@ -301,6 +301,20 @@ pub fn check_scans(data: &[u8]) -> Result<bool, Why> {
     walk(data).map(|(sequential, scans)| sequential && scans > 1)
 }
 
+/// [`check`] for every JPEG, and whether it is a sequential one of more than one scan (a non-interleaved JPEG,
+/// one scan per component). A progressive JPEG's scans are Huffman-decoded by libjpeg-turbo's decoder (ported to
+/// Rust) in its strict mode, which refuses a scan whose data ends before its last block: the marker walk alone
+/// accepts a progressive JPEG cut inside a scan and closed with an end marker.
+pub fn check_all(data: &[u8]) -> Result<bool, Why> {
+    let (sequential, scans) = walk(data)?;
+    if !sequential {
+        libjpeg_turbo_rs::read_coefficients(data).map_err(|e| {
+            format!("a scan of this progressive JPEG is incomplete or damaged ({e})")
+        })?;
+    }
+    Ok(sequential && scans > 1)
+}
+
 /// The walk of [`check`]: whether the frame is sequential, and how many scans it has.
 fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
     if data.get(..2) != Some(&[0xFF, 0xD8]) {
@@ -378,6 +392,46 @@ fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
             _ => {}
         }
         pos += len;
+    }
+}
+
+/// Width and height from a JPEG's frame header, reading the marker segments before it and nothing else (the
+/// `image` crate's JPEG reader reads the whole file first, tail included).
+pub fn dimensions(mut r: impl std::io::Read + std::io::Seek) -> Result<(usize, usize), Why> {
+    let io = |e: std::io::Error| format!("cannot read the header: {e}");
+    let mut b = [0u8; 2];
+    r.read_exact(&mut b).map_err(io)?;
+    if b != [0xFF, 0xD8] {
+        return Err("not a JPEG (no start-of-image marker)".into());
+    }
+    loop {
+        r.read_exact(&mut b).map_err(io)?;
+        while b[0] == 0xFF && b[1] == 0xFF {
+            r.read_exact(&mut b[1..]).map_err(io)?;
+        }
+        if b[0] != 0xFF {
+            return Err("no marker where the next header segment should be (damaged)".into());
+        }
+        let m = b[1];
+        if m == 0x01 || (0xD0..=0xD7).contains(&m) {
+            continue;
+        }
+        if m == 0xD9 || m == 0xDA {
+            return Err("no frame header before the image data".into());
+        }
+        r.read_exact(&mut b).map_err(io)?;
+        let len = u16::from_be_bytes(b) as i64;
+        if len < 2 {
+            return Err("bad header segment length".into());
+        }
+        if matches!(m, 0xC0..=0xCF) && !matches!(m, 0xC4 | 0xC8 | 0xCC) {
+            let mut f = [0u8; 5];
+            r.read_exact(&mut f).map_err(io)?;
+            let height = u16::from_be_bytes([f[1], f[2]]) as usize;
+            let width = u16::from_be_bytes([f[3], f[4]]) as usize;
+            return Ok((width, height));
+        }
+        r.seek(std::io::SeekFrom::Current(len - 2)).map_err(io)?;
     }
 }
 

@@ -1,6 +1,8 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+#[cfg(test)]
+mod fuzz;
 pub(crate) mod gate;
 pub(crate) mod jpeg;
 pub(crate) mod jpeg_check;
@@ -199,11 +201,25 @@ pub(crate) fn header_size(path: &Path) -> Result<(usize, usize)> {
     let reader = image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| Error::io(path, e))?;
+    if reader.format() == Some(ImageFormat::Jpeg) {
+        return jpeg_header_size(path);
+    }
     let (w, h) = reader.into_dimensions().map_err(|e| Error::Decode {
         path: path.to_owned(),
         reason: e.to_string(),
     })?;
     Ok((w as usize, h as usize))
+}
+
+/// [`header_size`] of a JPEG: the marker segments up to the frame header, nothing after it.
+fn jpeg_header_size(path: &Path) -> Result<(usize, usize)> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    crate::io::jpeg_check::dimensions(std::io::BufReader::new(file)).map_err(|reason| {
+        Error::Decode {
+            path: path.to_owned(),
+            reason,
+        }
+    })
 }
 
 fn check_size(width: usize, height: usize) -> std::result::Result<(), String> {
@@ -296,47 +312,71 @@ pub(crate) fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T
 }
 
 fn decode_unguarded(path: &Path) -> Result<Photo> {
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    if data.is_empty() {
-        return Err(Error::Decode {
-            path: path.to_owned(),
-            reason: "empty file (0 bytes)".into(),
-        });
+    let decode_error = |reason: String| Error::Decode {
+        path: path.to_owned(),
+        reason,
+    };
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    if len == 0 {
+        return Err(decode_error("empty file (0 bytes)".into()));
     }
-    let format = image::guess_format(&data)
+    let mut head = [0u8; 32];
+    let got = read_full(&mut file, &mut head).map_err(|e| Error::io(path, e))?;
+    let format = image::guess_format(&head[..got])
         .ok()
         .or_else(|| format_of(path))
-        .ok_or_else(|| Error::Decode {
-            path: path.to_owned(),
-            reason: "unknown image format".into(),
-        })?;
+        .ok_or_else(|| decode_error("unknown image format".into()))?;
+    // Header first: an absurd size is refused before the decoder allocates for it.
+    let open = || -> Result<image::ImageReader<std::io::BufReader<File>>> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut reader = image::ImageReader::with_format(std::io::BufReader::new(file), format);
+        reader.limits(decode_limits());
+        Ok(reader)
+    };
     if format == ImageFormat::Jpeg {
-        return decode_jpeg_strict(&data).map_err(|reason| Error::Decode {
-            path: path.to_owned(),
-            reason,
+        // A header the quick reader cannot take: the strict decoder names what is wrong (from the first 64 MiB).
+        let (w, h) = jpeg_header_size(path).unwrap_or((0, 0));
+        if w > 0 {
+            check_size(w, h).map_err(decode_error)?;
+        }
+        let data = read_within_budget(path, len, jpeg_byte_budget(w, h))?;
+        return decode_jpeg_strict(&data).map_err(|reason| {
+            decode_error(if (data.len() as u64) < len {
+                format!(
+                    "{reason} (only the first {} of its {len} bytes were read: more than a {w}x{h} JPEG can \
+                     need)",
+                    data.len()
+                )
+            } else {
+                reason
+            })
         });
     }
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data), format);
-    reader.limits(decode_limits());
-    // Header first: an absurd size is refused before the decoder allocates for it.
-    let (w, h) = reader.into_dimensions().map_err(|e| Error::Decode {
-        path: path.to_owned(),
-        reason: e.to_string(),
-    })?;
-    check_size(w as usize, h as usize).map_err(|reason| Error::Decode {
-        path: path.to_owned(),
-        reason,
-    })?;
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&data), format);
-    reader.limits(decode_limits());
-    let img = reader.decode().map_err(|e| Error::Decode {
-        path: path.to_owned(),
-        reason: e.to_string(),
-    })?;
-    photo_from_dynamic(img).map_err(|reason| Error::Decode {
-        path: path.to_owned(),
-        reason,
-    })
+    let (w, h) = open()?
+        .into_dimensions()
+        .map_err(|e| decode_error(e.to_string()))?;
+    check_size(w as usize, h as usize).map_err(decode_error)?;
+    // PNG and TIFF decoders read what their chunks and strips point to: a tail after the image is never read.
+    let img = open()?.decode().map_err(|e| decode_error(e.to_string()))?;
+    photo_from_dynamic(img).map_err(decode_error)
+}
+
+/// The most bytes a JPEG of `width × height` pixels is read from: 8 bytes a pixel (a JPEG at the highest quality
+/// of pure noise takes about 3) plus 64 MiB of metadata segments. A file longer than that (a valid JPEG followed
+/// by gigabytes of garbage) is read only that far: the decoder stops at the end marker anyway.
+pub fn jpeg_byte_budget(width: usize, height: usize) -> u64 {
+    (width as u64 * height as u64).saturating_mul(8) + (64 << 20)
+}
+
+/// The first `budget` bytes of the file at `path` (of `len` bytes).
+fn read_within_budget(path: &Path, len: u64, budget: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let mut data = Vec::with_capacity(len.min(budget) as usize);
+    File::open(path)
+        .and_then(|f| f.take(budget).read_to_end(&mut data))
+        .map_err(|e| Error::io(path, e))?;
+    Ok(data)
 }
 
 /// Limits for the `image` decoders: the largest photo of [`MAX_PIXELS`] at 16-bit RGBA, and no side longer than
@@ -381,8 +421,8 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
     check_size(width, height)?;
     // zune-jpeg, even strict, fills data missing at the end with grey: check that it is all there first.
-    let non_interleaved = crate::io::jpeg_check::check_scans(data)
-        .map_err(|why| format!("incomplete JPEG: {why}"))?;
+    let non_interleaved =
+        crate::io::jpeg_check::check_all(data).map_err(|why| format!("incomplete JPEG: {why}"))?;
     let grey = matches!(
         dec.input_colorspace(),
         Some(ColorSpace::Luma | ColorSpace::LumaA)

@@ -222,33 +222,38 @@ impl<R: BufRead> FrameSplitter<R> {
         if bytes[..8] != SIGNATURE {
             return Err("bad PNG signature".into());
         }
+        // What the frame may hold, from its IHDR (the first chunk): 8 bytes a pixel (raw 16-bit RGBA, more than
+        // any compressed PNG needs) and 64 MiB of other chunks. A frame beyond it is passed over, not held.
+        let mut budget: u64 = 64 << 20;
         let mut chunks = 0;
         loop {
-            let start = bytes.len();
-            bytes.resize(start + 8, 0);
-            let got = read_full(&mut self.r, &mut bytes[start..]).map_err(|e| e.to_string())?;
-            if got < 8 {
-                return Err(format!(
-                    "truncated: the stream ends in PNG chunk {chunks} (before IEND)"
-                ));
-            }
-            let len = u32::from_be_bytes(bytes[start..start + 4].try_into().unwrap()) as usize;
-            let kind: [u8; 4] = bytes[start + 4..start + 8].try_into().unwrap();
-            if len > 0x7fff_ffff || !kind.iter().all(|b| b.is_ascii_alphabetic()) {
-                return Err(format!(
-                    "bad PNG chunk {chunks} (type {:?}, length {len})",
-                    String::from_utf8_lossy(&kind)
-                ));
+            let (kind, len) = self.png_chunk_head(&mut bytes, chunks)?;
+            if bytes.len() as u64 + len + 4 > budget {
+                return Err(self.pass_over_png(kind, len, chunks, budget));
             }
             let body = bytes.len();
-            bytes.resize(body + len + 4, 0);
-            let got = read_full(&mut self.r, &mut bytes[body..]).map_err(|e| e.to_string())?;
-            if got < len + 4 {
+            // Grown as the data arrives: a stream that ends early never makes us hold what a chunk declares.
+            let got = (&mut self.r)
+                .take(len + 4)
+                .read_to_end(&mut bytes)
+                .map_err(|e| e.to_string())?;
+            if (got as u64) < len + 4 {
                 return Err(format!(
                     "truncated: the stream ends inside PNG chunk {chunks} ({}, {got} of {} bytes)",
                     String::from_utf8_lossy(&kind),
                     len + 4
                 ));
+            }
+            if chunks == 0 && &kind == b"IHDR" && len >= 8 {
+                let dim =
+                    |at: usize| u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap()) as u64;
+                let pixels = dim(body) * dim(body + 4);
+                // Too many pixels: the decoder refuses the frame by its header; nothing more is needed for that.
+                budget += if pixels > crate::io::MAX_PIXELS {
+                    0
+                } else {
+                    pixels * 8
+                };
             }
             chunks += 1;
             if &kind == b"IEND" {
@@ -258,6 +263,63 @@ impl<R: BufRead> FrameSplitter<R> {
                 });
             }
         }
+    }
+
+    /// Read a PNG chunk's length and type (appended to `bytes`); an error for a bad one.
+    fn png_chunk_head(
+        &mut self,
+        bytes: &mut Vec<u8>,
+        chunks: usize,
+    ) -> std::result::Result<([u8; 4], u64), String> {
+        let mut head = [0u8; 8];
+        let got = read_full(&mut self.r, &mut head).map_err(|e| e.to_string())?;
+        if got < 8 {
+            return Err(format!(
+                "truncated: the stream ends in PNG chunk {chunks} (before IEND)"
+            ));
+        }
+        bytes.extend_from_slice(&head);
+        let len = u32::from_be_bytes(head[..4].try_into().unwrap()) as u64;
+        let kind: [u8; 4] = head[4..].try_into().unwrap();
+        if len > 0x7fff_ffff || !kind.iter().all(|b| b.is_ascii_alphabetic()) {
+            return Err(format!(
+                "bad PNG chunk {chunks} (type {:?}, length {len})",
+                String::from_utf8_lossy(&kind)
+            ));
+        }
+        Ok((kind, len))
+    }
+
+    /// A PNG frame larger than its header allows: read over the rest of it (chunk `chunks`, of type `kind` and
+    /// `len` bytes, and those after it up to IEND) without holding it, so that the frames after it are read.
+    fn pass_over_png(&mut self, kind: [u8; 4], len: u64, chunks: usize, budget: u64) -> String {
+        let skip = |n: u64, r: &mut R| {
+            std::io::copy(&mut r.take(n), &mut std::io::sink()).is_ok_and(|k| k == n)
+        };
+        let (mut kind, mut len, mut whole) = (kind, len, true);
+        loop {
+            if !skip(len + 4, &mut self.r) {
+                whole = false;
+                break;
+            }
+            if &kind == b"IEND" {
+                break;
+            }
+            let mut head = Vec::new();
+            match self.png_chunk_head(&mut head, chunks) {
+                Ok((k, l)) => (kind, len) = (k, l),
+                Err(_) => {
+                    whole = false;
+                    break;
+                }
+            }
+        }
+        self.resync = whole;
+        format!(
+            "PNG frame larger than its header allows ({budget} bytes; chunk {chunks} declares {len} bytes): frame \
+             skipped{}",
+            if whole { "" } else { " (and the stream ends or breaks inside it)" }
+        )
     }
 }
 
@@ -323,7 +385,7 @@ pub fn decode_frame(frame: &RawFrame) -> std::result::Result<Photo, String> {
     .unwrap_or_else(|_| Err("the decoder failed on this frame; skipped".into()))
 }
 
-fn decode_frame_unguarded(frame: &RawFrame) -> std::result::Result<Photo, String> {
+pub(crate) fn decode_frame_unguarded(frame: &RawFrame) -> std::result::Result<Photo, String> {
     match frame.format {
         FrameFormat::Pnm => decode_pnm(&frame.bytes),
         FrameFormat::Png => {

@@ -4,22 +4,34 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::io::{decode, load_raster, save_raster_png16, Entry};
+use crate::io::{decode_expecting, load_raster, majority_size, save_raster_png16, Entry};
 use crate::method::scatter::{estimate_banded, Scatter};
 
 impl Scatter {
     /// Estimate `S` from water-column frames on disk, holding at most `memory_budget` bytes of them at once (row
-    /// bands beyond that, each frame decoded once per band). Frames that cannot be read or do not match the first
-    /// readable frame are passed to `on_error` and left out. `None` when no frame could be used.
+    /// bands beyond that, each frame decoded once per band). The frames' size is the one most of them have (read
+    /// from the headers, [`majority_size`]): frames that cannot be read or are of another size (never decoded)
+    /// are passed to `on_error` and left out. `None` when no frame could be used.
     pub fn from_files(
         frames: &[Entry],
+        memory_budget: usize,
+        on_error: impl FnMut(Error),
+    ) -> Result<Option<Scatter>> {
+        let size = majority_size(frames, 15);
+        Scatter::from_files_sized(frames, size, memory_budget, on_error)
+    }
+
+    /// [`Scatter::from_files`] of frames that must be `size` (when known) to be decoded.
+    pub fn from_files_sized(
+        frames: &[Entry],
+        size: Option<(usize, usize)>,
         memory_budget: usize,
         on_error: impl FnMut(Error),
     ) -> Result<Option<Scatter>> {
         estimate_banded(
             frames,
             memory_budget,
-            |e| decode(&e.path),
+            |e| decode_expecting(&e.path, size),
             |e| e.path.clone(),
             on_error,
         )

@@ -230,7 +230,7 @@ impl Plan {
 
     /// What the run would read and write, in words (`correct --dry-run`).
     pub fn describe(&self, opts: &Options) -> Result<String> {
-        let facts = self.facts(opts)?;
+        let facts = self.facts_now(opts)?;
         let given = opts.params()?;
         let params = given.resolved(&facts.facts);
         let mut s = String::new();
@@ -299,7 +299,19 @@ impl Plan {
     /// water-column frame, the same camera, or else none, and the engine takes it from the first photo that
     /// arrives), whether a mask is used, and with `--transfer auto` the curve the first survey photo declares
     /// ([`crate::io::transfer::assume`]; linear without a photo file to read).
+    ///
+    /// With `--watch` and `--transfer auto` this waits for the first photo the watch takes (as a batch run reads
+    /// the first photo of its folder); [`Plan::facts_now`] does not wait.
     pub fn facts(&self, opts: &Options) -> Result<MissionFacts> {
+        self.facts_waiting(opts, true)
+    }
+
+    /// [`Plan::facts`] without waiting for a watched folder's first photo (`--dry-run`): the photos there now.
+    pub fn facts_now(&self, opts: &Options) -> Result<MissionFacts> {
+        self.facts_waiting(opts, false)
+    }
+
+    fn facts_waiting(&self, opts: &Options, wait: bool) -> Result<MissionFacts> {
         let water = || {
             let dir = opts.water_column.as_ref()?;
             let first = find_photos(dir).ok()?.photos.into_iter().next()?;
@@ -313,10 +325,31 @@ impl Plan {
                 None => (water(), "water-column frames"),
             },
         };
-        // The first photo that can be read (an unreadable one is that photo's error, later).
-        let first = self.found.photos.iter().take(15).map(|e| e.path.as_path());
+        // The first photo that can be read (an unreadable one is that photo's error, later); with --watch the
+        // first photo the watch takes, once it is complete.
+        let mut first: Vec<PathBuf> = self
+            .found
+            .photos
+            .iter()
+            .take(15)
+            .map(|e| e.path.clone())
+            .collect();
+        if opts.watch && opts.transfer.is_none() && !wait {
+            let now = find_photos(&self.survey)
+                .map(|f| f.photos)
+                .unwrap_or_default();
+            first.extend(now.into_iter().take(15).map(|e| e.path));
+        } else if opts.watch && opts.transfer.is_none() {
+            first.extend(crate::run::watch::first_complete(
+                &self.survey,
+                &self.out,
+                std::time::Duration::from_millis(opts.poll_interval),
+                opts.idle_timeout.map(std::time::Duration::from_secs_f64),
+                crate::run::watch::stop_flag(),
+            ));
+        }
         let assumed = opts.transfer.is_none().then(|| {
-            crate::io::transfer::assume_first(first).unwrap_or(crate::io::transfer::Assumed {
+            crate::io::transfer::assume_first(first.iter().map(PathBuf::as_path)).unwrap_or(crate::io::transfer::Assumed {
                 transfer: Transfer::Linear,
                 why: "no photo file to read before the run (standard input, an empty folder or unreadable \
                       photos)"

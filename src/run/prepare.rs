@@ -6,7 +6,7 @@ use std::path::Path;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::io::{decode, Entry};
+use crate::io::{decode_expecting, Entry};
 use crate::method::baseline::{block_mean, Method};
 use crate::method::engine::{linear_block_medians, median_linear_table, Engine, Params};
 use crate::method::mask::{detect_static, DetectSettings, Mask};
@@ -63,6 +63,9 @@ pub fn prepare<T>(
         info.saved_to = Some(p);
     }
     let mask = mask(opts, params.curve(), plan, progress, &mut warnings)?;
+    if let Some(m) = &mask {
+        warn_if_most_is_hidden(m, &mut warnings);
+    }
     if let (Some(m), Some(s)) = (&mask, &scatter) {
         m.check(s.layout, mask_path(opts))?;
     }
@@ -71,6 +74,7 @@ pub fn prepare<T>(
     if opts.method == Method::Mean {
         engine.set_mission_mean(mission_mean(
             &plan.found.photos,
+            plan.photo_size,
             opts.block(),
             params.curve(),
             progress,
@@ -150,6 +154,24 @@ fn scatter(
     Ok((s, info))
 }
 
+/// Share of the frame a mask may hide before the run warns that it hides most of it.
+const MASK_WARN_SHARE: f64 = 0.5;
+
+/// A mask that hides most of the frame (an inverted `--mask`: white where black was meant) leaves little seafloor
+/// to estimate the lighting from: warned about, and the warning goes into the report.
+fn warn_if_most_is_hidden(mask: &Mask, warnings: &mut Warnings) {
+    let share = mask.count() as f64 / mask.ignore.len().max(1) as f64;
+    if share > MASK_WARN_SHARE {
+        warnings.warn(format!(
+            "the mask hides {:.0} % of the frame ({} of {} pixels): the lighting is estimated from the rest only; \
+             white marks what is not seafloor (is the mask inverted?)",
+            100.0 * share,
+            mask.count(),
+            mask.ignore.len()
+        ));
+    }
+}
+
 /// `--mask`, united with what `--mask-auto` finds.
 fn mask(
     opts: &Options,
@@ -193,11 +215,15 @@ fn mask(
     let mut medians = Vec::new();
     for p in 0..parts {
         let part = &sample[p * sample.len() / parts..(p + 1) * sample.len() / parts];
-        if let Some(m) = Scatter::from_files(part, budget, |_| {})? {
+        if let Some(m) = Scatter::from_files_sized(part, plan.photo_size, budget, |_| {})? {
             medians.push(m.to_raster());
         }
     }
     if medians.is_empty() || medians.iter().any(|m| m.layout() != medians[0].layout()) {
+        warnings.warn(
+            "--mask-auto found no photos of the mission's size that decode: no mask found"
+                .to_string(),
+        );
         return Ok(mask);
     }
     let mut found = detect_static(&medians, DetectSettings::default());
@@ -255,12 +281,10 @@ fn spot_path(sample: &[Entry], fixed: &Mask, k: usize, transfer: Transfer) -> Op
     let path = sample
         .par_iter()
         .fold(SpotPath::new, |mut path, e| {
-            let Ok(p) = decode(&e.path) else {
+            // Of another size: never decoded (a small file may declare a huge photo).
+            let Ok(p) = decode_expecting(&e.path, Some((w, h))) else {
                 return path;
             };
-            if (p.layout.width, p.layout.height) != (w, h) {
-                return path;
-            }
             path.add(&linear_block_medians(&p, k, Some(fixed), transfer, &table));
             path
         })
@@ -280,9 +304,11 @@ pub fn spread_indices(n: usize, most: usize) -> Vec<usize> {
 }
 
 /// The mission's mean image at block resolution, in linear light, over every photo that decodes with the layout of
-/// the first one (others are skipped here and reported by the correction stream).
+/// the first one (others are skipped here and reported by the correction stream). Photos whose header is not
+/// `size` (the mission's, when known) are never decoded.
 pub fn mission_mean(
     photos: &[Entry],
+    size: Option<(usize, usize)>,
     k: usize,
     transfer: Transfer,
     progress: &dyn Progress,
@@ -294,7 +320,7 @@ pub fn mission_mean(
     let lows: Vec<Option<(Layout, Raster)>> = photos
         .par_iter()
         .map(|e| {
-            let p = decode(&e.path).ok()?;
+            let p = decode_expecting(&e.path, size).ok()?;
             let r = Raster::from_photo_linear(&p, transfer);
             Some((p.layout, block_mean(&r, k)))
         })

@@ -39,6 +39,24 @@ pub fn stop_flag() -> Arc<AtomicBool> {
 
 type Stamp = (u64, Option<SystemTime>);
 
+/// Bytes at the end of a file that, all zero, mark it as possibly still being written ([`ends_in_zeros`]).
+const ZERO_TAIL: u64 = 4096;
+
+/// Whether the last [`ZERO_TAIL`] bytes of the file at `path` are all zero: what a preallocated file (the full
+/// size reserved first, then filled) shows while it is being written. An uncompressed TIFF decodes then, its
+/// missing rows black. A complete JPEG or PNG never ends so (an end marker, a checksum); a complete TIFF only if
+/// its last rows are black (then it is taken when the watch ends).
+fn ends_in_zeros(path: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    let Ok(mut f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut tail = vec![0u8; ZERO_TAIL as usize];
+    f.seek(SeekFrom::End(-(ZERO_TAIL as i64)))
+        .and_then(|_| f.read_exact(&mut tail))
+        .is_ok_and(|_| tail.iter().all(|&b| b == 0))
+}
+
 /// Watches a folder (recursively, as a batch run scans it) and yields photos once they are complete.
 pub struct WatchFolder {
     dir: PathBuf,
@@ -53,6 +71,9 @@ pub struct WatchFolder {
     taken: HashSet<PathBuf>,
     /// Taken but undecodable at this stamp; retried when it changes.
     undecodable: HashMap<PathBuf, (Stamp, Entry, Error)>,
+    /// Those of `undecodable` that decode but end in zeros ([`ends_in_zeros`]): taken when the watch ends if they
+    /// have not changed by then.
+    zero_tailed: HashSet<PathBuf>,
     ready: VecDeque<(Entry, Photo, f64)>,
     /// Errors left to report at the end.
     leftover: VecDeque<(Entry, Error)>,
@@ -74,6 +95,7 @@ impl WatchFolder {
             seen: HashMap::new(),
             taken: HashSet::new(),
             undecodable: HashMap::new(),
+            zero_tailed: HashSet::new(),
             ready: VecDeque::new(),
             leftover: VecDeque::new(),
             last_change: Instant::now(),
@@ -109,12 +131,25 @@ impl WatchFolder {
                 }
                 self.last_change = Instant::now();
                 self.undecodable.remove(&entry.path);
+                self.zero_tailed.remove(&entry.path);
             }
             match self.seen.insert(entry.path.clone(), stamp) {
                 Some(prev) if prev == stamp && stamp.0 > 0 => {
                     self.seen.remove(&entry.path);
                     let t = Instant::now();
                     match decode(&entry.path) {
+                        Ok(_) if ends_in_zeros(&entry.path) => {
+                            let e = Error::Decode {
+                                path: entry.path.clone(),
+                                reason: format!(
+                                    "its last {ZERO_TAIL} bytes are zeros: a preallocated file still being \
+                                     written? Taken when it changes or when the watch ends"
+                                ),
+                            };
+                            self.zero_tailed.insert(entry.path.clone());
+                            self.undecodable
+                                .insert(entry.path.clone(), (stamp, entry, e));
+                        }
                         Ok(photo) => {
                             self.taken.insert(entry.path.clone());
                             let ms = t.elapsed().as_secs_f64() * 1000.0;
@@ -132,6 +167,31 @@ impl WatchFolder {
         }
     }
 
+    /// The watch ends: files that decoded but ended in zeros are taken as they are (in name order); those still
+    /// undecodable are left to report.
+    fn end(&mut self) {
+        let mut left: Vec<_> = self
+            .undecodable
+            .drain()
+            .map(|(_, (_, en, e))| (en, e))
+            .collect();
+        left.sort_by(|a, b| alphanumeric_sort::compare_path(&a.0.relative, &b.0.relative));
+        for (entry, e) in left {
+            if !self.zero_tailed.contains(&entry.path) {
+                self.leftover.push_back((entry, e));
+                continue;
+            }
+            let t = Instant::now();
+            match decode(&entry.path) {
+                Ok(photo) => {
+                    let ms = t.elapsed().as_secs_f64() * 1000.0;
+                    self.ready.push_back((entry, photo, ms));
+                }
+                Err(e) => self.leftover.push_back((entry, e)),
+            }
+        }
+    }
+
     fn item(&mut self, entry: Entry) -> Item {
         let index = self.index;
         self.index += 1;
@@ -139,6 +199,28 @@ impl WatchFolder {
             index,
             entry,
             role: Role::Write,
+        }
+    }
+}
+
+/// The photo a watch of `dir` takes first (complete as [`WatchFolder`] sees it: unchanged between two scans and
+/// decodable), once it is there: for what the run resolves from the photos before it starts (`--transfer auto`,
+/// as a batch run reads it from its first photo). `None` when the watch ends before any photo is complete (stop
+/// raised, or `idle` without a new or changed file).
+pub fn first_complete(
+    dir: &Path,
+    exclude: &Path,
+    poll: Duration,
+    idle: Option<Duration>,
+    stop: Arc<AtomicBool>,
+) -> Option<PathBuf> {
+    let mut watch = WatchFolder::new(dir, poll, idle, stop).excluding(exclude);
+    // The first scan now: photos already complete in the folder are seen without waiting a poll first.
+    watch.scan();
+    loop {
+        match watch.next_photo()? {
+            (item, Ok(_), _) => return Some(item.entry.path),
+            (_, Err(_), _) => continue,
         }
     }
 }
@@ -156,13 +238,7 @@ impl Source for WatchFolder {
             let idle = self.idle.is_some_and(|d| self.last_change.elapsed() >= d);
             if self.stop.load(Ordering::SeqCst) || idle {
                 self.ended = true;
-                let mut left: Vec<_> = self
-                    .undecodable
-                    .drain()
-                    .map(|(_, (_, en, e))| (en, e))
-                    .collect();
-                left.sort_by(|a, b| alphanumeric_sort::compare_path(&a.0.relative, &b.0.relative));
-                self.leftover.extend(left);
+                self.end();
                 continue;
             }
             // Sleep one poll interval, in small steps so that a stop request is seen quickly.
@@ -220,5 +296,81 @@ mod tests {
             assert_eq!(w.ready.len(), 1, "the complete JPEG was not taken");
             std::fs::remove_file(&p).unwrap();
         }
+    }
+
+    /// An uncompressed RGB TIFF with its directory first and its pixels last (as several writers lay it out).
+    fn tiff_ifd_first(w: u32, h: u32, px: &[u8]) -> Vec<u8> {
+        let mut t = b"II*\0".to_vec();
+        t.extend_from_slice(&8u32.to_le_bytes());
+        let entries: [(u16, u16, u32); 10] = [
+            (256, 4, w),
+            (257, 4, h),
+            (258, 3, 134), // BitsPerSample 8,8,8: 6 bytes after the directory
+            (259, 3, 1),
+            (262, 3, 2),
+            (273, 4, 140),
+            (277, 3, 3),
+            (278, 4, h),
+            (279, 4, w * h * 3),
+            (284, 3, 1),
+        ];
+        t.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+        for (tag, kind, value) in entries {
+            let count: u32 = if tag == 258 { 3 } else { 1 };
+            t.extend_from_slice(&tag.to_le_bytes());
+            t.extend_from_slice(&kind.to_le_bytes());
+            t.extend_from_slice(&count.to_le_bytes());
+            t.extend_from_slice(&value.to_le_bytes());
+        }
+        t.extend_from_slice(&0u32.to_le_bytes());
+        t.extend_from_slice(&[8, 0, 8, 0, 8, 0]);
+        assert_eq!(t.len(), 140);
+        t.extend_from_slice(px);
+        t
+    }
+
+    /// A preallocated TIFF being written (its directory and first rows in place, the rest still zeros) decodes,
+    /// black below: it is held back and taken once it changes (before: taken at once, never read again, and
+    /// corrected as a black photo); unchanged until the watch ends, it is taken then, as it is.
+    #[test]
+    fn a_preallocated_tiff_being_written_is_held_back() {
+        let d = tempfile::tempdir().unwrap();
+        let (w, h) = (64u32, 48u32);
+        let px: Vec<u8> = (0..w * h * 3).map(|i| (i % 200) as u8 + 20).collect();
+        let full = tiff_ifd_first(w, h, &px);
+        let mut partial = full.clone();
+        let n = partial.len();
+        partial[140 + (n - 140) / 3..].fill(0);
+        let p = d.path().join("IMG_0001.tif");
+        std::fs::write(&p, &partial).unwrap();
+        assert!(
+            decode(&p).is_ok(),
+            "the partial TIFF should decode (black below)"
+        );
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut w1 = WatchFolder::new(d.path(), Duration::from_millis(1), None, stop.clone());
+        for _ in 0..3 {
+            w1.scan();
+        }
+        assert!(
+            w1.ready.is_empty(),
+            "a preallocated TIFF was taken while being written"
+        );
+        std::fs::write(&p, &full).unwrap();
+        w1.scan();
+        w1.scan();
+        let (_, photo, _) = w1
+            .ready
+            .pop_front()
+            .expect("the complete TIFF was not taken");
+        assert_eq!(photo.samples, crate::method::raster::Samples::U8(px));
+        // Never completed: taken when the watch ends.
+        std::fs::write(&p, &partial).unwrap();
+        let mut w2 = WatchFolder::new(d.path(), Duration::from_millis(1), None, stop.clone());
+        w2.scan();
+        w2.scan();
+        stop.store(true, Ordering::SeqCst);
+        let (_, got, _) = w2.next_photo().expect("nothing taken at the end");
+        assert!(got.is_ok());
     }
 }

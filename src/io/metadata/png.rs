@@ -7,19 +7,23 @@ use super::{exif_for_output, Metadata, Text};
 const XMP_KEYWORD: &str = "XML:com.adobe.xmp";
 /// Chunks carried as stored.
 const RAW_CHUNKS: [&[u8; 4]; 5] = [b"gAMA", b"cHRM", b"sRGB", b"cICP", b"pHYs"];
-/// Largest metadata chunk read, and largest decompressed text or profile.
+/// Largest metadata chunk read, and the most metadata kept from one file, decompressed texts and profiles
+/// included (a PNG of many small zTXt chunks would otherwise inflate to a thousand times its size).
 const MAX_CHUNK: u32 = 64 << 20;
 /// Text longer than this is written compressed.
 const COMPRESS_ABOVE: usize = 1024;
 
-fn inflate(data: &[u8]) -> Result<Vec<u8>, String> {
+/// Decompress `data`, at most `room` bytes of it.
+fn inflate(data: &[u8], room: usize) -> Result<Vec<u8>, String> {
     let mut out = Vec::new();
     flate2::read::ZlibDecoder::new(data)
-        .take(MAX_CHUNK as u64 + 1)
+        .take(room as u64 + 1)
         .read_to_end(&mut out)
         .map_err(|e| format!("cannot decompress: {e}"))?;
-    if out.len() > MAX_CHUNK as usize {
-        return Err(format!("decompresses to more than {MAX_CHUNK} bytes"));
+    if out.len() > room {
+        return Err(format!(
+            "decompresses to more than the {room} bytes left of the {MAX_CHUNK} kept from a file's metadata"
+        ));
     }
     Ok(out)
 }
@@ -40,8 +44,9 @@ fn latin1(bytes: &[u8]) -> String {
     bytes.iter().map(|&b| b as char).collect()
 }
 
-/// Decode a text chunk into (keyword, text bytes as stored in the text's encoding, is UTF-8).
-fn text_chunk(kind: &[u8; 4], data: &[u8]) -> Result<(String, Vec<u8>, bool), String> {
+/// Decode a text chunk into (keyword, text bytes as stored in the text's encoding, is UTF-8), decompressing at
+/// most `room` bytes.
+fn text_chunk(kind: &[u8; 4], data: &[u8], room: usize) -> Result<(String, Vec<u8>, bool), String> {
     let (keyword, rest) = split_nul(data).ok_or("no keyword terminator")?;
     let keyword = latin1(keyword);
     match kind {
@@ -51,7 +56,7 @@ fn text_chunk(kind: &[u8; 4], data: &[u8]) -> Result<(String, Vec<u8>, bool), St
             if method != 0 {
                 return Err(format!("unknown compression method {method}"));
             }
-            Ok((keyword, inflate(z)?, false))
+            Ok((keyword, inflate(z, room)?, false))
         }
         _ => {
             // iTXt: compression flag, method, language tag\0, translated keyword\0, text.
@@ -62,7 +67,7 @@ fn text_chunk(kind: &[u8; 4], data: &[u8]) -> Result<(String, Vec<u8>, bool), St
             let (_translated, text) = split_nul(rest).ok_or("no translated-keyword terminator")?;
             let text = match (flag, method) {
                 (0, _) => text.to_vec(),
-                (1, 0) => inflate(text)?,
+                (1, 0) => inflate(text, room)?,
                 _ => return Err(format!("unknown compression method {method}")),
             };
             Ok((keyword, text, true))
@@ -92,6 +97,8 @@ pub(super) fn read(mut r: impl Read + Seek, meta: &mut Metadata) {
         return;
     }
     let mut raw_profiles: Vec<(String, String)> = Vec::new();
+    // Bytes of metadata kept so far (decompressed): at most MAX_CHUNK.
+    let mut held = 0usize;
     loop {
         let mut head = [0u8; 8];
         if r.read_exact(&mut head).is_err() {
@@ -140,31 +147,43 @@ pub(super) fn read(mut r: impl Read + Seek, meta: &mut Metadata) {
                 .push(format!("PNG: {name} chunk fails its CRC check; left out"));
             continue;
         }
-        take_chunk(kind, data, meta, &mut raw_profiles);
+        let room = (MAX_CHUNK as usize).saturating_sub(held);
+        if data.len() > room {
+            meta.problems.push(format!(
+                "PNG: {name} chunk left out: the file's metadata is beyond the {MAX_CHUNK} bytes kept"
+            ));
+            continue;
+        }
+        held += take_chunk(kind, data, room, meta, &mut raw_profiles);
     }
     use_raw_profiles(raw_profiles, meta);
 }
 
-/// Store one wanted, CRC-checked chunk in `meta`; ImageMagick raw-profile texts are also noted in `raw_profiles`
-/// as (profile kind in lower case, text).
+/// Store one wanted, CRC-checked chunk in `meta`, decompressing at most `room` bytes; ImageMagick raw-profile
+/// texts are also noted in `raw_profiles` as (profile kind in lower case, text). Returns the bytes kept.
 fn take_chunk(
     kind: [u8; 4],
     data: Vec<u8>,
+    room: usize,
     meta: &mut Metadata,
     raw_profiles: &mut Vec<(String, String)>,
-) {
+) -> usize {
     let name = latin1(&kind);
+    let mut kept = data.len();
     match &kind {
         b"iCCP" => {
             let profile = split_nul(&data)
                 .and_then(|(_, rest)| rest.split_first())
                 .ok_or_else(|| "cut off".to_string())
                 .and_then(|(&method, z)| match method {
-                    0 => inflate(z),
+                    0 => inflate(z, room),
                     m => Err(format!("unknown compression method {m}")),
                 });
             match profile {
-                Ok(p) => meta.icc = Some(p),
+                Ok(p) => {
+                    kept = p.len();
+                    meta.icc = Some(p)
+                }
                 Err(e) => meta
                     .problems
                     .push(format!("PNG: iCCP chunk {e}; ICC profile left out")),
@@ -174,9 +193,13 @@ fn take_chunk(
             let exif = data.strip_prefix(b"Exif\0\0").unwrap_or(&data);
             meta.exif = Some(exif.to_vec());
         }
-        b"tEXt" | b"zTXt" | b"iTXt" => match text_chunk(&kind, &data) {
-            Ok((keyword, text, _)) if keyword == XMP_KEYWORD => meta.xmp = Some(text),
+        b"tEXt" | b"zTXt" | b"iTXt" => match text_chunk(&kind, &data, room) {
+            Ok((keyword, text, _)) if keyword == XMP_KEYWORD => {
+                kept = text.len();
+                meta.xmp = Some(text)
+            }
             Ok((keyword, text, utf8)) => {
+                kept = text.len();
                 let text = if utf8 {
                     String::from_utf8_lossy(&text).into_owned()
                 } else {
@@ -193,6 +216,7 @@ fn take_chunk(
         },
         _ => meta.png_chunks.push((kind, data)),
     }
+    kept
 }
 
 /// ImageMagick stores profiles as hex text. Use them where the proper chunk is missing; drop the text copies of
@@ -323,4 +347,46 @@ pub(super) fn embed(meta: &Metadata, encoded: Vec<u8>, dropped: &mut Vec<String>
     out.extend_from_slice(&chunks);
     out.extend_from_slice(&encoded[ihdr_end..]);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+        let mut c = (data.len() as u32).to_be_bytes().to_vec();
+        c.extend_from_slice(kind);
+        c.extend_from_slice(data);
+        let mut h = crc32fast::Hasher::new();
+        h.update(kind);
+        h.update(data);
+        c.extend_from_slice(&h.finalize().to_be_bytes());
+        c
+    }
+
+    /// Eight zTXt chunks of 20 KB, each inflating to 20 MB (160 MB from a 160 KB file): what is kept stays within
+    /// the 64 MiB a file's metadata may take, the rest is named as left out (before: all 160 MB were kept).
+    #[test]
+    fn many_compressed_texts_are_kept_within_the_budget() {
+        let bomb = deflate(&vec![b'a'; 20 << 20]);
+        assert!(bomb.len() < 100_000);
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        png.extend(chunk(b"IHDR", &[0, 0, 0, 1, 0, 0, 0, 1, 8, 0, 0, 0, 0]));
+        for i in 0..8 {
+            let mut data = format!("Comment{i}\0\0").into_bytes();
+            data.extend_from_slice(&bomb);
+            png.extend(chunk(b"zTXt", &data));
+        }
+        png.extend(chunk(b"IEND", b""));
+        let mut meta = Metadata::default();
+        read(std::io::Cursor::new(png), &mut meta);
+        let kept: usize = meta.text.iter().map(|t| t.text.len()).sum();
+        assert!(kept <= MAX_CHUNK as usize, "{kept} bytes of text kept");
+        assert_eq!(meta.text.len(), 3, "{:?}", meta.problems);
+        assert!(
+            meta.problems.iter().any(|p| p.contains("zTXt")),
+            "{:?}",
+            meta.problems
+        );
+    }
 }
