@@ -867,6 +867,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
     let (zeroi, topi) = (_mm256_setzero_si256(), _mm256_set1_epi32(top as i32));
     for i in (0..n).step_by(8) {
         // A match, not `Option::map`: the closure was not inlined into this AVX2 function (a call per 8 samples).
+        #[allow(clippy::manual_map)]
         let q8 = match q {
             Some(q) => Some(&q[i..i + 8]),
             None => None,
