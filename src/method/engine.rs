@@ -442,7 +442,8 @@ impl<T> Engine<T> {
     ///
     /// 1. the paper: the window's `M` (with `--bright-spots` filled where spots held it) and `F = (M − S)/C`
     ///    ([`Engine::window_estimate`]);
-    /// 2. the monitor's health figures on that `F` ([`Engine::judge`]);
+    /// 2. the monitor's health figures on that `F` ([`Engine::judged`]), on another worker thread while the next
+    ///    steps run (nothing of them depends on it);
     /// 3. with [`Method::Abyss`], the steps it adds, in order ([`Engine::abyss_steps`]);
     /// 4. the correction `A = (I − S)/F` of the photo ([`Engine::correct`]).
     fn estimate_and_correct(
@@ -453,23 +454,33 @@ impl<T> Engine<T> {
         eof: bool,
     ) -> Corrected<T> {
         let t = Instant::now();
-        let window = self.window_estimate(i, &range);
-        let mut health = self.judge(i, &range, &window);
+        let WindowEstimate { m, f, lit } = self.window_estimate(i, &range);
+        let pooled = self.pooled_estimate(i, &range);
+        let mut monitor = std::mem::take(&mut self.monitor);
+        let mut health = Health::default();
+        let mut photo = w.photo;
+        let (estimate, estimate_ms, stats, correct_ms) = rayon::in_place_scope(|scope| {
+            let judged = self.judged(i, (&lit, &f), pooled.as_ref());
+            let (monitor, health) = (&mut monitor, &mut health);
+            scope.spawn(move |_| {
+                *health = monitor.observe_photo(judged.0, judged.1, judged.2, judged.3)
+            });
+            let estimate = match self.params.method {
+                Method::Abyss => self.abyss_steps(i, &range, m, photo.as_ref()),
+                _ => Estimate::of_window(f.clone(), self.params.factor_floor),
+            };
+            let estimate_ms = w.downsample_ms + ms(t);
+            let t = Instant::now();
+            let stats = photo
+                .as_mut()
+                .map_or_else(CorrectStats::default, |p| self.correct(p, &estimate));
+            (estimate, estimate_ms, stats, ms(t))
+        });
+        self.monitor = monitor;
         let (photos, n) = (self.ring.pushed(), self.params.window);
         if eof && photos < n {
             health.flags.push(Flag::ShortMission { photos, window: n });
         }
-        let WindowEstimate { m, f, lit } = window;
-        let estimate = match self.params.method {
-            Method::Abyss => self.abyss_steps(i, &range, m, w.photo.as_ref()),
-            _ => Estimate::of_window(f, self.params.factor_floor),
-        };
-        let estimate_ms = w.downsample_ms + ms(t);
-        let t = Instant::now();
-        let mut photo = w.photo;
-        let stats = photo
-            .as_mut()
-            .map_or_else(CorrectStats::default, |p| self.correct(p, &estimate));
         let Estimate {
             f,
             mut scale,
@@ -489,7 +500,7 @@ impl<T> Engine<T> {
             health,
             stats,
             estimate_ms,
-            correct_ms: ms(t),
+            correct_ms,
             backscatter_scale: scale,
             noise,
         }
@@ -521,10 +532,11 @@ impl<T> Engine<T> {
         WindowEstimate { m, f, lit }
     }
 
-    /// Step 2: the monitor's health figures of photo `i` on its window's `F`. The monitor judges blocks of about 8
-    /// pixels whatever the block size (its thresholds were set there): with smaller blocks, on its own `M` and `F`
-    /// from the window's block medians pooled to that size.
-    fn judge(&mut self, i: usize, range: &Range<usize>, window: &WindowEstimate) -> Health {
+    /// Step 2's `F` and `F·C` of photo `i` when the monitor judges pooled blocks (`None` when it judges the
+    /// window's own): the monitor judges blocks of about 8 pixels whatever the block size (its thresholds were set
+    /// there), so with smaller blocks it sees its own `M` and `F` from the window's block medians pooled to that
+    /// size.
+    fn pooled_estimate(&mut self, i: usize, range: &Range<usize>) -> Option<(Raster, Raster)> {
         let p = pool_factor(self.params.downsample);
         if p > 1 && self.judged_fixed.is_none() {
             self.judged_fixed = Some((
@@ -532,17 +544,7 @@ impl<T> Engine<T> {
                 self.mission_mean.as_ref().map(|m| pooled(m, p)),
             ));
         }
-        // The ring's entry, not `self.own`: the monitor is borrowed mutably beside it.
-        let own = self
-            .ring
-            .get(i)
-            .expect("a photo's own block medians are in its window");
-        let Some(own_j) = own.judged.as_ref() else {
-            let s_low = self.scatter_low.as_ref();
-            return self
-                .monitor
-                .observe_photo(&own.low, &window.lit, s_low, &window.f);
-        };
+        let own_j = self.own(i).judged.as_ref()?;
         let stack_j: Vec<&Raster> = self
             .ring
             .in_range(range.clone())
@@ -555,8 +557,25 @@ impl<T> Engine<T> {
         let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
         let f_j = self.factor_of(&m_j, s_j.as_ref());
         let lit_j = lit_seafloor(&f_j, &self.colour);
-        self.monitor
-            .observe_photo(own_j, &lit_j, s_j.as_ref(), &f_j)
+        Some((f_j, lit_j))
+    }
+
+    /// Step 2's rasters for [`Monitor::observe_photo`] of photo `i`: its block medians, `F·C`, `S` and `F`, the
+    /// window's own or, with `pooled` ([`Engine::pooled_estimate`]), pooled.
+    fn judged<'a>(
+        &'a self,
+        i: usize,
+        (lit, f): (&'a Raster, &'a Raster),
+        pooled: Option<&'a (Raster, Raster)>,
+    ) -> (&'a Raster, &'a Raster, Option<&'a Raster>, &'a Raster) {
+        let own = self.own(i);
+        match (own.judged.as_ref(), pooled) {
+            (Some(own_j), Some((f_j, lit_j))) => {
+                let s_j = self.judged_fixed.as_ref().and_then(|(s, _)| s.as_ref());
+                (own_j, lit_j, s_j, f_j)
+            }
+            _ => (&own.low, lit, self.scatter_low.as_ref(), f),
+        }
     }
 
     /// Step 3, what [`Method::Abyss`] adds to the paper, in order, on the window's `M` of photo `i`: the near
