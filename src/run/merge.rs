@@ -437,6 +437,7 @@ fn frame_for_pictures(f: &Value) -> FrameReport {
             },
             ..Health::default()
         },
+        window_auto: None,
         backscatter_scale: Vec::new(),
         noise_sigma: Vec::new(),
         texture_sigma: Vec::new(),
