@@ -149,7 +149,7 @@ fn stretches_line(choices: &[Choice]) -> String {
     let acted = choices.iter().filter(|c| c.rule != Rule::Sparse).count();
     format!(
         "--window auto: {acted} of {} photos on stretches that need more than the window 7 and its median; \
-         windows {w0}..{w1} photos, dark share {:.0}..{:.0} %, {p0}..{p1} photo(s) per independent sample",
+         windows {w0}..{w1} photos, dark share {:.0}..{:.0} %, {p0:.1}..{p1:.1} photo(s) per independent sample",
         choices.len(),
         100.0 * c0,
         100.0 * c1
