@@ -241,7 +241,9 @@ impl<T> Engine<T> {
             median_linear_8: median_linear_table(transfer),
             colour: Vec::new(),
             layout: None,
-            monitor: Monitor::new(Thresholds::default()).with_window(n),
+            monitor: Monitor::new(Thresholds::default())
+                .with_window(n)
+                .with_gain(params.method == Method::Abyss && params.steps.photo_gain),
             ring: Ring::new(n),
             judged_fixed: None,
             stretches: None,
@@ -618,6 +620,8 @@ impl<T> Engine<T> {
                 self.mission_mean.as_ref().map(|m| pooled(m, p)),
             ));
         }
+        let (n, q) = (self.window_of(i), self.quantile_of(i));
+        self.monitor.set_window(n, q);
         // The ring's entry, not `self.own`: the monitor is borrowed mutably beside it.
         let own = self
             .ring
