@@ -528,10 +528,14 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_METHOD)]
     bright_spots: bool,
 
-    /// Photos in the sliding window whose median gives F (odd) [default: 7].
+    /// Photos in the sliding window whose median gives F (odd) [default: auto].
     ///
     /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
     /// shadow) at one place in the frame, but follow altitude changes more slowly.
+    /// Without --window and --contamination (--method abyss): auto, chosen per stretch of the mission from a
+    /// survey of its photos (their dark share and how many photos see the same scene; docs/nodules.md): 7 and
+    /// the median on sparse ground under a moving camera, longer windows and the (1 + c)/2 quantile on dense
+    /// nodule fields and under a slow camera. Photos as they come (--watch, --survey -) take 7 and the median.
     #[arg(long, value_name = "N", conflicts_with = "contamination", help_heading = H_METHOD)]
     window: Option<usize>,
 

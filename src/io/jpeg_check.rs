@@ -295,12 +295,6 @@ pub fn check(data: &[u8]) -> Result<(), Why> {
     walk(data).map(|_| ())
 }
 
-/// [`check`], and whether the JPEG is a sequential (baseline or extended) one of more than one scan: a
-/// non-interleaved JPEG, one scan per component.
-pub fn check_scans(data: &[u8]) -> Result<bool, Why> {
-    walk(data).map(|(sequential, scans)| sequential && scans > 1)
-}
-
 /// [`check`] for every JPEG, and whether it is a sequential one of more than one scan (a non-interleaved JPEG,
 /// one scan per component). A progressive JPEG's scans are Huffman-decoded by libjpeg-turbo's decoder (ported to
 /// Rust) in its strict mode, which refuses a scan whose data ends before its last block: the marker walk alone

@@ -38,6 +38,7 @@ use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
 use crate::method::ring::Ring;
 use crate::method::scatter::{Prepared, Scatter};
+use crate::method::stretch::Choice;
 use crate::method::transfer::{Curve, Transfer};
 use crate::method::window::near_range;
 
@@ -82,6 +83,8 @@ pub struct Corrected<T> {
     pub backscatter_scale: Vec<f32>,
     /// [`Method::Abyss`] with `denoise`: the noise and texture measured on the photo.
     pub noise: Option<NoiseModel>,
+    /// With the window chosen per stretch ([`Engine::set_stretches`]): what was chosen for this photo and why.
+    pub choice: Option<Choice>,
 }
 
 struct Waiting<T> {
@@ -122,6 +125,8 @@ pub struct Engine<T> {
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
+    /// Each photo's window, quantile and near window, chosen per stretch ([`Engine::set_stretches`]).
+    stretches: Option<Vec<Choice>>,
 }
 
 /// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
@@ -236,10 +241,80 @@ impl<T> Engine<T> {
             median_linear_8: median_linear_table(transfer),
             colour: Vec::new(),
             layout: None,
-            monitor: Monitor::new(Thresholds::default()).with_window(n),
+            monitor: Monitor::new(Thresholds::default())
+                .with_window(n)
+                .with_gain(params.method == Method::Abyss && params.steps.photo_gain),
             ring: Ring::new(n),
             judged_fixed: None,
+            stretches: None,
         })
+    }
+
+    /// Each photo's window, quantile and near window (by the order photos are pushed), chosen per stretch of the
+    /// mission ([`crate::method::stretch::choose`]), for [`Method::Abyss`] with [`Params::auto_window`]; photos
+    /// past the end take the last choice. The ring then holds the longest window. Refused once photos were pushed.
+    pub fn set_stretches(&mut self, choices: Vec<Choice>) -> Result<()> {
+        if self.ring.pushed() > 0 {
+            return Err(Error::Usage(
+                "the stretches of a mission are set before its first photo".into(),
+            ));
+        }
+        if !self.params.window_is_auto() || choices.is_empty() {
+            return Ok(());
+        }
+        if let Some(c) = choices.iter().find(|c| c.window % 2 == 0) {
+            return Err(Error::Usage(format!(
+                "the window must be an odd number of photos, got {}",
+                c.window
+            )));
+        }
+        let longest = choices.iter().map(|c| c.window).max().unwrap_or(1);
+        self.ring = Ring::new(longest);
+        self.stretches = Some(choices);
+        Ok(())
+    }
+
+    /// A survey of the mission for [`Engine::set_stretches`], against this engine's `S`: push it
+    /// [`Engine::block_image`] of every photo, in order.
+    pub fn surveyor(&self) -> crate::method::stretch::Surveyor {
+        crate::method::stretch::Surveyor::new(self.scatter_low.as_ref())
+    }
+
+    /// The block medians the engine takes of `photo` (its blocks, mask and curve, linear light); `None` while the
+    /// block size is not known (no size before the first photo) or when the photo does not fit the mask.
+    pub fn block_image(&self, photo: &Photo) -> Option<Raster> {
+        let l = photo.layout;
+        let fits = self
+            .mask
+            .as_ref()
+            .is_none_or(|m| (m.width, m.height) == (l.width, l.height));
+        (self.params.downsample > 0 && fits).then(|| self.block_medians(photo))
+    }
+
+    /// Photo `i`'s choice, when the window is chosen per stretch.
+    fn choice(&self, i: usize) -> Option<&Choice> {
+        let s = self.stretches.as_ref()?;
+        s.get(i).or(s.last())
+    }
+
+    /// Photo `i`'s window length.
+    fn window_of(&self, i: usize) -> usize {
+        self.choice(i).map_or(self.params.window, |c| c.window)
+    }
+
+    /// The quantile photo `i`'s window takes as `M`.
+    fn quantile_of(&self, i: usize) -> f32 {
+        self.choice(i)
+            .map_or(self.params.window_quantile(), |c| c.quantile)
+    }
+
+    /// Photo `i`'s near window (`None`: off); `--near-window 0` turns it off for chosen windows too.
+    fn near_of(&self, i: usize) -> Option<usize> {
+        match self.choice(i) {
+            Some(_) if self.params.steps.near_window == Some(0) => None,
+            Some(c) => c.near,
+            None => self.params.near_window(),
+        }
     }
 
     /// `M` of [`Method::Mean`]: the mission's mean image at block resolution, in linear light.
@@ -362,13 +437,12 @@ impl<T> Engine<T> {
         stack: &[&Raster],
         s_low: Option<&Raster>,
         mission_mean: Option<&Raster>,
+        q: f32,
     ) -> Raster {
         match (self.params.method, mission_mean) {
             (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
             (Method::Polynomial, _) => polynomial_m(own, s_low, self.params.degree),
-            (Method::Abyss, _) if self.params.window_quantile() != 0.5 => {
-                stack_quantile(stack, self.params.window_quantile() as f64)
-            }
+            (Method::Abyss, _) if q != 0.5 => stack_quantile(stack, q as f64),
             _ => stack_median(stack),
         }
     }
@@ -430,7 +504,14 @@ impl<T> Engine<T> {
     /// Every waiting photo whose window is complete (all of them at the end of the mission).
     fn flush(&mut self, eof: bool) -> Vec<Corrected<T>> {
         let mut out = Vec::new();
-        while let Some((i, w, range)) = self.ring.next_ready(eof) {
+        loop {
+            let stretches = &self.stretches;
+            let window = self.params.window;
+            let ready = self.ring.next_ready_by(eof, |i| match stretches {
+                Some(s) => s.get(i).or(s.last()).map_or(window, |c| c.window),
+                None => window,
+            });
+            let Some((i, w, range)) = ready else { break };
             if w.use_ != Use::Context {
                 out.push(self.estimate_and_correct(i, w, range, eof));
             }
@@ -457,6 +538,7 @@ impl<T> Engine<T> {
         let WindowEstimate { m, f, lit } = self.window_estimate(i, &range);
         let pooled = self.pooled_estimate(i, &range);
         let mut monitor = std::mem::take(&mut self.monitor);
+        monitor.set_window(self.window_of(i), self.quantile_of(i));
         let mut health = Health::default();
         let mut photo = w.photo;
         let (estimate, estimate_ms, stats, correct_ms) = rayon::in_place_scope(|scope| {
@@ -477,7 +559,7 @@ impl<T> Engine<T> {
             (estimate, estimate_ms, stats, ms(t))
         });
         self.monitor = monitor;
-        let (photos, n) = (self.ring.pushed(), self.params.window);
+        let (photos, n) = (self.ring.pushed(), self.window_of(i));
         if eof && photos < n {
             health.flags.push(Flag::ShortMission { photos, window: n });
         }
@@ -503,6 +585,7 @@ impl<T> Engine<T> {
             correct_ms,
             backscatter_scale: scale,
             noise,
+            choice: self.choice(i).copied(),
         }
     }
 
@@ -525,7 +608,14 @@ impl<T> Engine<T> {
     fn window_estimate(&self, i: usize, range: &Range<usize>) -> WindowEstimate {
         let stack = self.stack(range);
         let s_low = self.scatter_low.as_ref();
-        let mut m = self.window_m(&self.own(i).low, &stack, s_low, self.mission_mean.as_ref());
+        let q = self.quantile_of(i);
+        let mut m = self.window_m(
+            &self.own(i).low,
+            &stack,
+            s_low,
+            self.mission_mean.as_ref(),
+            q,
+        );
         self.without_spots(&mut m, range);
         let f = self.factor_of(&m, s_low);
         let lit = lit_seafloor(&f, &self.colour);
@@ -554,7 +644,13 @@ impl<T> Engine<T> {
             .judged_fixed
             .as_ref()
             .expect("made above when the ring holds pooled images");
-        let m_j = self.window_m(own_j, &stack_j, s_j.as_ref(), mean_j.as_ref());
+        let m_j = self.window_m(
+            own_j,
+            &stack_j,
+            s_j.as_ref(),
+            mean_j.as_ref(),
+            self.quantile_of(i),
+        );
         let f_j = self.factor_of(&m_j, s_j.as_ref());
         let lit_j = lit_seafloor(&f_j, &self.colour);
         Some((f_j, lit_j))
@@ -600,7 +696,10 @@ impl<T> Engine<T> {
         let s_k = s_low.map(|s| scaled(s, &scale));
         let rescaled = scale.iter().any(|&v| v != 1.0);
         let mut f = self.factor_of(&m, if rescaled { s_k.as_ref() } else { s_low });
-        refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params.steps);
+        // The per-photo gain at the window's quantile where the window is chosen per stretch (the median
+        // elsewhere: docs/nodules.md).
+        let gain_q = self.choice(i).map_or(0.5, |c| c.quantile as f64);
+        refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params.steps, gain_q);
         let noise = self.noise_model(photo, &f);
         let blended = noise
             .as_ref()
@@ -626,12 +725,12 @@ impl<T> Engine<T> {
         m: Raster,
         window_len: usize,
     ) -> Raster {
-        let Some(near) = self.params.near_window().filter(|&k| k < window_len) else {
+        let Some(near) = self.near_of(i).filter(|&k| k < window_len) else {
             return m;
         };
         let s_low = self.scatter_low.as_ref();
         let near_r = near_range(i, near, range);
-        let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None);
+        let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None, self.quantile_of(i));
         self.without_spots(&mut m_near, &near_r);
         near_shape(&m, &m_near, s_low)
     }

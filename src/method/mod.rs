@@ -11,6 +11,7 @@
 //! - [`params`]: the method's parameters;
 //! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
 //! - [`outliers`]: bright spots that move (laser dots, highlights), and `M` where they held the window;
+//! - [`stretch`]: the window per stretch of the mission, from its dark share and the camera's motion;
 //! - [`monitor`]: health figures that say where the method's assumptions fail;
 //! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
 //! - [`raster`] and [`transfer`]: photos, low-resolution images and camera curves.
@@ -32,5 +33,6 @@ pub mod raster;
 pub mod refine;
 pub(crate) mod ring;
 pub mod scatter;
+pub mod stretch;
 pub mod transfer;
 pub mod window;

@@ -117,6 +117,11 @@ pub struct Params {
     pub method: Method,
     /// Photos in the sliding window, `n` (odd). Default: 7.
     pub window: usize,
+    /// With [`Method::Abyss`]: each photo's window, quantile and near window chosen per stretch of the mission from
+    /// a survey of its photos before the correction ([`crate::method::stretch`]; the engine takes it with
+    /// [`Engine::set_stretches`](crate::method::engine::Engine::set_stretches)); `window` is then the window of a
+    /// mission without a survey (photos as they come). Off when `window` or `contamination` is given. Default: true.
+    pub auto_window: bool,
     /// Contamination rate `c`, the share of non-seafloor pixels, when known: with [`Method::Abyss`] the window's
     /// `M` is its `(1 + c)/2` quantile (`window_quantile`) and the near window is the 5 % window of `c`. It does
     /// not change `window` (`--contamination` chooses the window in
@@ -187,6 +192,7 @@ impl Default for Params {
         Params {
             method: Method::default(),
             window: 7,
+            auto_window: true,
             contamination: None,
             downsample: 0,
             seafloor_colour: SeafloorColour::default(),
@@ -281,6 +287,12 @@ impl Params {
     /// The quantile the window takes as `M` (`window_quantile`).
     pub fn window_quantile(&self) -> f32 {
         window_quantile(self.method, self.contamination) as f32
+    }
+
+    /// Whether each photo's window is chosen per stretch of the mission ([`Params::auto_window`], only with
+    /// [`Method::Abyss`]).
+    pub fn window_is_auto(&self) -> bool {
+        self.auto_window && self.method == Method::Abyss
     }
 
     /// The curve in effect: `transfer`, or linear where it is `auto` and not resolved ([`Params::resolved`]).

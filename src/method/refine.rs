@@ -261,18 +261,19 @@ pub fn apply_gain(f: &mut Raster, gain: &[f32]) {
 
 /// What the abyss method does to one photo's `F` (block resolution, linear light): the per-photo gain against the
 /// window's `M` (when `steps.photo_gain`), then the soft relative floor. `own` is the photo's block-median image,
-/// `s_low` the (scaled) backscatter at block resolution. Returns the floor levels `φ` per channel.
+/// `s_low` the (scaled) backscatter at block resolution, `gain_quantile` the quantile of the gain. Returns the floor levels `φ` per channel.
 pub fn refine_factor(
     f: &mut Raster,
     own: &Raster,
     m: &Raster,
     s_low: Option<&Raster>,
     steps: &Steps,
+    gain_quantile: f64,
 ) -> Vec<f32> {
     if steps.photo_gain {
-        // The median: the window's quantile here wins on dense nodule fields but moved the twelve dives of the
-        // matrix by up to 8 % either way (docs/nodules.md); it waits for the coverage estimated per stretch.
-        let g = photo_gain(own, m, s_low, 0.3, 0.5);
+        // The engine gives the median unless the window is chosen per stretch: the window's quantile here wins on
+        // dense nodule fields but moved the twelve dives of the matrix by up to 8 % either way (docs/nodules.md).
+        let g = photo_gain(own, m, s_low, 0.3, gain_quantile);
         apply_gain(f, &g);
     }
     soft_floor(f, steps.relative_floor)

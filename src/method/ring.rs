@@ -55,13 +55,26 @@ impl<E, W> Ring<E, W> {
 
     /// The first waiting photo whose window is complete (any, in order, once `eof`: the mission is over), with its
     /// number and its window.
+    #[cfg(test)]
     pub(crate) fn next_ready(&mut self, eof: bool) -> Option<(usize, W, Range<usize>)> {
+        let n = self.n;
+        self.next_ready_by(eof, |_| n)
+    }
+
+    /// [`Ring::next_ready`] with a window of its own for each photo, `window_of(i)` photos (odd, at most the
+    /// ring's `n`): photo `i` waits for the `window_of(i)/2` photos after it (and for the photos before it).
+    pub(crate) fn next_ready_by(
+        &mut self,
+        eof: bool,
+        window_of: impl Fn(usize) -> usize,
+    ) -> Option<(usize, W, Range<usize>)> {
         let &(i, _) = self.waiting.front()?;
+        let n = window_of(i).clamp(1, self.n);
         let range = if eof {
-            window_range(i, self.n, self.seq)
+            window_range(i, n, self.seq)
         } else {
-            let s = i.saturating_sub(self.n / 2);
-            s..s + self.n
+            let s = i.saturating_sub(n / 2);
+            s..s + n
         };
         if !eof && self.seq < range.end {
             return None;

@@ -381,6 +381,8 @@ fn summary_of(frames: &[Value]) -> Summary {
             .flatten()
             .filter_map(|x| x["kind"].as_str())
             .collect();
+        s.exposure_absorbed +=
+            usize::from(f["health"]["exposure_absorbed"].as_bool() == Some(true));
         if kinds.is_empty() {
             continue;
         }
@@ -394,6 +396,7 @@ fn summary_of(frames: &[Value]) -> Summary {
                 "exposure-jump" => s.exposure_jump += 1,
                 "camera-still" => s.camera_still += 1,
                 "short-mission" => s.short_mission += 1,
+                "structure-added" => s.structure_added += 1,
                 _ => {}
             }
         }
@@ -437,6 +440,7 @@ fn frame_for_pictures(f: &Value) -> FrameReport {
             },
             ..Health::default()
         },
+        window_auto: None,
         backscatter_scale: Vec::new(),
         noise_sigma: Vec::new(),
         texture_sigma: Vec::new(),

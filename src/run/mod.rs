@@ -188,6 +188,7 @@ fn report_of(opts: &Options, plan: &Plan, before: BeforeStream, outcome: Outcome
     let mut monitor = Summary::default();
     for f in &outcome.frames {
         monitor.add(&f.health.flags);
+        monitor.exposure_absorbed += usize::from(f.health.exposure_absorbed);
     }
     Report {
         tool: "abysslight".into(),

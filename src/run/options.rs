@@ -336,6 +336,16 @@ impl Options {
         })
     }
 
+    /// The longest window a photo of the run can have: with `--window auto` (neither `--window` nor
+    /// `--contamination`, `--method abyss`) [`crate::method::stretch::MAX_AUTO_WINDOW`], else the window.
+    pub fn longest_window(&self) -> Result<usize, Error> {
+        Ok(if self.params()?.window_is_auto() {
+            crate::method::stretch::MAX_AUTO_WINDOW
+        } else {
+            self.window_choice()?.n
+        })
+    }
+
     /// Check values that do not depend on the file system.
     pub fn validate(&self) -> Result<(), Error> {
         self.check_ranges()?;
@@ -503,8 +513,9 @@ impl Options {
         } = *self;
         Ok(Params {
             method,
-            // `window` and `risk` (or `contamination`) choose n.
+            // `window` and `risk` (or `contamination`) choose n; without either, per stretch of the mission.
             window: self.window_choice()?.n,
+            auto_window: self.window.is_none() && contamination.is_none(),
             contamination,
             downsample: downsample.unwrap_or(0),
             seafloor_colour,

@@ -116,7 +116,12 @@ impl Plan {
             chunk.end = chunk.end.min(chunk.start.saturating_add(limit));
         }
         let first = if chunk.start > 0 {
-            halo_start(&found.photos, chunk.start, window.n, photo_size)
+            halo_start(
+                &found.photos,
+                chunk.start,
+                opts.longest_window()?,
+                photo_size,
+            )
         } else {
             0
         };

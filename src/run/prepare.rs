@@ -13,6 +13,7 @@ use crate::method::mask::{detect_static, DetectSettings, Mask};
 use crate::method::outliers::SpotPath;
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
+use crate::method::stretch::{choose, Choice, Rule, MAX_AUTO_WINDOW, REFERENCE_HALF, STRETCH_HALF};
 use crate::method::transfer::Transfer;
 use crate::run::options::Options;
 use crate::run::plan::Plan;
@@ -45,7 +46,7 @@ impl Warnings<'_> {
 
 /// Estimate or load `S`, find the mask, and build the engine.
 /// `params` are the run's, resolved ([`crate::method::params::Params::resolved`]).
-pub fn prepare<T>(
+pub fn prepare<T: Sync>(
     opts: &Options,
     params: &Params,
     plan: &Plan,
@@ -71,6 +72,20 @@ pub fn prepare<T>(
     }
     let mut engine = Engine::new(*params, scatter.as_ref(), mask)?;
     drop(scatter);
+    if params.window_is_auto() {
+        match plan.streaming {
+            true => warnings.warn(
+                "--window auto: photos as they come cannot be surveyed before the correction; the window 7 and \
+                 its median (give --window or --contamination to choose)"
+                    .into(),
+            ),
+            false => {
+                let choices = survey(&engine, plan, progress);
+                progress.stage(&stretches_line(&choices));
+                engine.set_stretches(choices)?;
+            }
+        }
+    }
     if opts.method == Method::Mean {
         engine.set_mission_mean(mission_mean(
             &plan.found.photos,
@@ -86,6 +101,63 @@ pub fn prepare<T>(
         errors,
         warnings: warnings.list,
     })
+}
+
+/// Photos after the last photo of the chunk the survey reads: the longest window's half and the stretch and
+/// reference around it.
+const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
+
+/// `--window auto`: the survey of the mission's block images before the correction (one more decode of each
+/// photo the run reads; memory: a few dozen block images) and each photo's window, quantile and near window
+/// ([`crate::method::stretch`]). Photos that do not decode, or differ in size from the first, are passed over as
+/// the correction's stream passes them over, so the choices follow the engine's numbering.
+fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> Vec<Choice> {
+    let end = (plan.chunk.end + SURVEY_AFTER)
+        .saturating_sub(plan.first)
+        .min(plan.items.len());
+    let items = &plan.items[..end];
+    progress.stage(&format!(
+        "--window auto: surveying {} photos for their dark share and the camera's motion",
+        items.len()
+    ));
+    let mut surveyor = engine.surveyor();
+    let mut layout = None;
+    for batch in items.chunks(32) {
+        let lows: Vec<Option<(Layout, Raster)>> = batch
+            .par_iter()
+            .map(|item| {
+                let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
+                Some((p.layout, engine.block_image(&p)?))
+            })
+            .collect();
+        for (l, low) in lows.into_iter().flatten() {
+            if *layout.get_or_insert(l) == l {
+                surveyor.push(&low);
+            }
+        }
+    }
+    choose(&surveyor.finish())
+}
+
+/// The console's line on the windows chosen.
+fn stretches_line(choices: &[Choice]) -> String {
+    let span = |f: &dyn Fn(&Choice) -> f64| {
+        let v = choices.iter().map(f).filter(|v| v.is_finite());
+        let lo = v.clone().fold(f64::INFINITY, f64::min);
+        let hi = v.fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    };
+    let (w0, w1) = span(&|c| c.window as f64);
+    let (c0, c1) = span(&|c| c.coverage as f64);
+    let (p0, p1) = span(&|c| c.photos_per_sample as f64);
+    let acted = choices.iter().filter(|c| c.rule != Rule::Sparse).count();
+    format!(
+        "--window auto: {acted} of {} photos on stretches that need more than the window 7 and its median; \
+         windows {w0}..{w1} photos, dark share {:.0}..{:.0} %, {p0:.1}..{p1:.1} photo(s) per independent sample",
+        choices.len(),
+        100.0 * c0,
+        100.0 * c1
+    )
 }
 
 /// The path a mask error names: `--mask`, or the mask `--mask-auto` found.

@@ -105,6 +105,28 @@ pub struct FrameReport {
     /// block per channel, in the units of the seafloor colour (at most three times the median channel's relative
     /// texture); empty without `denoise`.
     pub texture_sigma: Vec<f32>,
+    /// `--window auto`: the window, quantile and near window chosen for this photo, its stretch's dark share and
+    /// photos per independent sample, and why (`None` when the window was given).
+    pub window_auto: Option<WindowAuto>,
+}
+
+/// What `--window auto` chose for one photo ([`crate::method::stretch::Choice`]), and why in words.
+#[derive(Debug, Clone, Serialize)]
+pub struct WindowAuto {
+    /// The choice.
+    #[serde(flatten)]
+    pub choice: crate::method::stretch::Choice,
+    /// Why, in words.
+    pub why: String,
+}
+
+impl From<crate::method::stretch::Choice> for WindowAuto {
+    fn from(choice: crate::method::stretch::Choice) -> Self {
+        WindowAuto {
+            why: choice.why(),
+            choice,
+        }
+    }
 }
 
 /// Where `S` came from.

@@ -274,6 +274,7 @@ impl Feed<'_> {
                 texture_sigma: c.noise.as_ref().map_or(Vec::new(), |n| {
                     n.texture_var.iter().map(|v| v.sqrt()).collect()
                 }),
+                window_auto: c.choice.map(Into::into),
             };
             let Some(photo) = c.photo else {
                 self.progress.photo_done(&entry.path, true);

@@ -26,6 +26,8 @@ fn opts(root: &Path, out: &str) -> Options {
         survey: Some(root.join("survey")),
         out: Some(root.join(out)),
         window: Some(5),
+        // Without the per-photo gain the overexposed photo is flagged (with it, its exposure is absorbed).
+        photo_gain: false,
         ..Options::default()
     }
 }

@@ -1,0 +1,530 @@
+//! The window chosen per stretch of the mission (`--window auto`, the default of [`Method::Abyss`]): how much of
+//! the seafloor is dark (nodules, burrows, shadows) and how far the camera moves between photos, measured on the
+//! mission's block images before the correction ([`Surveyor`]), give each photo its window, the quantile its `M`
+//! and per-photo gain take, and its near window ([`choose`]).
+//!
+//! The paper's window rule counts photos as independent samples. They are not when the camera moves less than an
+//! object's extent between photos: a slow sledge sees the same burrow at the same place of the frame in most photos
+//! of a short window, and the window's `M` takes it into `F`. So the rule here counts ground covered, measured
+//! where it matters: each photo's scene at block resolution (its block image over the reference of its neighbours,
+//! the lights' smooth pattern and what is fixed in the frame taken out) is correlated with the scene of the photos
+//! after it at the same blocks; the photos one independent sample takes are the lag at which that correlation
+//! falls below [`SAME_SCENE`]. The window then holds [`BASE_WINDOW`] independent samples, and more by
+//! [`crate::method::window::quantile_window`] where the stretch is dark.
+//!
+//! [`Method::Abyss`]: crate::method::baseline::Method::Abyss
+
+use std::collections::VecDeque;
+
+use serde::Serialize;
+
+use crate::method::matching::box_blur;
+use crate::method::raster::Raster;
+use crate::method::refine::quantile;
+use crate::method::window::{near_range, quantile_window, window_range, NEAR_MIN, NEAR_RISK};
+
+/// Photos on each side of a photo whose block images make the reference its dark share is measured against.
+pub const REFERENCE_HALF: usize = 10;
+/// The reference's quantile over those photos, per block: the seafloor's bright side, above what dark patches
+/// covering up to half of the photos at a block pull down.
+pub const REFERENCE_QUANTILE: f64 = 0.8;
+/// A block is dark when its level against the reference is below this share of the photo's seafloor level.
+pub const DARK_RATIO: f32 = 0.6;
+/// Photos on each side of a photo over which its stretch's coverage and photos per sample are taken.
+pub const STRETCH_HALF: usize = 10;
+/// The stretch's coverage: this quantile of its photos' dark shares (a stretch is as dense as its denser photos).
+pub const STRETCH_QUANTILE: f64 = 0.75;
+/// Coverage below which a stretch on which the camera moves on keeps the default window and its median.
+pub const ACT_COVERAGE: f32 = 0.25;
+/// The longest window chosen (the engine's ring holds it; `n/2 + 1` full photos wait for it).
+pub const MAX_AUTO_WINDOW: usize = 31;
+/// The window of a stretch where nothing calls for more: the paper's 7 (today's default).
+pub const BASE_WINDOW: usize = 7;
+/// Breakdown risk of the window's quantile ([`quantile_window`]).
+pub const RISK: f64 = 0.01;
+/// Correlation of two photos' scenes at the same blocks above which they are not independent samples.
+pub const SAME_SCENE: f32 = 0.45;
+/// Longest lag, in photos, at which the scenes are correlated (photos per sample beyond it: capped).
+pub const MAX_LAG: usize = 16;
+
+/// What the survey measured on one photo.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PhotoSurvey {
+    /// Share of the photo's blocks darker than [`DARK_RATIO`] of its seafloor level, against the reference of its
+    /// neighbours' bright side.
+    pub coverage: f32,
+    /// Correlation of its scene with the scene of the photo `k` after it at the same blocks, `k = 1..=`
+    /// [`MAX_LAG`] (NaN past the mission's end).
+    pub same_scene: [f32; MAX_LAG],
+}
+
+/// The streaming pass over a mission's block images (bounded memory: `2·`[`REFERENCE_HALF`]` + 1` grey block
+/// images). Push each photo's block medians (linear light) in mission order, then [`Surveyor::finish`].
+pub struct Surveyor {
+    s_low: Option<Raster>,
+    /// Grey `M − S`-like levels of the last photos, with their first photo's number.
+    greys: VecDeque<Vec<f32>>,
+    size: (usize, usize),
+    pushed: usize,
+    /// The scenes of the last photos measured (at most [`MAX_LAG`] + 1).
+    scenes: VecDeque<Vec<f32>>,
+    done: Vec<PhotoSurvey>,
+}
+
+/// The grey level above `S` of each block (mean over channels; NaN where masked).
+fn grey_above(low: &Raster, s: Option<&Raster>) -> Vec<f32> {
+    let c = low.channels;
+    (0..low.width * low.height)
+        .map(|b| {
+            let mut g = 0.0;
+            for ch in 0..c {
+                let i = b * c + ch;
+                g += low.data[i] - s.map_or(0.0, |s| s.data.get(i).copied().unwrap_or(0.0));
+            }
+            g / c as f32
+        })
+        .collect()
+}
+
+impl Surveyor {
+    /// A survey against the backscatter `s_low` (block resolution, linear; `None`: no `S`).
+    pub fn new(s_low: Option<&Raster>) -> Self {
+        Surveyor {
+            s_low: s_low.cloned(),
+            greys: VecDeque::new(),
+            size: (0, 0),
+            pushed: 0,
+            scenes: VecDeque::new(),
+            done: Vec::new(),
+        }
+    }
+
+    /// The next photo's block medians. Block images of another size than the first are taken as missing.
+    pub fn push(&mut self, low: &Raster) {
+        if self.pushed == 0 {
+            self.size = (low.width, low.height);
+        }
+        let fits = (low.width, low.height) == self.size
+            && self
+                .s_low
+                .as_ref()
+                .is_none_or(|s| s.layout() == low.layout());
+        let grey = if fits {
+            grey_above(low, self.s_low.as_ref())
+        } else {
+            vec![f32::NAN; self.size.0 * self.size.1]
+        };
+        self.greys.push_back(grey);
+        self.pushed += 1;
+        let n = 2 * REFERENCE_HALF + 1;
+        if self.greys.len() > n {
+            self.greys.pop_front();
+        }
+        if self.greys.len() == n {
+            // Every photo whose reference is these photos: the first `REFERENCE_HALF + 1` at once, then one each.
+            while self.done.len() + REFERENCE_HALF < self.pushed {
+                self.measure(self.done.len(), self.pushed - n);
+            }
+        }
+    }
+
+    /// Photo `j`'s dark share against the reference of the photos held (the first of them is photo `first`).
+    fn measure(&mut self, j: usize, first: usize) {
+        let own = &self.greys[j - first];
+        let reference = reference(&self.greys);
+        let coverage = dark_share(own, &reference);
+        let scene = scene(own, &reference, self.size);
+        // This photo's scene against the photos before it: their correlation at lag k.
+        for (k, earlier) in self.scenes.iter().rev().enumerate() {
+            self.done[j - 1 - k].same_scene[k] = correlation(earlier, &scene);
+        }
+        self.scenes.push_back(scene);
+        if self.scenes.len() > MAX_LAG {
+            self.scenes.pop_front();
+        }
+        self.done.push(PhotoSurvey {
+            coverage,
+            same_scene: [f32::NAN; MAX_LAG],
+        });
+    }
+
+    /// The survey of every photo pushed (shorter missions than the reference: against all their photos).
+    pub fn finish(mut self) -> Vec<PhotoSurvey> {
+        let first = self.pushed - self.greys.len();
+        while self.done.len() < self.pushed {
+            self.measure(self.done.len(), first);
+        }
+        self.done
+    }
+}
+
+/// Per block, [`REFERENCE_QUANTILE`] of the photos' grey levels (NaN ones left out).
+fn reference(greys: &VecDeque<Vec<f32>>) -> Vec<f32> {
+    let len = greys.front().map_or(0, Vec::len);
+    let mut col = Vec::with_capacity(greys.len());
+    (0..len)
+        .map(|b| {
+            col.clear();
+            col.extend(greys.iter().map(|g| g[b]).filter(|v| v.is_finite()));
+            quantile(&mut col, REFERENCE_QUANTILE)
+        })
+        .collect()
+}
+
+/// The dark share of a photo's grey levels `own` against `reference`, and which blocks are dark. Blocks where the
+/// reference is dim (under 5 % of its 95th percentile: corners the lights miss) are not judged.
+fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
+    let mut lit: Vec<f32> = reference
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let top = quantile(&mut lit, 0.95);
+    let ratio: Vec<f32> = own
+        .iter()
+        .zip(reference)
+        .map(|(&o, &r)| {
+            if r.is_finite() && o.is_finite() && r > 0.05 * top && top > 0.0 {
+                o / r
+            } else {
+                f32::NAN
+            }
+        })
+        .collect();
+    let mut judged: Vec<f32> = ratio.iter().copied().filter(|v| v.is_finite()).collect();
+    if judged.is_empty() {
+        return 0.0;
+    }
+    let n = judged.len();
+    // The seafloor's level: a first guess at the median, then at the median of the blocks not dark.
+    let mut level = quantile(&mut judged, 0.5);
+    for _ in 0..2 {
+        let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
+        let c = dark_n as f64 / n as f64;
+        level = quantile(&mut judged, ((1.0 + c) / 2.0).min(0.95));
+    }
+    let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
+    dark_n as f32 / n as f32
+}
+
+/// A photo's scene at block resolution: `ln(own / reference)` less its box average (a sixteenth of the frame:
+/// the lights' changing shape and the photo's exposure go), 0 where not judged (dim or masked blocks).
+fn scene(own: &[f32], reference: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
+    let mut lit: Vec<f32> = reference
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let top = quantile(&mut lit, 0.95);
+    let log: Vec<f32> = own
+        .iter()
+        .zip(reference)
+        .map(|(&o, &r)| {
+            if o.is_finite() && r.is_finite() && r > 0.05 * top && o > 0.0 && top > 0.0 {
+                (o / r).ln()
+            } else {
+                f32::NAN
+            }
+        })
+        .collect();
+    let valid: Vec<f32> = log
+        .iter()
+        .map(|v| f32::from(u8::from(v.is_finite())))
+        .collect();
+    let zeroed: Vec<f32> = log
+        .iter()
+        .map(|&v| if v.is_finite() { v } else { 0.0 })
+        .collect();
+    // A band: objects of a few blocks to an eighth of the frame (a burrow, a nodule patch), not the sediment's
+    // fine texture (which a small shift decorrelates) nor the lights' shape.
+    let band = |r: usize| {
+        let (num, den) = (box_blur(&zeroed, w, h, r), box_blur(&valid, w, h, r));
+        num.iter()
+            .zip(&den)
+            .map(|(&n, &d)| if d > 1e-3 { n / d } else { 0.0 })
+            .collect::<Vec<f32>>()
+    };
+    let (fine, coarse) = (band((w.max(h) / 60).max(1)), band((w.max(h) / 8).max(2)));
+    log.iter()
+        .zip(fine.iter().zip(&coarse))
+        .map(|(&v, (&f, &c))| if v.is_finite() { f - c } else { 0.0 })
+        .collect()
+}
+
+/// Pearson correlation of two scenes (0 when either is flat).
+fn correlation(a: &[f32], b: &[f32]) -> f32 {
+    let (mut sa, mut sb, mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        let (x, y) = (x as f64, y as f64);
+        sa += x;
+        sb += y;
+        saa += x * x;
+        sbb += y * y;
+        sab += x * y;
+    }
+    let n = a.len().max(1) as f64;
+    let (va, vb) = (saa - sa * sa / n, sbb - sb * sb / n);
+    if va <= 1e-12 || vb <= 1e-12 {
+        return 0.0;
+    }
+    ((sab - sa * sb / n) / (va * vb).sqrt()) as f32
+}
+
+/// Why a photo has the window it has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rule {
+    /// No survey of the mission before the correction (photos as they come, in memory): the default window 7 and
+    /// its median.
+    NoSurvey,
+    /// Little dark seafloor and a camera that moves on: the default window 7 and its median.
+    Sparse,
+    /// A dense stretch (the `(1 + c)/2` quantile and the samples [`quantile_window`] asks) or photos that see the
+    /// same scene (a longer window until it holds enough independent samples).
+    Quantile,
+    /// As [`Rule::Quantile`], but [`MAX_AUTO_WINDOW`] photos did not hold the samples asked.
+    Capped,
+}
+
+/// What `--window auto` chose for one photo.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Choice {
+    /// Photos in its window (odd).
+    pub window: usize,
+    /// The quantile its window's `M` and its per-photo gain take.
+    pub quantile: f32,
+    /// Its near window (`None`: off).
+    pub near: Option<usize>,
+    /// Its stretch's coverage by dark patches.
+    pub coverage: f32,
+    /// Photos per independent sample in its window.
+    pub photos_per_sample: f32,
+    /// Why.
+    pub rule: Rule,
+}
+
+impl Choice {
+    /// The default window and median, for a mission without a survey.
+    pub fn without_survey() -> Self {
+        Choice {
+            window: BASE_WINDOW,
+            quantile: 0.5,
+            near: crate::method::window::near_window(BASE_WINDOW, None),
+            coverage: f32::NAN,
+            photos_per_sample: 1.0,
+            rule: Rule::NoSurvey,
+        }
+    }
+
+    /// In words, for the console and the report.
+    pub fn why(&self) -> String {
+        let c = 100.0 * self.coverage;
+        match self.rule {
+            Rule::NoSurvey => "no survey of the mission before the correction: the window 7 and its median".into(),
+            Rule::Sparse => format!(
+                "{c:.0} % dark, {:.1} photo(s) per independent sample: the window 7 and its median",
+                self.photos_per_sample
+            ),
+            Rule::Quantile | Rule::Capped => format!(
+                "{c:.0} % dark, {:.1} photo(s) per independent sample: the {:.2} quantile of {} photos{}",
+                self.photos_per_sample,
+                self.quantile,
+                self.window,
+                if self.rule == Rule::Capped { " (capped)" } else { "" }
+            ),
+        }
+    }
+}
+
+/// Each photo's window, quantile and near window from the mission's survey (see the module documentation): the
+/// stretch's coverage `c` is [`STRETCH_QUANTILE`] of its photos' dark shares; the window needs [`BASE_WINDOW`]
+/// independent samples below [`ACT_COVERAGE`] (its median), else the samples [`quantile_window`] asks of the
+/// `(1 + c)/2` quantile, and grows from [`BASE_WINDOW`] photos until it holds them ([`independent`]).
+pub fn choose(photos: &[PhotoSurvey]) -> Vec<Choice> {
+    let total = photos.len();
+    (0..total)
+        .map(|i| {
+            let stretch =
+                &photos[i.saturating_sub(STRETCH_HALF)..(i + STRETCH_HALF + 1).min(total)];
+            let mut c: Vec<f32> = stretch.iter().map(|p| p.coverage).collect();
+            let c = quantile(&mut c, STRETCH_QUANTILE);
+            let c = if c.is_finite() {
+                c.clamp(0.0, 0.6)
+            } else {
+                0.0
+            };
+            let dense = c >= ACT_COVERAGE;
+            let q = if dense { (1.0 + c as f64) / 2.0 } else { 0.5 };
+            let samples = |risk: f64, least: usize| match dense {
+                true => quantile_window(c as f64, q, risk, 1)
+                    .unwrap_or(MAX_AUTO_WINDOW)
+                    .max(least),
+                false => least,
+            };
+            let need = samples(RISK, BASE_WINDOW);
+            let (window, found) = grow(photos, BASE_WINDOW, MAX_AUTO_WINDOW, need, |n| {
+                window_range(i, n, total)
+            });
+            let range = window_range(i, window, total);
+            let need_near = samples(NEAR_RISK, NEAR_MIN);
+            let (near, _) = grow(photos, NEAR_MIN, window, need_near, |k| {
+                near_range(i, k, &range)
+            });
+            let rule = match (found >= need, dense || window > BASE_WINDOW) {
+                (false, _) => Rule::Capped,
+                (true, false) => Rule::Sparse,
+                (true, true) => Rule::Quantile,
+            };
+            Choice {
+                window,
+                quantile: q as f32,
+                near: (near < window).then_some(near),
+                coverage: c,
+                photos_per_sample: range.len() as f32 / found.max(1) as f32,
+                rule,
+            }
+        })
+        .collect()
+}
+
+/// The shortest odd length from `from` up to `most` whose photos (`range_of(length)`) hold `need` independent
+/// samples, and how many they hold (`most` and its count when none does).
+fn grow(
+    photos: &[PhotoSurvey],
+    from: usize,
+    most: usize,
+    need: usize,
+    range_of: impl Fn(usize) -> std::ops::Range<usize>,
+) -> (usize, usize) {
+    let mut n = from | 1;
+    loop {
+        let found = independent(photos, range_of(n));
+        if found >= need || n + 2 > most || range_of(n + 2).len() == range_of(n).len() {
+            return (n, found);
+        }
+        n += 2;
+    }
+}
+
+/// Independent samples among `photos[range]`: the photos whose scene is not the scene of an earlier photo of the
+/// range (correlation at least [`SAME_SCENE`], within [`MAX_LAG`] photos).
+pub fn independent(photos: &[PhotoSurvey], range: std::ops::Range<usize>) -> usize {
+    range
+        .clone()
+        .filter(|&j| {
+            !(range.start.max(j.saturating_sub(MAX_LAG))..j)
+                .any(|e| photos[e].same_scene[j - e - 1] >= SAME_SCENE)
+        })
+        .count()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mission of `frames` block images (`w`×`h`, grey): a smooth light over a seafloor of level 1 with a share
+    /// `c` of dark (0.1) square patches of `size` blocks, the camera moving `step` blocks a photo along x.
+    fn mission(frames: usize, c: f64, size: usize, step: usize) -> Vec<Raster> {
+        let (w, h) = (60usize, 40usize);
+        let ground_w = w + step * frames + size;
+        // Patches on a grid of cells, each dark with probability c (a hash of the cell): the dark share is c.
+        let dark = |x: usize, y: usize| {
+            let (cx, cy) = ((x / size) as u64, (y / size) as u64);
+            let hsh = (cx.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ cy.wrapping_mul(0xC2B2_AE3D_27D4_EB4F))
+            .wrapping_mul(0x1656_67B1_9E37_79F9);
+            ((hsh >> 11) as f64 / (1u64 << 53) as f64) < c
+        };
+        assert!(ground_w > w);
+        (0..frames)
+            .map(|i| {
+                Raster::from_fn(w, h, 1, |x, y, _| {
+                    let light = 0.2
+                        + 0.8
+                            * (-(((x as f32 - 30.0) / 25.0).powi(2)
+                                + ((y as f32 - 20.0) / 18.0).powi(2)))
+                            .exp();
+                    let albedo = if dark(x + i * step, y) { 0.1 } else { 1.0 };
+                    light * albedo * 0.5
+                })
+            })
+            .collect()
+    }
+
+    fn survey(frames: &[Raster]) -> Vec<PhotoSurvey> {
+        let mut s = Surveyor::new(None);
+        for f in frames {
+            s.push(f);
+        }
+        s.finish()
+    }
+
+    #[test]
+    fn the_dark_share_is_measured_against_the_neighbours_bright_side() {
+        for c in [0.0, 0.15, 0.4] {
+            let got = survey(&mission(30, c, 3, 4));
+            let mut v: Vec<f32> = got.iter().map(|p| p.coverage).collect();
+            let med = quantile(&mut v, 0.5);
+            assert!(
+                (med - c as f32).abs() < 0.08,
+                "coverage {c}: measured {med}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_slow_camera_takes_more_photos_per_independent_sample() {
+        // Patches of 6 blocks: moving 8 blocks a photo, consecutive photos see other ground at each block; moving
+        // 1 block a photo, the same patch stays several photos: the window grows until it holds 7 samples.
+        let fast = choose(&survey(&mission(60, 0.2, 6, 8)));
+        let slow = choose(&survey(&mission(60, 0.2, 6, 1)));
+        let (f, s) = (fast[30], slow[30]);
+        assert_eq!(
+            (f.window, f.quantile, f.rule),
+            (BASE_WINDOW, 0.5, Rule::Sparse),
+            "{f:?}"
+        );
+        assert!(f.photos_per_sample < 1.2, "{f:?}");
+        assert!(
+            s.window > BASE_WINDOW && s.photos_per_sample >= 2.0,
+            "{s:?}"
+        );
+        assert_eq!(s.quantile, 0.5);
+    }
+
+    #[test]
+    fn independent_samples_are_counted_by_brute_force() {
+        // Photos 0..10; photo 3 repeats 2 and photo 4 repeats 3 (a chain: one scene), photo 9 repeats 5.
+        let mut photos = vec![
+            PhotoSurvey {
+                coverage: 0.0,
+                same_scene: [0.0; MAX_LAG],
+            };
+            10
+        ];
+        photos[2].same_scene[0] = 0.9;
+        photos[3].same_scene[0] = 0.9;
+        photos[5].same_scene[3] = 0.9;
+        assert_eq!(independent(&photos, 0..10), 7);
+        assert_eq!(
+            independent(&photos, 3..10),
+            5,
+            "photo 3 starts the range: its own sample"
+        );
+        assert_eq!(independent(&photos, 6..10), 4);
+        // The longer window that holds 7 samples around photo 4.
+        let (n, found) = grow(&photos, 7, 31, 7, |n| window_range(4, n, 10));
+        assert_eq!((n, found), (9, 7));
+    }
+
+    #[test]
+    fn a_dense_stretch_takes_the_quantile_and_its_window() {
+        let dense = choose(&survey(&mission(40, 0.4, 3, 8)));
+        let d = dense[20];
+        assert!(d.coverage > 0.3 && d.coverage < 0.5, "{d:?}");
+        assert!((d.quantile - (1.0 + d.coverage) / 2.0).abs() < 1e-6);
+        let need = quantile_window(d.coverage as f64, d.quantile as f64, RISK, 1).unwrap();
+        assert_eq!(d.window, need.min(MAX_AUTO_WINDOW));
+        assert!(d.near.is_some_and(|k| k < d.window));
+    }
+}
