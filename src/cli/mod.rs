@@ -536,8 +536,8 @@ struct CorrectArgs {
     /// survey of its photos (their dark share and how many photos see the same scene; docs/nodules.md): 7 and
     /// the median on sparse ground under a moving camera, longer windows and the (1 + c)/2 quantile on dense
     /// nodule fields and under a slow camera. Photos as they come (--watch, --survey -) take 7 and the median.
-    #[arg(long, value_name = "N", conflicts_with = "contamination", help_heading = H_METHOD)]
-    window: Option<usize>,
+    #[arg(long, value_name = "N|auto", value_parser = parse_window, conflicts_with = "contamination", help_heading = H_METHOD)]
+    window: Option<WindowArg>,
 
     /// --method abyss: photos in the near window, or auto; 0 turns it off [default: auto].
     ///
@@ -785,8 +785,9 @@ fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
     o.denoise &= !args.no_denoise;
     o.level_by_light &= !args.no_level_by_light;
     o.bright_spots |= args.bright_spots;
-    if let Some(n) = args.window {
-        o.window = Some(n);
+    if let Some(WindowArg(n)) = args.window {
+        // `auto` also undoes a config file's window.
+        o.window = n;
         o.contamination = None;
     }
     if let Some(c) = args.contamination {
@@ -1275,6 +1276,15 @@ struct NearArg(Option<usize>);
 /// `--near-window`: `auto` or a whole number of photos (0: off).
 fn parse_near(s: &str) -> Result<NearArg, String> {
     auto_or(s, "a number of photos such as 5 (0: off)").map(NearArg)
+}
+
+/// `--window`: a number of photos, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct WindowArg(Option<usize>);
+
+/// `--window`: `auto` or a whole (odd) number of photos.
+fn parse_window(s: &str) -> Result<WindowArg, String> {
+    auto_or(s, "an odd number of photos such as 15").map(WindowArg)
 }
 
 /// `--downsample`: a block size, or `None` for `auto`.
