@@ -479,6 +479,43 @@ pub struct Evaluation {
     pub settings: EvalSettings,
     /// Scores per set of photos, in the order given.
     pub sets: Vec<Scores>,
+    /// What the user should know about the scores: a set its `correct` run wrote with another curve than
+    /// `transfer` ([`transfer_warnings`]).
+    pub warnings: Vec<String>,
+}
+
+/// The curve the `correct` run that wrote `folder` took, from its `<folder>/_abysslight/report.json`
+/// (`options.transfer`, which a run records with `auto` resolved; for an `auto` there, the curve
+/// `transfer_assumed` names). `None` when the folder holds no readable report.
+pub fn run_transfer(folder: &Path) -> Option<Transfer> {
+    let text =
+        std::fs::read_to_string(folder.join(crate::io::WORK_DIR).join("report.json")).ok()?;
+    let report: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let given = report.get("options")?.get("transfer")?.as_str()?;
+    let assumed = report.get("transfer_assumed").and_then(|a| a.as_str());
+    let curve = match (given.trim().eq_ignore_ascii_case("auto"), assumed) {
+        (false, _) => given,
+        (true, Some(a)) => a.split_once(':').map_or(a, |(t, _)| t),
+        (true, None) => return None,
+    };
+    curve.parse().ok()
+}
+
+/// A warning for each set whose `correct` run ([`run_transfer`]) took another curve than `transfer`, the one the
+/// scores assume: its photos would be read into linear light with another curve than they were written with, and
+/// its scores would not be those of the run.
+pub fn transfer_warnings(sets: &[(String, PathBuf)], transfer: Transfer) -> Vec<String> {
+    sets.iter()
+        .filter_map(|(label, folder)| {
+            let run = run_transfer(folder).filter(|t| *t != transfer)?;
+            Some(format!(
+                "{label}: the correct run that wrote {} took the camera curve {run} (its {}/report.json), but these \
+                 scores assume {transfer}; give --transfer {run} to score the photos as they were corrected",
+                folder.display(),
+                crate::io::WORK_DIR
+            ))
+        })
+        .collect()
 }
 
 /// `truth/dive.json` below a dive folder, or the file itself.
@@ -741,6 +778,7 @@ pub fn evaluate(
         registration,
         settings: settings.clone(),
         sets: scores,
+        warnings: transfer_warnings(sets, transfer),
     })
 }
 
@@ -764,6 +802,30 @@ impl Evaluation {
             ));
         }
         s
+    }
+
+    /// What each score of [`Evaluation::table`] means, one line each, for the columns that have values.
+    pub fn legend(&self) -> Vec<String> {
+        type Column = (fn(&Scores) -> Option<f64>, &'static str);
+        let columns: [Column; 4] = [
+            (|s| s.albedo_error, "albedo error: mean difference from the true seafloor after one scale per \
+                colour channel, as a share of it (0.05: 5 %)"),
+            (|s| s.residual_pattern, "residual pattern: lighting left in the photos, the spread of corrected / \
+                true over an 8x6 grid of the frame (0.05: 5 % brighter or darker in places)"),
+            (|s| s.consistency, "consistency: RMS difference where photos overlap in the mosaic, as a share of \
+                the photos' contrast (their standard deviation)"),
+            (|s| s.overlap_difference, "overlap difference: the same RMS difference as a share of the photos' \
+                mean level (0.10: 10 % of the seafloor's brightness)"),
+        ];
+        let has = |f: fn(&Scores) -> Option<f64>| self.sets.iter().any(|s| f(s).is_some());
+        let mut lines = vec!["lower is better for every score; 0 is perfect".to_string()];
+        lines.extend(
+            columns
+                .iter()
+                .filter(|(f, _)| has(*f))
+                .map(|(_, m)| m.to_string()),
+        );
+        lines
     }
 
     /// Write the evaluation as JSON (atomically).
