@@ -42,7 +42,8 @@ fn dry_run_reports_what_would_go_wrong_and_writes_nothing() {
     // Six PNGs of one dive, two seconds apart by their names; then a JPEG and a smaller PNG a day later.
     for i in 0..6 {
         photo(
-            &d.path().join(format!("survey/D2023-06-03T16-27-{:02}.png", 10 + 2 * i)),
+            &d.path()
+                .join(format!("survey/D2023-06-03T16-27-{:02}.png", 10 + 2 * i)),
             32,
             24,
             i,
@@ -77,10 +78,7 @@ fn dry_run_reports_what_would_go_wrong_and_writes_nothing() {
     assert!(!dry(&["--window", "15"]).contains("--save-factors"));
 
     // The first dive alone, one format, one size, enough photos: nothing to warn about.
-    for f in [
-        "D2023-06-04T16-30-00.jpg",
-        "D2023-06-04T16-30-02.png",
-    ] {
+    for f in ["D2023-06-04T16-30-00.jpg", "D2023-06-04T16-30-02.png"] {
         std::fs::remove_file(d.path().join("survey").join(f)).unwrap();
     }
     let out = dry(&["--window", "5"]);
@@ -125,7 +123,15 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
     let d = tempfile::tempdir().unwrap();
     let o = abysslight(
         &[
-            "simulate", "--out", "dive", "--frames", "8", "--water-column", "4", "--size", "64x48",
+            "simulate",
+            "--out",
+            "dive",
+            "--frames",
+            "8",
+            "--water-column",
+            "4",
+            "--size",
+            "64x48",
         ],
         d.path(),
     );
@@ -176,7 +182,14 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
     // Scored with the run's own curve: no warning; --json writes where asked.
     let o = abysslight(
         &[
-            "evaluate", "--truth", "dive", "--transfer", "srgb", "--json", "scores.json", "out",
+            "evaluate",
+            "--truth",
+            "dive",
+            "--transfer",
+            "srgb",
+            "--json",
+            "scores.json",
+            "out",
         ],
         d.path(),
     );

@@ -90,7 +90,12 @@ fn photo_ticks(photos: usize) -> Vec<usize> {
         k += 1;
     }
     let mut ticks: Vec<usize> = (photos > 0).then_some(0).into_iter().collect();
-    ticks.extend((step..=photos).step_by(step).map(|t| t - 1).filter(|&t| t > 0));
+    ticks.extend(
+        (step..=photos)
+            .step_by(step)
+            .map(|t| t - 1)
+            .filter(|&t| t > 0),
+    );
     ticks
 }
 
@@ -121,7 +126,7 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
         1
     };
     draw::text(&mut img, f.left, 10, &title, scale, BLACK);
-    let key = "blue: each photo's value; red bands: flagged photos; red dashes: the flag threshold";
+    let key = "blue: value of each photo; red bands: flagged; red dashes: flag threshold";
     draw::text(&mut img, f.left, 34, key, 1, GREY);
     let mut top = 56i64;
     for s in &series {
@@ -152,7 +157,12 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
     let right = f.left + f.plot_w - 1;
     draw::line(img, (f.left, y0), (f.left, y0 + h - 1), BLACK);
     draw::line(img, (f.left, y0 + h - 1), (right, y0 + h - 1), BLACK);
-    for (v, colour) in [(0.0, BLACK), (vmax / 2.0, BLACK), (vmax, BLACK), (s.threshold, RED)] {
+    for (v, colour) in [
+        (0.0, BLACK),
+        (vmax / 2.0, BLACK),
+        (vmax, BLACK),
+        (s.threshold, RED),
+    ] {
         let y = y_of(v);
         draw::line(img, (f.left - 4, y), (f.left, y), colour);
         let label = format!("{v:.3}");
@@ -168,7 +178,14 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
         draw::line(img, (x, y0 + h - 1), (x, y0 + h + 3), BLACK);
         let label = (frames[t].index + 1).to_string();
         let lw = draw::text_width(&label, 1) as i64;
-        draw::text(img, (x - lw / 2).min(right - lw), y0 + h + 6, &label, 1, BLACK);
+        draw::text(
+            img,
+            (x - lw / 2).min(right - lw),
+            y0 + h + 6,
+            &label,
+            1,
+            BLACK,
+        );
     }
     let axis = "photo number";
     let aw = draw::text_width(axis, 1) as i64;
@@ -224,17 +241,27 @@ pub fn flagged_sheet_with(
         .sum::<u32>()
         + gap;
     // Column titles: what each tile is.
-    let titles_h = 26u32;
+    let titles_h = 32u32;
     let mut img = RgbImage::from_pixel(2 * tile_w + 3 * gap, h + titles_h, WHITE);
     let columns = [
         ("corrected photo", "flagged: its first reason in red"),
-        ("F·C: the light it was divided by", "brightened to show its shape"),
+        (
+            "F·C: the light it was divided by",
+            "brightened to show its shape",
+        ),
     ];
     for (c, (title, note)) in columns.iter().enumerate() {
         let x = (gap + c as u32 * (tile_w + gap)) as i64;
         draw::text(&mut img, x, gap as i64, title, 1, BLACK);
         draw::text(&mut img, x, gap as i64 + 11, note, 1, GREY);
     }
+    let rule = (gap + titles_h - 6) as i64;
+    draw::line(
+        &mut img,
+        (gap as i64, rule),
+        ((2 * tile_w + 2 * gap) as i64, rule),
+        GREY,
+    );
     let mut y = (gap + titles_h) as i64;
     for (frame, reason, a, f) in &tiles {
         let name = frame
@@ -324,7 +351,8 @@ pub fn before_after_sheet(
 
 /// The `report.json` of the run that wrote `output`, if there is one.
 fn read_report(output: &Path) -> Option<serde_json::Value> {
-    let text = std::fs::read_to_string(output.join(crate::io::WORK_DIR).join("report.json")).ok()?;
+    let text =
+        std::fs::read_to_string(output.join(crate::io::WORK_DIR).join("report.json")).ok()?;
     serde_json::from_str(&text).ok()
 }
 
@@ -339,7 +367,9 @@ fn skipped_reason(report: &Option<serde_json::Value>, relative: &Path) -> String
             .flatten()
     });
     message.unwrap_or_else(|| match report {
-        Some(_) => "no output: not in the run's photos (--limit, --shard) or not corrected yet".into(),
+        Some(_) => {
+            "no output: not in the run's photos (--limit, --shard) or not corrected yet".into()
+        }
         None => "no output, and no report of a run in this folder".into(),
     })
 }
@@ -507,6 +537,118 @@ mod tests {
         let jump = col.windows(2).map(|p| (p[1] - p[0]).abs()).max().unwrap();
         assert!(jump <= 4, "largest step down a column: {jump}");
         assert!(col[319] - col[0] > 150, "the column still spans the ramp");
+    }
+
+    /// The ticks of the photo axis against a search over the allowed steps: the smallest of 1, 2, 5, 10, 20, …
+    /// that gives at most 10 steps, ticks at the first photo and at every multiple of the step.
+    #[test]
+    fn photo_ticks_are_round_steps_at_most_ten() {
+        let steps: Vec<usize> = (0..6)
+            .flat_map(|e| [1, 2, 5].map(|m| m * 10usize.pow(e)))
+            .collect();
+        for photos in 0..3000 {
+            let step = *steps.iter().find(|&&s| photos / s <= 10).unwrap();
+            let mut want: Vec<usize> = if photos > 0 { vec![0] } else { vec![] };
+            want.extend(
+                (1..=photos)
+                    .filter(|p| p % step == 0 && *p > 1)
+                    .map(|p| p - 1),
+            );
+            assert_eq!(photo_ticks(photos), want, "{photos} photos");
+        }
+    }
+
+    fn frames(n: usize, dir: &Path) -> Vec<FrameReport> {
+        (0..n)
+            .map(|i| FrameReport {
+                input: dir.join(format!("in{i}.png")),
+                output: dir.join(format!("out{i}.png")),
+                index: i,
+                window: [0, 0],
+                decode_ms: 0.0,
+                estimate_ms: 0.0,
+                correct_ms: 0.0,
+                encode_ms: 0.0,
+                floored_pixels: 0,
+                clipped_samples: 0,
+                resumed: false,
+                health: Default::default(),
+                backscatter_scale: Vec::new(),
+                noise_sigma: Vec::new(),
+                texture_sigma: Vec::new(),
+            })
+            .collect()
+    }
+
+    /// Dark pixels of `img` in the rectangle `x0..x1`, `y0..y1`.
+    fn ink(img: &RgbImage, (x0, x1): (i64, i64), (y0, y1): (i64, i64)) -> usize {
+        let (w, h) = (img.width() as i64, img.height() as i64);
+        (y0.max(0)..y1.min(h))
+            .flat_map(|y| (x0.max(0)..x1.min(w)).map(move |x| (x, y)))
+            .filter(|&(x, y)| img.get_pixel(x as u32, y as u32).0[0] < 100)
+            .count()
+    }
+
+    /// Under every panel of the overview, the photo numbers of the ticks (photo 20, 40, … of 151), where the
+    /// overview had only "photo 1" and "photo 151" under the last panel.
+    #[test]
+    fn the_overview_numbers_the_photo_axis_of_every_panel() {
+        let fr = frames(151, Path::new("/nowhere"));
+        let img = overview(&fr, &Thresholds::default());
+        let f = Frame {
+            left: 70,
+            plot_w: 600,
+            panel_h: 130,
+            title_h: 22,
+            gap: 30,
+            photos: 151,
+        };
+        assert_eq!(img.width() as i64, 70 + 600 + 20);
+        for p in 0..6 {
+            let below = 56 + p * (22 + 130 + 30) + 22 + 130 + 6;
+            for t in [19usize, 79, 139] {
+                let x = f.x_of(t);
+                assert!(
+                    ink(&img, (x - 12, x + 12), (below, below + 8)) > 5,
+                    "panel {p}, photo {}",
+                    t + 1
+                );
+            }
+            // Between ticks, no label.
+            let x = f.x_of(29);
+            assert_eq!(
+                ink(&img, (x - 3, x + 3), (below, below + 8)),
+                0,
+                "panel {p}"
+            );
+        }
+    }
+
+    /// The flagged sheet has a title over each column, above the first photo's name.
+    #[test]
+    fn the_flagged_sheet_has_column_titles() {
+        let d = tempfile::tempdir().unwrap();
+        let fr = frames(1, d.path());
+        RgbImage::from_pixel(64, 48, image::Rgb([120, 110, 100]))
+            .save(&fr[0].output)
+            .unwrap();
+        let lit = Raster::filled(8, 6, 3, 0.3);
+        let rows = vec![(fr[0].clone(), "a reason".to_string(), &lit)];
+        let img = flagged_sheet_with(&rows, 100).unwrap();
+        // Gap 6, two 100-pixel columns; the titles' line at y 6..14, the photo's name 32 pixels lower.
+        assert!(
+            ink(&img, (6, 106), (6, 14)) > 20,
+            "title of the corrected column"
+        );
+        assert!(
+            ink(&img, (112, 212), (6, 14)) > 20,
+            "title of the F·C column"
+        );
+        assert!(
+            ink(&img, (6, 106), (38, 46)) > 5,
+            "the photo's name below the titles"
+        );
+        assert_eq!(img.height(), 6 + 32 + 40 + 75 + 6);
     }
 
     #[test]

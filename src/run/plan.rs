@@ -223,7 +223,10 @@ impl Plan {
             checks::size_text(outputs)
         );
         if factors > 0 {
-            line += &format!(" and up to {} for --save-factors", checks::size_text(factors));
+            line += &format!(
+                " and up to {} for --save-factors",
+                checks::size_text(factors)
+            );
         }
         match self.free_space() {
             Some(free) => line + &format!("; {} free there", checks::size_text(free)),
@@ -233,7 +236,9 @@ impl Plan {
 
     /// Free bytes on the file system `--out` is (or would be) on; `None` with `--out -` or where unknown.
     fn free_space(&self) -> Option<u64> {
-        (!self.stdout).then(|| checks::free_space(&self.out)).flatten()
+        (!self.stdout)
+            .then(|| checks::free_space(&self.out))
+            .flatten()
     }
 
     /// What would go wrong in the run, each in words (empty when nothing is found; always empty when streaming):
@@ -352,8 +357,11 @@ impl Plan {
             .collect();
         if !self.streaming {
             lines.push(match lines.len() {
-                0 => "checks: photo sizes, formats, window, one dive, disk: nothing found".to_string(),
-                k => format!("checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"),
+                0 => "checks: photo sizes, formats, window, one dive, disk: nothing found"
+                    .to_string(),
+                k => format!(
+                    "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"
+                ),
             });
         }
         lines

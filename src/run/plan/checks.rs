@@ -179,7 +179,9 @@ pub(crate) fn name_time(p: &Path) -> Option<f64> {
             if k > 0 && j < b.len() && sep(b[j]) {
                 j += 1;
             }
-            let digits = b.get(j..j + width).filter(|d| d.iter().all(u8::is_ascii_digit));
+            let digits = b
+                .get(j..j + width)
+                .filter(|d| d.iter().all(u8::is_ascii_digit));
             let Some(d) = digits else { continue 'start };
             f[k] = d.iter().fold(0, |v, c| v * 10 + (c - b'0') as u32);
             j += width;
@@ -221,7 +223,12 @@ fn capture_times(photos: &[Entry]) -> Option<(Vec<f64>, &'static str)> {
     };
     let t = photos
         .iter()
-        .map(|e| std::fs::metadata(&e.path).and_then(|m| m.modified()).ok().map(secs))
+        .map(|e| {
+            std::fs::metadata(&e.path)
+                .and_then(|m| m.modified())
+                .ok()
+                .map(secs)
+        })
         .collect::<Option<Vec<f64>>>()?;
     Some((t, "the file times"))
 }
@@ -269,7 +276,9 @@ pub(crate) fn two_dives(photos: &[Entry]) -> Option<String> {
     let times = capture_times(photos);
     // Numbers in names that carry the time are the time of day (they start again at midnight): the gap in the
     // times is the sign then.
-    let timed = times.as_ref().is_some_and(|(_, from)| from.contains("names"));
+    let timed = times
+        .as_ref()
+        .is_some_and(|(_, from)| from.contains("names"));
     if let Some(&first) = numbering_restarts(photos).first().filter(|_| !timed) {
         signs.push(format!(
             "the numbering of the file names starts again at {} (after {})",
@@ -316,7 +325,11 @@ fn file_key(p: &Path) -> Option<String> {
 /// whose frames are survey photos (the same files under other names: links, a copy by hard links): `S` would then
 /// hold the seafloor itself and the correction would remove it, or the frames would be corrected as survey photos.
 /// `survey_photos` are the photos the run found; none when streaming (the folders are still compared).
-pub(crate) fn water_is_survey(water: &Path, survey: &Path, survey_photos: &[Entry]) -> Option<String> {
+pub(crate) fn water_is_survey(
+    water: &Path,
+    survey: &Path,
+    survey_photos: &[Entry],
+) -> Option<String> {
     let real = |p: &Path| std::fs::canonicalize(p).ok();
     let (w, s) = (water.display(), survey.display());
     let (rw, rs): (PathBuf, PathBuf) = (real(water)?, real(survey)?);
@@ -339,8 +352,10 @@ pub(crate) fn water_is_survey(water: &Path, survey: &Path, survey_photos: &[Entr
              survey photos would enter S; give the folder of the water-column frames alone"
         ));
     }
-    let keys: std::collections::HashSet<String> =
-        survey_photos.iter().filter_map(|e| file_key(&e.path)).collect();
+    let keys: std::collections::HashSet<String> = survey_photos
+        .iter()
+        .filter_map(|e| file_key(&e.path))
+        .collect();
     let frames = crate::io::find_photos(water).ok()?.photos;
     let shared: Vec<&Entry> = frames
         .iter()
@@ -408,8 +423,8 @@ pub(crate) fn disk(outputs: u64, factors: u64, free: Option<u64>, out: &Path) ->
     let free = free?;
     (need > free).then(|| {
         format!(
-            "the outputs need about {}{} but only {} are free on the file system of {}: the run would stop when \
-             the disk is full",
+            "the outputs need about {}{} but only {} are free on the file system of {}: the writes would fail \
+             once the disk is full",
             size_text(need),
             if factors > 0 {
                 format!(" ({} of them for --save-factors)", size_text(factors))
@@ -500,14 +515,20 @@ mod tests {
     fn name_time_reads_the_date_and_time_of_a_file_name() {
         // Seconds since 1970 by Python's calendar.timegm, an independent calendar.
         let t = |s: &str| name_time(Path::new(s));
-        let nephrops = "image_D2023-06-03T16-27-38-624235Z_0_jpg.rf.0f602c5d89dc6317d3a2261b942229b6.jpg";
+        let nephrops =
+            "image_D2023-06-03T16-27-38-624235Z_0_jpg.rf.0f602c5d89dc6317d3a2261b942229b6.jpg";
         assert_eq!(t(nephrops), Some(1685809658.0));
         assert_eq!(t("dive/IMG_20230603_162738.jpg"), Some(1685809658.0));
         assert_eq!(t("2023-06-03 16:27:38.png"), Some(1685809658.0));
         assert_eq!(t("20000229000000.tif"), Some(951782400.0));
         assert_eq!(t("cam2_2024-12-31T23:59:59.jpg"), Some(1735689599.0));
         // No date, or digits that are not one (month 13, a longer number, a counter).
-        for none in ["IMG_0042.jpg", "20231303162738.jpg", "120230603162738.jpg", "x.jpg"] {
+        for none in [
+            "IMG_0042.jpg",
+            "20231303162738.jpg",
+            "120230603162738.jpg",
+            "x.jpg",
+        ] {
             assert_eq!(t(none), None, "{none}");
         }
     }
@@ -520,8 +541,14 @@ mod tests {
             .collect();
         let refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let m = two_dives(&entries(&refs)).unwrap();
-        assert!(m.contains("24.1 h") && m.contains("D2023-06-04T16-32-10.jpg"), "{m}");
-        assert!(!m.contains("numbering"), "times in names are not a numbering: {m}");
+        assert!(
+            m.contains("24.1 h") && m.contains("D2023-06-04T16-32-10.jpg"),
+            "{m}"
+        );
+        assert!(
+            !m.contains("numbering"),
+            "times in names are not a numbering: {m}"
+        );
         assert!(two_dives(&entries(&refs[..8])).is_none());
     }
 
@@ -546,7 +573,10 @@ mod tests {
         // The same file under another name (a hard link) is found; a copy of other bytes is not.
         std::fs::hard_link(survey.join("a.png"), water.join("w2.png")).unwrap();
         let m = water_is_survey(&water, &survey, &photos).unwrap();
-        assert!(m.contains("1 of the 2 frames") && m.contains("w2.png"), "{m}");
+        assert!(
+            m.contains("1 of the 2 frames") && m.contains("w2.png"),
+            "{m}"
+        );
     }
 
     #[test]
