@@ -1163,6 +1163,9 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
     let console = Console::new(false);
     let r = abysslight::eval::demo::run_demo(&a.out, &sim, &console)?;
     print!("{}", r.evaluation.table());
+    for line in r.evaluation.legend() {
+        eprintln!("abysslight: {line}");
+    }
     eprintln!(
         "abysslight: demo done in {:.1} s: contact sheet {}, scores {}",
         r.seconds,

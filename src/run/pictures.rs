@@ -277,15 +277,13 @@ pub fn flagged_sheet_with(
             1,
             BLACK,
         );
-        let reason: Vec<char> = reason.chars().collect();
         let max_chars = ((2 * tile_w + gap) / 8) as usize;
-        for (line, chunk) in reason.chunks(max_chars).take(2).enumerate() {
-            let text: String = chunk.iter().collect();
+        for (line, text) in wrap(reason, max_chars).iter().take(2).enumerate() {
             draw::text(
                 &mut img,
                 gap as i64,
                 y + 12 + 11 * line as i64,
-                &text,
+                text,
                 1,
                 RED,
             );
@@ -379,12 +377,48 @@ fn skipped_tile(like: &RgbImage, name: &Path, reason: &str) -> RgbImage {
     let mut t = RgbImage::from_pixel(like.width(), like.height(), image::Rgb([225, 225, 225]));
     draw::text(&mut t, 6, 6, "SKIPPED", 2, RED);
     let per_line = (like.width().saturating_sub(12) / 8).max(1) as usize;
-    let text: Vec<char> = format!("{}: {reason}", name.display()).chars().collect();
-    for (i, chunk) in text.chunks(per_line).take(8).enumerate() {
-        let line: String = chunk.iter().collect();
-        draw::text(&mut t, 6, 30 + 11 * i as i64, &line, 1, BLACK);
+    // The report's message names the file already (by the run's path).
+    let file = name
+        .file_name()
+        .map_or(String::new(), |f| f.to_string_lossy().into_owned());
+    let text = if reason.contains(&file) {
+        reason.to_string()
+    } else {
+        format!("{}: {reason}", name.display())
+    };
+    for (i, line) in wrap(&text, per_line).iter().take(8).enumerate() {
+        draw::text(&mut t, 6, 30 + 11 * i as i64, line, 1, BLACK);
     }
     t
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces where a line has one (else mid-word).
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut rest: Vec<char> = text.chars().collect();
+    while rest.len() > width {
+        let cut = rest[..=width]
+            .iter()
+            .rposition(|c| *c == ' ')
+            .filter(|&i| i > 0)
+            .unwrap_or(width);
+        lines.push(
+            rest[..cut]
+                .iter()
+                .collect::<String>()
+                .trim_end()
+                .to_string(),
+        );
+        rest = rest[cut..]
+            .iter()
+            .copied()
+            .skip_while(|c| *c == ' ')
+            .collect();
+    }
+    if !rest.is_empty() {
+        lines.push(rest.into_iter().collect());
+    }
+    lines
 }
 
 /// The folders of `abysslight sheet SURVEY CORRECTED` the right way round, and a warning when they were not:
@@ -537,6 +571,28 @@ mod tests {
         let jump = col.windows(2).map(|p| (p[1] - p[0]).abs()).max().unwrap();
         assert!(jump <= 4, "largest step down a column: {jump}");
         assert!(col[319] - col[0] > 150, "the column still spans the ramp");
+    }
+
+    #[test]
+    fn wrap_breaks_at_spaces_and_keeps_every_word() {
+        let text =
+            "mix/a_very_long_name.jpg: size 614x345 differs from the mission's 1229x691; skipped";
+        for width in [5usize, 12, 23, 40, 200] {
+            let lines = wrap(text, width);
+            assert!(
+                lines.iter().all(|l| l.chars().count() <= width),
+                "{width}: {lines:?}"
+            );
+            let joined: Vec<&str> = lines.iter().flat_map(|l| l.split(' ')).collect();
+            let words: Vec<&str> = text.split(' ').collect();
+            if width >= 24 {
+                assert_eq!(joined, words, "{width}: whole words");
+            } else {
+                assert_eq!(lines.concat().replace(' ', ""), text.replace(' ', ""));
+            }
+        }
+        assert_eq!(wrap("ab cd", 2), ["ab", "cd"]);
+        assert!(wrap("", 5).is_empty());
     }
 
     /// The ticks of the photo axis against a search over the allowed steps: the smallest of 1, 2, 5, 10, 20, …
