@@ -440,7 +440,6 @@ pub(crate) fn disk(outputs: u64, factors: u64, free: Option<u64>, out: &Path) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::Duration;
 
     fn entries(names: &[&str]) -> Vec<Entry> {
         names
