@@ -70,36 +70,10 @@ impl Plan {
         let stdin = survey == Path::new("-");
         let stdout = out == Path::new("-");
         let streaming = stdin || opts.watch;
-        // Baseline `--method mean` needs the whole mission's mean before the stream.
-        if streaming && opts.method == Method::Mean {
-            return Err(Error::Usage(
-                "--method mean needs every photo of the mission before it corrects the first; it cannot be used \
-                 with --watch or --survey -"
-                    .into(),
-            ));
-        }
         // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
         let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
-        let found = if streaming {
-            if opts.watch && !survey.is_dir() {
-                return Err(Error::Usage(format!(
-                    "--watch {}: not a folder",
-                    survey.display()
-                )));
-            }
-            Found::default()
-        } else {
-            // A survey link pointing at --out is not read back.
-            find_photos_excluding(&survey, &[&out])?
-        };
-        if !streaming && found.photos.is_empty() {
-            return Err(Error::Usage(format!(
-                "no photos ({}) found below {}",
-                io::PHOTO_EXTENSIONS.join(", "),
-                survey.display()
-            )));
-        }
+        let found = list_survey(opts, &survey, &out, streaming)?;
         let warnings = folder_warnings(opts, &survey, &found);
         for m in &warnings {
             progress.warn(m);
@@ -411,6 +385,37 @@ impl Plan {
     pub fn output_path(&self, entry: &Entry) -> PathBuf {
         output_path(&self.out, entry)
     }
+}
+
+/// The survey photos found (none when streaming), or why there are none to correct.
+fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Result<Found> {
+    // Baseline `--method mean` needs the whole mission's mean before the stream.
+    if streaming && opts.method == Method::Mean {
+        return Err(Error::Usage(
+            "--method mean needs every photo of the mission before it corrects the first; it cannot be used with \
+             --watch or --survey -"
+                .into(),
+        ));
+    }
+    if streaming {
+        if opts.watch && !survey.is_dir() {
+            return Err(Error::Usage(format!(
+                "--watch {}: not a folder",
+                survey.display()
+            )));
+        }
+        return Ok(Found::default());
+    }
+    // A survey link pointing at --out is not read back.
+    let found = find_photos_excluding(survey, &[out])?;
+    if found.photos.is_empty() {
+        return Err(Error::Usage(format!(
+            "no photos ({}) found below {}",
+            io::PHOTO_EXTENSIONS.join(", "),
+            survey.display()
+        )));
+    }
+    Ok(found)
 }
 
 /// Warnings about the input folders, before the run: files passed over, and a water-column folder that is the
