@@ -346,9 +346,9 @@ struct EvaluateArgs {
     /// How the photos' values relate to light [default: the simulated dive's encoding, else linear].
     #[arg(long, value_name = "CURVE")]
     transfer: Option<Transfer>,
-    /// Where to write the scores as JSON.
-    #[arg(long, value_name = "FILE.json", default_value = "evaluation.json")]
-    json: PathBuf,
+    /// Also write the scores as JSON to this file [default: none; the table goes to stdout].
+    #[arg(long, value_name = "FILE.json")]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -1123,7 +1123,7 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
     ] {
         inputs.extend(p.as_deref().map(|p| (what, p)));
     }
-    let mut outputs = vec![Output::File("--json", &a.json)];
+    let mut outputs: Vec<Output> = a.json.iter().map(|j| Output::File("--json", j)).collect();
     outputs.extend(
         a.save_placements
             .as_deref()
@@ -1147,8 +1147,17 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         );
     }
     print!("{}", ev.table());
-    ev.save_json(&a.json)?;
-    eprintln!("abysslight: scores written to {}", a.json.display());
+    for line in ev.legend() {
+        eprintln!("abysslight: {line}");
+    }
+    for w in &ev.warnings {
+        eprintln!("abysslight: warning: {w}");
+    }
+    // Written only where asked: a file in the current folder nobody asked for was overwritten by the next run.
+    if let Some(json) = &a.json {
+        ev.save_json(json)?;
+        eprintln!("abysslight: scores written to {}", json.display());
+    }
     Ok(ExitCode::from(EXIT_OK))
 }
 
@@ -1162,6 +1171,9 @@ fn demo(a: DemoArgs) -> Result<ExitCode, Error> {
     let console = Console::new(false);
     let r = abysslight::eval::demo::run_demo(&a.out, &sim, &console)?;
     print!("{}", r.evaluation.table());
+    for line in r.evaluation.legend() {
+        eprintln!("abysslight: {line}");
+    }
     eprintln!(
         "abysslight: demo done in {:.1} s: contact sheet {}, scores {}",
         r.seconds,
@@ -1181,8 +1193,13 @@ fn sheet(a: SheetArgs) -> Result<ExitCode, Error> {
             ("corrected folder", &a.corrected),
         ],
     )?;
+    let (survey, corrected, swapped) =
+        abysslight::run::pictures::sheet_folders(&a.survey, &a.corrected);
+    if let Some(w) = swapped {
+        eprintln!("abysslight: warning: {w}");
+    }
     let (img, with_factors) =
-        abysslight::run::pictures::before_after_sheet(&a.survey, &a.corrected, a.rows, a.width)?;
+        abysslight::run::pictures::before_after_sheet(&survey, &corrected, a.rows, a.width)?;
     abysslight::run::pictures::save_png(&img, &a.sheet)?;
     if with_factors {
         eprintln!(

@@ -509,6 +509,44 @@ pub struct Evaluation {
     pub settings: EvalSettings,
     /// Scores per set of photos, in the order given.
     pub sets: Vec<Scores>,
+    /// What the user should know about the scores: a set its `correct` run wrote with another curve than
+    /// `transfer` ([`transfer_warnings`]).
+    pub warnings: Vec<String>,
+}
+
+/// The curve the `correct` run that wrote `folder` took, from its `<folder>/_abysslight/report.json`
+/// (`options.transfer`, which a run records with `auto` resolved; for an `auto` there, the curve
+/// `transfer_assumed` names). `None` when the folder holds no readable report.
+pub fn run_transfer(folder: &Path) -> Option<Transfer> {
+    let text =
+        std::fs::read_to_string(folder.join(crate::io::WORK_DIR).join("report.json")).ok()?;
+    let report: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let given = report.get("options")?.get("transfer")?.as_str()?;
+    let assumed = report.get("transfer_assumed").and_then(|a| a.as_str());
+    let curve = match (given.trim().eq_ignore_ascii_case("auto"), assumed) {
+        (false, _) => given,
+        // "<curve>: <why>" (a curve never holds ": ", gamma:2.2 no space).
+        (true, Some(a)) => a.split_once(": ").map_or(a, |(t, _)| t),
+        (true, None) => return None,
+    };
+    curve.parse().ok()
+}
+
+/// A warning for each set whose `correct` run ([`run_transfer`]) took another curve than `transfer`, the one the
+/// scores assume: its photos would be read into linear light with another curve than they were written with, and
+/// its scores would not be those of the run.
+pub fn transfer_warnings(sets: &[(String, PathBuf)], transfer: Transfer) -> Vec<String> {
+    sets.iter()
+        .filter_map(|(label, folder)| {
+            let run = run_transfer(folder).filter(|t| *t != transfer)?;
+            Some(format!(
+                "{label}: the correct run that wrote {} took the camera curve {run} (its {}/report.json), but these \
+                 scores assume {transfer}; give --transfer {run} to score the photos as they were corrected",
+                folder.display(),
+                crate::io::WORK_DIR
+            ))
+        })
+        .collect()
 }
 
 /// `truth/dive.json` below a dive folder, or the file itself.
@@ -771,6 +809,7 @@ pub fn evaluate(
         registration,
         settings: settings.clone(),
         sets: scores,
+        warnings: transfer_warnings(sets, transfer),
     })
 }
 
@@ -796,6 +835,42 @@ impl Evaluation {
         s
     }
 
+    /// What each score of [`Evaluation::table`] means, one line each, for the columns that have values.
+    pub fn legend(&self) -> Vec<String> {
+        type Column = (fn(&Scores) -> Option<f64>, &'static str);
+        let columns: [Column; 4] = [
+            (
+                |s| s.albedo_error,
+                "albedo error: mean difference from the true seafloor after one scale per \
+                colour channel, as a share of it (0.05: 5 %)",
+            ),
+            (
+                |s| s.residual_pattern,
+                "residual pattern: lighting left in the photos, the spread of corrected / \
+                true over an 8x6 grid of the frame (0.05: 5 % brighter or darker in places)",
+            ),
+            (
+                |s| s.consistency,
+                "consistency: RMS difference where photos overlap in the mosaic, as a share of \
+                the photos' contrast (their standard deviation)",
+            ),
+            (
+                |s| s.overlap_difference,
+                "overlap difference: the same RMS difference as a share of the photos' \
+                mean level (0.10: 10 % of the seafloor's brightness)",
+            ),
+        ];
+        let has = |f: fn(&Scores) -> Option<f64>| self.sets.iter().any(|s| f(s).is_some());
+        let mut lines = vec!["lower is better for every score; 0 is perfect".to_string()];
+        lines.extend(
+            columns
+                .iter()
+                .filter(|(f, _)| has(*f))
+                .map(|(_, m)| m.to_string()),
+        );
+        lines
+    }
+
     /// Write the evaluation as JSON (atomically).
     pub fn save_json(&self, path: &Path) -> Result<()> {
         crate::io::write_with(path, |w| {
@@ -812,6 +887,85 @@ mod tests {
     use super::*;
 
     const ID: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+    /// A folder with a run report whose `options.transfer` is `given` and `transfer_assumed` is `assumed`.
+    fn run_folder(root: &Path, name: &str, given: &str, assumed: Option<&str>) -> PathBuf {
+        let dir = root.join(name);
+        std::fs::create_dir_all(dir.join(crate::io::WORK_DIR)).unwrap();
+        let report = serde_json::json!({
+            "options": { "transfer": given },
+            "transfer_assumed": assumed,
+        });
+        std::fs::write(
+            dir.join(crate::io::WORK_DIR).join("report.json"),
+            report.to_string(),
+        )
+        .unwrap();
+        dir
+    }
+
+    #[test]
+    fn the_curve_of_a_run_is_read_from_its_report_and_another_one_warned_of() {
+        let d = tempfile::tempdir().unwrap();
+        let srgb = run_folder(d.path(), "a", "srgb", None);
+        let gamma = run_folder(d.path(), "b", "auto", Some("gamma:2.2: what the file says"));
+        let unknown = run_folder(d.path(), "c", "auto", None);
+        assert_eq!(run_transfer(&srgb), Some(Transfer::Srgb));
+        assert_eq!(run_transfer(&gamma), Some(Transfer::Gamma(2.2)));
+        assert_eq!(run_transfer(&unknown), None);
+        assert_eq!(run_transfer(d.path()), None, "no report");
+        let sets: Vec<(String, PathBuf)> = [("a", &srgb), ("b", &gamma), ("c", &unknown)]
+            .iter()
+            .map(|(l, p)| (l.to_string(), p.to_path_buf()))
+            .collect();
+        let w = transfer_warnings(&sets, Transfer::Srgb);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with("b: ") && w[0].contains("--transfer gamma:2.2"),
+            "{w:?}"
+        );
+        assert_eq!(transfer_warnings(&sets, Transfer::Linear).len(), 2);
+    }
+
+    #[test]
+    fn the_legend_explains_the_columns_that_have_scores() {
+        let scores = |consistency: Option<f64>, albedo: Option<f64>| Scores {
+            label: "x".into(),
+            folder: PathBuf::new(),
+            photos: 1,
+            albedo_error: albedo,
+            residual_pattern: albedo,
+            consistency,
+            overlap_difference: consistency,
+        };
+        let ev = |sets| Evaluation {
+            truth: None,
+            placements: None,
+            registration: None,
+            transfer: Transfer::Linear,
+            settings: EvalSettings::default(),
+            sets,
+            warnings: Vec::new(),
+        };
+        let only_overlaps = ev(vec![scores(Some(0.1), None)]).legend();
+        assert_eq!(only_overlaps.len(), 3, "{only_overlaps:?}");
+        assert!(only_overlaps[1].starts_with("consistency: "));
+        assert!(only_overlaps[2].starts_with("overlap difference: "));
+        let all = ev(vec![scores(None, Some(0.1)), scores(Some(0.1), None)]).legend();
+        let names: Vec<&str> = all[1..]
+            .iter()
+            .filter_map(|l| l.split(':').next())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "albedo error",
+                "residual pattern",
+                "consistency",
+                "overlap difference"
+            ]
+        );
+    }
 
     #[test]
     fn placement_file_formats_and_errors() {

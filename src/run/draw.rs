@@ -21,6 +21,7 @@ pub fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, scale: u32, colour: Rgb
     for ch in s.chars() {
         let glyph = font8x8::BASIC_FONTS
             .get(ch)
+            .or_else(|| font8x8::LATIN_FONTS.get(ch))
             .or_else(|| font8x8::BASIC_FONTS.get('?'));
         if let Some(rows) = glyph {
             for (gy, bits) in rows.iter().enumerate() {

@@ -2,7 +2,7 @@
 //! with flagged photos marked (`_abysslight/overview.png`), and a contact sheet of flagged photos beside their
 //! lit-seafloor image `F·C` (`_abysslight/flagged.png`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use image::RgbImage;
 
@@ -23,32 +23,32 @@ struct Series<'a> {
 fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 6] {
     [
         Series {
-            title: "contamination (share of blocks off the seafloor colour)",
+            title: "contamination: share of blocks off the seafloor colour (0 to 1)",
             values: frames.iter().map(|f| f.health.contamination).collect(),
             threshold: t.contamination,
         },
         Series {
-            title: "change of F from the previous photo",
+            title: "change of F from the previous photo (relative: 0.1 = 10 %)",
             values: frames.iter().map(|f| f.health.factor_change).collect(),
             threshold: t.factor_change,
         },
         Series {
-            title: "colour shift of F against what its level predicts",
+            title: "colour shift of F against what its level predicts (relative)",
             values: frames.iter().map(|f| f.health.colour_shift).collect(),
             threshold: t.colour_shift,
         },
         Series {
-            title: "roughness of F (scene left in F)",
+            title: "roughness of F: high = scene left in F (relative)",
             values: frames.iter().map(|f| f.health.roughness).collect(),
             threshold: t.roughness,
         },
         Series {
-            title: "texture kept by the correction (low: scene left in F)",
+            title: "texture kept by the correction: low = scene left in F (share, 1 = all)",
             values: frames.iter().map(|f| f.health.texture_kept).collect(),
             threshold: t.texture_kept,
         },
         Series {
-            title: "level against the window's M, |level - 1| (exposure jump)",
+            title: "exposure against the window's M: |level - 1| (relative: 0.1 = 10 %)",
             values: frames
                 .iter()
                 .map(|f| (f.health.level - 1.0).abs())
@@ -58,98 +58,147 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 
     ]
 }
 
+/// Margins and sizes of the overview, in pixels.
+struct Frame {
+    left: i64,
+    plot_w: i64,
+    panel_h: i64,
+    title_h: i64,
+    gap: i64,
+    photos: usize,
+}
+
+impl Frame {
+    /// The x of the `i`-th photo of the plot (0-based).
+    fn x_of(&self, i: usize) -> i64 {
+        self.left
+            + if self.photos > 1 {
+                i as i64 * (self.plot_w - 1) / (self.photos as i64 - 1)
+            } else {
+                self.plot_w / 2
+            }
+    }
+}
+
+/// Positions (0-based) of the ticks of the photo axis for `photos` photos: the first, then every `step` photos,
+/// `step` 1, 2 or 5 times a power of ten, at most 10 steps.
+fn photo_ticks(photos: usize) -> Vec<usize> {
+    let mut step = 1usize;
+    let mut k = 0;
+    while photos / step > 10 {
+        step = [2, 5, 10][k % 3] * 10usize.pow((k / 3) as u32);
+        k += 1;
+    }
+    let mut ticks: Vec<usize> = (photos > 0).then_some(0).into_iter().collect();
+    ticks.extend(
+        (step..=photos)
+            .step_by(step)
+            .map(|t| t - 1)
+            .filter(|&t| t > 0),
+    );
+    ticks
+}
+
 /// Draw the mission overview: contamination, change of F, colour shift and roughness of F, texture kept and level
-/// (exposure), per photo; flagged photos in red.
+/// (exposure), per photo; flagged photos in red. Each panel has its value axis (0, half, top, and the flag
+/// threshold in red) and the photo number below; a key under the title says what is drawn.
 pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
     let series = overview_series(frames, t);
-    let n = frames.len().max(1);
-    let (left, right, panel_h, title_h, gap) = (70i64, 20i64, 130i64, 22i64, 14i64);
-    let plot_w = (n as i64 * 3).clamp(600, 1600);
-    let width = (left + plot_w + right) as u32;
-    let height = (40 + series.len() as i64 * (title_h + panel_h + gap) + 30) as u32;
+    let f = Frame {
+        left: 70,
+        plot_w: (frames.len().max(1) as i64 * 3).clamp(600, 1600),
+        panel_h: 130,
+        title_h: 22,
+        gap: 30,
+        photos: frames.len().max(1),
+    };
+    let width = (f.left + f.plot_w + 20) as u32;
+    let height = (56 + series.len() as i64 * (f.title_h + f.panel_h + f.gap) + 10) as u32;
     let mut img = RgbImage::from_pixel(width, height, WHITE);
     let flagged = frames.iter().filter(|f| !f.health.flags.is_empty()).count();
     let title = format!(
-        "abysslight: {} photos, {} flagged (red)",
-        frames.len(),
-        flagged
+        "abysslight: {} photos, {flagged} flagged (red)",
+        frames.len()
     );
-    let scale = if draw::text_width(&title, 2) as i64 + left < width as i64 {
+    let scale = if draw::text_width(&title, 2) as i64 + f.left < width as i64 {
         2
     } else {
         1
     };
-    draw::text(&mut img, left, 10, &title, scale, BLACK);
-    let x_of = |i: usize| {
-        left + if n > 1 {
-            i as i64 * (plot_w - 1) / (n as i64 - 1)
-        } else {
-            plot_w / 2
-        }
-    };
-    let mut top = 40i64;
+    draw::text(&mut img, f.left, 10, &title, scale, BLACK);
+    let key = "blue: value of each photo; red bands: flagged; red dashes: flag threshold";
+    draw::text(&mut img, f.left, 34, key, 1, GREY);
+    let mut top = 56i64;
     for s in &series {
-        draw::text(&mut img, left, top + 4, s.title, 1, BLACK);
-        let y0 = top + title_h;
-        let vmax = s
-            .values
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(s.threshold * 1.5, f32::max);
-        let y_of =
-            |v: f32| y0 + panel_h - 1 - ((v / vmax).clamp(0.0, 1.0) * (panel_h - 1) as f32) as i64;
-        // Flagged photos: red bands behind the series.
-        for (i, f) in frames.iter().enumerate() {
-            if !f.health.flags.is_empty() {
-                draw::fill_rect(
-                    &mut img,
-                    x_of(i) - 1,
-                    y0,
-                    3,
-                    panel_h as u32,
-                    image::Rgb([255, 200, 200]),
-                );
-            }
+        panel(&mut img, &f, frames, s, top);
+        top += f.title_h + f.panel_h + f.gap;
+    }
+    img
+}
+
+/// One panel of the overview, its title at `top`: flagged bands, the axes with their ticks and labels (the photo
+/// axis labelled with the photos' numbers in the mission), the threshold and the series.
+fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top: i64) {
+    draw::text(img, f.left, top + 4, s.title, 1, BLACK);
+    let (y0, h) = (top + f.title_h, f.panel_h);
+    let vmax = s
+        .values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(s.threshold * 1.5, f32::max);
+    let y_of = |v: f32| y0 + h - 1 - ((v / vmax).clamp(0.0, 1.0) * (h - 1) as f32) as i64;
+    let band = image::Rgb([255, 200, 200]);
+    for (i, fr) in frames.iter().enumerate() {
+        if !fr.health.flags.is_empty() {
+            draw::fill_rect(img, f.x_of(i) - 1, y0, 3, h as u32, band);
         }
-        // Frame, threshold, axis labels.
-        draw::line(&mut img, (left, y0), (left, y0 + panel_h - 1), BLACK);
-        draw::line(
-            &mut img,
-            (left, y0 + panel_h - 1),
-            (left + plot_w - 1, y0 + panel_h - 1),
+    }
+    let right = f.left + f.plot_w - 1;
+    draw::line(img, (f.left, y0), (f.left, y0 + h - 1), BLACK);
+    draw::line(img, (f.left, y0 + h - 1), (right, y0 + h - 1), BLACK);
+    for (v, colour) in [
+        (0.0, BLACK),
+        (vmax / 2.0, BLACK),
+        (vmax, BLACK),
+        (s.threshold, RED),
+    ] {
+        let y = y_of(v);
+        draw::line(img, (f.left - 4, y), (f.left, y), colour);
+        let label = format!("{v:.3}");
+        let x = f.left - 6 - draw::text_width(&label, 1) as i64;
+        draw::text(img, x, y - 4, &label, 1, colour);
+    }
+    let ty = y_of(s.threshold);
+    for x in (f.left..right).step_by(6) {
+        draw::line(img, (x, ty), (x + 2, ty), RED);
+    }
+    for t in photo_ticks(frames.len()) {
+        let x = f.x_of(t);
+        draw::line(img, (x, y0 + h - 1), (x, y0 + h + 3), BLACK);
+        let label = (frames[t].index + 1).to_string();
+        let lw = draw::text_width(&label, 1) as i64;
+        draw::text(
+            img,
+            (x - lw / 2).min(right - lw),
+            y0 + h + 6,
+            &label,
+            1,
             BLACK,
         );
-        let ty = y_of(s.threshold);
-        for x in (left..left + plot_w).step_by(6) {
-            draw::line(&mut img, (x, ty), (x + 2, ty), RED);
-        }
-        draw::text(&mut img, 4, y0 - 4, &format!("{vmax:.2}"), 1, GREY);
-        draw::text(&mut img, 4, ty - 4, &format!("{:.2}", s.threshold), 1, RED);
-        draw::text(&mut img, 4, y0 + panel_h - 8, "0", 1, GREY);
-        // The series.
-        let mut prev: Option<(i64, i64)> = None;
-        for (i, v) in s.values.iter().enumerate() {
-            let p = (x_of(i), y_of(*v));
-            if let Some(q) = prev {
-                draw::line(&mut img, q, p, BLUE);
-            }
-            draw::fill_rect(&mut img, p.0 - 1, p.1 - 1, 3, 3, BLUE);
-            prev = Some(p);
-        }
-        top += title_h + panel_h + gap;
     }
-    draw::text(&mut img, left, top, "photo 1", 1, BLACK);
-    let last = format!("photo {}", frames.len());
-    draw::text(
-        &mut img,
-        left + plot_w - draw::text_width(&last, 1) as i64,
-        top,
-        &last,
-        1,
-        BLACK,
-    );
-    img
+    let axis = "photo number";
+    let aw = draw::text_width(axis, 1) as i64;
+    draw::text(img, right - aw, y0 + h + 17, axis, 1, GREY);
+    let mut prev: Option<(i64, i64)> = None;
+    for (i, v) in s.values.iter().enumerate() {
+        let p = (f.x_of(i), y_of(*v));
+        if let Some(q) = prev {
+            draw::line(img, q, p, BLUE);
+        }
+        draw::fill_rect(img, p.0 - 1, p.1 - 1, 3, 3, BLUE);
+        prev = Some(p);
+    }
 }
 
 /// A contact sheet of flagged photos: corrected photo | `F·C`, with the photo's name and first reason.
@@ -191,8 +240,29 @@ pub fn flagged_sheet_with(
         .map(|(_, _, a, f)| a.height().max(f.height()) + label_h + gap)
         .sum::<u32>()
         + gap;
-    let mut img = RgbImage::from_pixel(2 * tile_w + 3 * gap, h, WHITE);
-    let mut y = gap as i64;
+    // Column titles: what each tile is.
+    let titles_h = 32u32;
+    let mut img = RgbImage::from_pixel(2 * tile_w + 3 * gap, h + titles_h, WHITE);
+    let columns = [
+        ("corrected photo", "flagged: its first reason in red"),
+        (
+            "F·C: the light it was divided by",
+            "brightened to show its shape",
+        ),
+    ];
+    for (c, (title, note)) in columns.iter().enumerate() {
+        let x = (gap + c as u32 * (tile_w + gap)) as i64;
+        draw::text(&mut img, x, gap as i64, title, 1, BLACK);
+        draw::text(&mut img, x, gap as i64 + 11, note, 1, GREY);
+    }
+    let rule = (gap + titles_h - 6) as i64;
+    draw::line(
+        &mut img,
+        (gap as i64, rule),
+        ((2 * tile_w + 2 * gap) as i64, rule),
+        GREY,
+    );
+    let mut y = (gap + titles_h) as i64;
     for (frame, reason, a, f) in &tiles {
         let name = frame
             .input
@@ -207,15 +277,13 @@ pub fn flagged_sheet_with(
             1,
             BLACK,
         );
-        let reason: Vec<char> = reason.chars().collect();
         let max_chars = ((2 * tile_w + gap) / 8) as usize;
-        for (line, chunk) in reason.chunks(max_chars).take(2).enumerate() {
-            let text: String = chunk.iter().collect();
+        for (line, text) in wrap(reason, max_chars).iter().take(2).enumerate() {
             draw::text(
                 &mut img,
                 gap as i64,
                 y + 12 + 11 * line as i64,
-                &text,
+                text,
                 1,
                 RED,
             );
@@ -244,6 +312,7 @@ pub fn before_after_sheet(
         return Err(Error::Usage(format!("no photos in {}", input.display())));
     }
     let rows = rows.min(n);
+    let report = read_report(output);
     let mut tiles = Vec::new();
     for r in 0..rows {
         let e = &found.photos[r * (n - 1) / (rows - 1).max(1)];
@@ -252,11 +321,16 @@ pub fn before_after_sheet(
             .join("factors")
             .join(&e.relative)
             .with_extension("png");
-        let mut row: Vec<RgbImage> = [e.path.clone(), output.join(&e.relative)]
-            .iter()
-            .filter_map(|p| image::open(p).ok())
-            .map(|img| draw::tile(&img.to_rgb8(), width, true))
-            .collect();
+        let Ok(before) = image::open(&e.path) else {
+            continue;
+        };
+        let before = draw::tile(&before.to_rgb8(), width, true);
+        // A photo the run skipped (another size, damaged) gets a labelled tile, not a gap that shifts the columns.
+        let after = match image::open(output.join(&e.relative)) {
+            Ok(c) => draw::tile(&c.to_rgb8(), width, true),
+            Err(_) => skipped_tile(&before, &e.relative, &skipped_reason(&report, &e.relative)),
+        };
+        let mut row = vec![before, after];
         // F·C is dim (it is the light on a grey seafloor): stretched like the flagged sheet's.
         if let Ok(f) = crate::io::load_raster(&factor) {
             row.push(draw::tile(&raster_rgb(&f), width, true));
@@ -266,11 +340,119 @@ pub fn before_after_sheet(
     // No empty, captioned F·C column when the run did not save its factors.
     let with_factors = tiles.iter().any(|r| r.len() > 2);
     let captions: &[&str] = if with_factors {
-        &["input", "corrected", "F*C"]
+        &["input", "corrected", "F·C: the light divided out"]
     } else {
         &["input", "corrected"]
     };
     Ok((draw::grid(captions, &tiles, 4), with_factors))
+}
+
+/// The `report.json` of the run that wrote `output`, if there is one.
+fn read_report(output: &Path) -> Option<serde_json::Value> {
+    let text =
+        std::fs::read_to_string(output.join(crate::io::WORK_DIR).join("report.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Why the run with `report` wrote no output for the photo at `relative` (below its survey folder): the message
+/// of its error in the report, or why there may be none.
+fn skipped_reason(report: &Option<serde_json::Value>, relative: &Path) -> String {
+    let errors = report.as_ref().and_then(|r| r.get("errors")?.as_array());
+    let message = errors.into_iter().flatten().find_map(|e| {
+        let path = Path::new(e.get("path")?.as_str()?);
+        path.ends_with(relative)
+            .then(|| e.get("message")?.as_str().map(str::to_owned))
+            .flatten()
+    });
+    message.unwrap_or_else(|| match report {
+        Some(_) => {
+            "no output: not in the run's photos (--limit, --shard) or not corrected yet".into()
+        }
+        None => "no output, and no report of a run in this folder".into(),
+    })
+}
+
+/// A grey tile the size of `like` saying that `name` was skipped, and why (wrapped over up to 8 lines).
+fn skipped_tile(like: &RgbImage, name: &Path, reason: &str) -> RgbImage {
+    let mut t = RgbImage::from_pixel(like.width(), like.height(), image::Rgb([225, 225, 225]));
+    draw::text(&mut t, 6, 6, "SKIPPED", 2, RED);
+    let per_line = (like.width().saturating_sub(12) / 8).max(1) as usize;
+    // The report's message names the file already (by the run's path).
+    let file = name
+        .file_name()
+        .map_or(String::new(), |f| f.to_string_lossy().into_owned());
+    let text = if reason.contains(&file) {
+        reason.to_string()
+    } else {
+        format!("{}: {reason}", name.display())
+    };
+    for (i, line) in wrap(&text, per_line).iter().take(8).enumerate() {
+        draw::text(&mut t, 6, 30 + 11 * i as i64, line, 1, BLACK);
+    }
+    t
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces where a line has one (else mid-word).
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut rest: Vec<char> = text.chars().collect();
+    while rest.len() > width {
+        let cut = rest[..=width]
+            .iter()
+            .rposition(|c| *c == ' ')
+            .filter(|&i| i > 0)
+            .unwrap_or(width);
+        lines.push(
+            rest[..cut]
+                .iter()
+                .collect::<String>()
+                .trim_end()
+                .to_string(),
+        );
+        rest = rest[cut..]
+            .iter()
+            .copied()
+            .skip_while(|c| *c == ' ')
+            .collect();
+    }
+    if !rest.is_empty() {
+        lines.push(rest.into_iter().collect());
+    }
+    lines
+}
+
+/// The folders of `abysslight sheet SURVEY CORRECTED` the right way round, and a warning when they were not:
+/// when `survey` holds a run's report and `corrected` does not, the two were given the other way round and are
+/// swapped back; when `corrected`'s report names another survey folder than `survey`, the sheet would pair photos
+/// of two dives by name.
+pub fn sheet_folders(survey: &Path, corrected: &Path) -> (PathBuf, PathBuf, Option<String>) {
+    let (s, c) = (survey.to_owned(), corrected.to_owned());
+    let (rs, rc) = (read_report(survey), read_report(corrected));
+    if rs.is_some() && rc.is_none() {
+        let m = format!(
+            "{} holds a correct run's report and {} does not: taken the other way round (SURVEY first, then \
+             CORRECTED)",
+            survey.display(),
+            corrected.display()
+        );
+        return (c, s, Some(m));
+    }
+    let real = |p: &Path| std::fs::canonicalize(p).ok();
+    let from = rc
+        .as_ref()
+        .and_then(|r| r.get("options")?.get("survey")?.as_str().map(PathBuf::from));
+    let warning = from
+        // A relative path is the run's own current folder's: only an absolute one can be compared here.
+        .filter(|f| f.is_absolute() && real(f).is_some_and(|f| Some(f) != real(survey)))
+        .map(|f| {
+            format!(
+                "{} was corrected from {} (its report), not from {}: the sheet pairs photos by name",
+                corrected.display(),
+                f.display(),
+                survey.display()
+            )
+        });
+    (s, c, warning)
 }
 
 /// Smallest width of a factor preview: a 4000-pixel photo's `F·C` is 500 blocks wide, a 1920-pixel video frame's
@@ -389,6 +571,140 @@ mod tests {
         let jump = col.windows(2).map(|p| (p[1] - p[0]).abs()).max().unwrap();
         assert!(jump <= 4, "largest step down a column: {jump}");
         assert!(col[319] - col[0] > 150, "the column still spans the ramp");
+    }
+
+    #[test]
+    fn wrap_breaks_at_spaces_and_keeps_every_word() {
+        let text =
+            "mix/a_very_long_name.jpg: size 614x345 differs from the mission's 1229x691; skipped";
+        for width in [5usize, 12, 23, 40, 200] {
+            let lines = wrap(text, width);
+            assert!(
+                lines.iter().all(|l| l.chars().count() <= width),
+                "{width}: {lines:?}"
+            );
+            let joined: Vec<&str> = lines.iter().flat_map(|l| l.split(' ')).collect();
+            let words: Vec<&str> = text.split(' ').collect();
+            if width >= 24 {
+                assert_eq!(joined, words, "{width}: whole words");
+            } else {
+                assert_eq!(lines.concat().replace(' ', ""), text.replace(' ', ""));
+            }
+        }
+        assert_eq!(wrap("ab cd", 2), ["ab", "cd"]);
+        assert!(wrap("", 5).is_empty());
+    }
+
+    /// The ticks of the photo axis against a search over the allowed steps: the smallest of 1, 2, 5, 10, 20, …
+    /// that gives at most 10 steps, ticks at the first photo and at every multiple of the step.
+    #[test]
+    fn photo_ticks_are_round_steps_at_most_ten() {
+        let steps: Vec<usize> = (0..6)
+            .flat_map(|e| [1, 2, 5].map(|m| m * 10usize.pow(e)))
+            .collect();
+        for photos in 0..3000 {
+            let step = *steps.iter().find(|&&s| photos / s <= 10).unwrap();
+            let mut want: Vec<usize> = if photos > 0 { vec![0] } else { vec![] };
+            want.extend(
+                (1..=photos)
+                    .filter(|p| p % step == 0 && *p > 1)
+                    .map(|p| p - 1),
+            );
+            assert_eq!(photo_ticks(photos), want, "{photos} photos");
+        }
+    }
+
+    fn frames(n: usize, dir: &Path) -> Vec<FrameReport> {
+        (0..n)
+            .map(|i| FrameReport {
+                input: dir.join(format!("in{i}.png")),
+                output: dir.join(format!("out{i}.png")),
+                index: i,
+                window: [0, 0],
+                decode_ms: 0.0,
+                estimate_ms: 0.0,
+                correct_ms: 0.0,
+                encode_ms: 0.0,
+                floored_pixels: 0,
+                clipped_samples: 0,
+                resumed: false,
+                health: Default::default(),
+                backscatter_scale: Vec::new(),
+                noise_sigma: Vec::new(),
+                texture_sigma: Vec::new(),
+            })
+            .collect()
+    }
+
+    /// Dark pixels of `img` in the rectangle `x0..x1`, `y0..y1`.
+    fn ink(img: &RgbImage, (x0, x1): (i64, i64), (y0, y1): (i64, i64)) -> usize {
+        let (w, h) = (img.width() as i64, img.height() as i64);
+        (y0.max(0)..y1.min(h))
+            .flat_map(|y| (x0.max(0)..x1.min(w)).map(move |x| (x, y)))
+            .filter(|&(x, y)| img.get_pixel(x as u32, y as u32).0[0] < 100)
+            .count()
+    }
+
+    /// Under every panel of the overview, the photo numbers of the ticks (photo 20, 40, … of 151), where the
+    /// overview had only "photo 1" and "photo 151" under the last panel.
+    #[test]
+    fn the_overview_numbers_the_photo_axis_of_every_panel() {
+        let fr = frames(151, Path::new("/nowhere"));
+        let img = overview(&fr, &Thresholds::default());
+        let f = Frame {
+            left: 70,
+            plot_w: 600,
+            panel_h: 130,
+            title_h: 22,
+            gap: 30,
+            photos: 151,
+        };
+        assert_eq!(img.width() as i64, 70 + 600 + 20);
+        for p in 0..6 {
+            let below = 56 + p * (22 + 130 + 30) + 22 + 130 + 6;
+            for t in [19usize, 79, 139] {
+                let x = f.x_of(t);
+                assert!(
+                    ink(&img, (x - 12, x + 12), (below, below + 8)) > 5,
+                    "panel {p}, photo {}",
+                    t + 1
+                );
+            }
+            // Between ticks, no label.
+            let x = f.x_of(29);
+            assert_eq!(
+                ink(&img, (x - 3, x + 3), (below, below + 8)),
+                0,
+                "panel {p}"
+            );
+        }
+    }
+
+    /// The flagged sheet has a title over each column, above the first photo's name.
+    #[test]
+    fn the_flagged_sheet_has_column_titles() {
+        let d = tempfile::tempdir().unwrap();
+        let fr = frames(1, d.path());
+        RgbImage::from_pixel(64, 48, image::Rgb([120, 110, 100]))
+            .save(&fr[0].output)
+            .unwrap();
+        let lit = Raster::filled(8, 6, 3, 0.3);
+        let rows = vec![(fr[0].clone(), "a reason".to_string(), &lit)];
+        let img = flagged_sheet_with(&rows, 100).unwrap();
+        // Gap 6, two 100-pixel columns; the titles' line at y 6..14, the photo's name 32 pixels lower.
+        assert!(
+            ink(&img, (6, 106), (6, 14)) > 20,
+            "title of the corrected column"
+        );
+        assert!(
+            ink(&img, (112, 212), (6, 14)) > 20,
+            "title of the F·C column"
+        );
+        assert!(
+            ink(&img, (6, 106), (38, 46)) > 5,
+            "the photo's name below the titles"
+        );
+        assert_eq!(img.height(), 6 + 32 + 40 + 75 + 6);
     }
 
     #[test]

@@ -18,6 +18,8 @@ use crate::run::options::Options;
 use crate::run::report::Progress;
 use crate::run::source::{Item, Role};
 
+pub(crate) mod checks;
+
 /// A run's inputs and outputs, decided up front.
 #[derive(Debug)]
 pub struct Plan {
@@ -68,46 +70,13 @@ impl Plan {
         let stdin = survey == Path::new("-");
         let stdout = out == Path::new("-");
         let streaming = stdin || opts.watch;
-        // Baseline `--method mean` needs the whole mission's mean before the stream.
-        if streaming && opts.method == Method::Mean {
-            return Err(Error::Usage(
-                "--method mean needs every photo of the mission before it corrects the first; it cannot be used \
-                 with --watch or --survey -"
-                    .into(),
-            ));
-        }
         // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
         let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
-        let found = if streaming {
-            if opts.watch && !survey.is_dir() {
-                return Err(Error::Usage(format!(
-                    "--watch {}: not a folder",
-                    survey.display()
-                )));
-            }
-            Found::default()
-        } else {
-            // A survey link pointing at --out is not read back.
-            find_photos_excluding(&survey, &[&out])?
-        };
-        if !streaming && found.photos.is_empty() {
-            return Err(Error::Usage(format!(
-                "no photos ({}) found below {}",
-                io::PHOTO_EXTENSIONS.join(", "),
-                survey.display()
-            )));
-        }
-        let mut warnings = Vec::new();
-        if !found.ignored.is_empty() {
-            let m = format!(
-                "{} file(s) in {} are not photos by name and were passed over (e.g. {})",
-                found.ignored.len(),
-                survey.display(),
-                found.ignored[0].display()
-            );
-            progress.warn(&m);
-            warnings.push(m);
+        let found = list_survey(opts, &survey, &out, streaming)?;
+        let warnings = folder_warnings(opts, &survey, &found);
+        for m in &warnings {
+            progress.warn(m);
         }
         let total = found.photos.len();
         let photo_size = majority_size(&found.photos, 15);
@@ -196,11 +165,7 @@ impl Plan {
                     n => format!(" ({n} other files passed over)"),
                 }
             ));
-            let write = self.items.iter().filter(|i| i.role == Role::Write);
-            let (count, bytes) = write.fold((0usize, 0u64), |(n, b), i| {
-                let size = std::fs::metadata(&i.entry.path).map_or(0, |m| m.len());
-                (n + 1, b + size)
-            });
+            let count = self.items.iter().filter(|i| i.role == Role::Write).count();
             let existing = self
                 .items
                 .iter()
@@ -225,12 +190,69 @@ impl Plan {
                      them)"
                 ));
             }
-            lines.push(format!(
-                "disk: about {:.1} MB of outputs (inputs' size; JPEG outputs can be larger)",
-                bytes as f64 / 1e6
-            ));
         }
         lines
+    }
+
+    /// The disk line of [`Plan::describe`]: what the outputs need, against what is free.
+    fn describe_disk(&self, opts: &Options, downsample: usize) -> String {
+        let (outputs, factors) = self.disk_need(opts, downsample);
+        let mut line = format!(
+            "disk: about {} of outputs (inputs' size; JPEG outputs can be larger)",
+            checks::size_text(outputs)
+        );
+        if factors > 0 {
+            line += &format!(
+                " and up to {} for --save-factors",
+                checks::size_text(factors)
+            );
+        }
+        match self.free_space() {
+            Some(free) => line + &format!("; {} free there", checks::size_text(free)),
+            None => line,
+        }
+    }
+
+    /// Free bytes on the file system `--out` is (or would be) on; `None` with `--out -` or where unknown.
+    fn free_space(&self) -> Option<u64> {
+        (!self.stdout)
+            .then(|| checks::free_space(&self.out))
+            .flatten()
+    }
+
+    /// What would go wrong in the run, each in words (empty when nothing is found; always empty when streaming):
+    /// photos of another size than the mission's or with unreadable headers, formats mixed, fewer photos than
+    /// the window, signs of two dives in one folder, and outputs (with `--save-factors`) larger than the free
+    /// space on the output's file system. Reads every photo's header (no photo is decoded). See [`checks`].
+    pub fn checks(&self, opts: &Options, downsample: usize) -> Vec<String> {
+        if self.streaming {
+            return Vec::new();
+        }
+        let photos = &self.found.photos;
+        let mut found = checks::other_sizes(photos, self.photo_size);
+        found.extend(checks::mixed_formats(photos));
+        found.extend(checks::too_few(photos.len(), self.window.n));
+        found.extend(checks::two_dives(photos));
+        let (outputs, factors) = self.disk_need(opts, downsample);
+        found.extend(checks::disk(outputs, factors, self.free_space(), &self.out));
+        found
+    }
+
+    /// Bytes the run would write: the outputs (the inputs' size) and, with `--save-factors`, the factor images
+    /// (blocks of `downsample`).
+    fn disk_need(&self, opts: &Options, downsample: usize) -> (u64, u64) {
+        let write = self.items.iter().filter(|i| i.role == Role::Write);
+        let outputs = write
+            .clone()
+            .map(|i| std::fs::metadata(&i.entry.path).map_or(0, |m| m.len()))
+            .sum();
+        let factors = match (opts.save_factors, self.photo_size) {
+            (true, Some((w, h))) => {
+                write.count() as u64 * checks::factor_bytes(w, h, downsample.max(1))
+            }
+            _ => 0,
+        };
+        (outputs, factors)
     }
 
     /// What the run would read and write, in words (`correct --dry-run`).
@@ -254,6 +276,9 @@ impl Plan {
                 format!("{} (run files in {WORK_DIR}/)", self.out.display())
             }
         ));
+        if !self.streaming {
+            line(self.describe_disk(opts, params.downsample));
+        }
         let window = if self.window.p_half.is_nan() {
             format!("window: n = {}", self.window.n)
         } else {
@@ -296,7 +321,29 @@ impl Plan {
             },
             opts.factor_floor
         ));
+        for l in self.describe_checks(opts, params.downsample) {
+            line(l);
+        }
         Ok(s)
+    }
+
+    /// The warnings of [`Plan::describe`]: the plan's own and what [`Plan::checks`] finds, and a last line saying
+    /// what was checked.
+    fn describe_checks(&self, opts: &Options, downsample: usize) -> Vec<String> {
+        let problems = self.checks(opts, downsample);
+        let mut lines: Vec<String> = (self.warnings.iter().chain(&problems))
+            .map(|w| format!("warning: {w}"))
+            .collect();
+        if !self.streaming {
+            lines.push(match lines.len() {
+                0 => "checks: photo sizes, formats, window, one dive, disk: nothing found"
+                    .to_string(),
+                k => format!(
+                    "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"
+                ),
+            });
+        }
+        lines
     }
 
     /// What the `auto` settings of the run are resolved from ([`Params::resolved`]): the mission's photo size
@@ -378,9 +425,55 @@ impl Plan {
     }
 }
 
-/// The photos to read from `entries` (the survey from photo `first` on), each with what to do with it: write it
-/// (in `chunk`), only read it for the windows (a shard's halo), or only read it because `--resume` found its output
-/// complete. Also returns how many outputs were found complete.
+/// The survey photos found (none when streaming), or why there are none to correct.
+fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Result<Found> {
+    // Baseline `--method mean` needs the whole mission's mean before the stream.
+    if streaming && opts.method == Method::Mean {
+        return Err(Error::Usage(
+            "--method mean needs every photo of the mission before it corrects the first; it cannot be used with \
+             --watch or --survey -"
+                .into(),
+        ));
+    }
+    if streaming {
+        if opts.watch && !survey.is_dir() {
+            return Err(Error::Usage(format!(
+                "--watch {}: not a folder",
+                survey.display()
+            )));
+        }
+        return Ok(Found::default());
+    }
+    // A survey link pointing at --out is not read back.
+    let found = find_photos_excluding(survey, &[out])?;
+    if found.photos.is_empty() {
+        return Err(Error::Usage(format!(
+            "no photos ({}) found below {}",
+            io::PHOTO_EXTENSIONS.join(", "),
+            survey.display()
+        )));
+    }
+    Ok(found)
+}
+
+/// Warnings about the input folders, before the run: files passed over, and a water-column folder that is the
+/// survey's ([`checks::water_is_survey`]).
+fn folder_warnings(opts: &Options, survey: &Path, found: &Found) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if !found.ignored.is_empty() {
+        warnings.push(format!(
+            "{} file(s) in {} are not photos by name and were passed over (e.g. {})",
+            found.ignored.len(),
+            survey.display(),
+            found.ignored[0].display()
+        ));
+    }
+    if let Some(water) = opts.water_column.as_deref() {
+        warnings.extend(checks::water_is_survey(water, survey, &found.photos));
+    }
+    warnings
+}
+
 /// What the `auto` settings of a run are resolved from ([`Plan::facts`]), and where each fact came from.
 #[derive(Debug, Clone)]
 pub struct MissionFacts {
@@ -416,6 +509,9 @@ impl MissionFacts {
     }
 }
 
+/// The photos to read from `entries` (the survey from photo `first` on), each with what to do with it: write it
+/// (in `chunk`), only read it for the windows (a shard's halo), or only read it because `--resume` found its output
+/// complete. Also returns how many outputs were found complete.
 fn roles(
     entries: &[Entry],
     first: usize,
