@@ -632,6 +632,7 @@ mod tests {
                 backscatter_scale: Vec::new(),
                 noise_sigma: Vec::new(),
                 texture_sigma: Vec::new(),
+                window_auto: None,
             })
             .collect()
     }

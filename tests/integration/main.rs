@@ -13,6 +13,7 @@ mod defaults;
 mod engine;
 mod faults;
 mod field;
+mod first_day;
 mod flag_ranges;
 mod hardening;
 mod honest_results;

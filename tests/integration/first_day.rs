@@ -3,7 +3,7 @@
 //! run's), `evaluate` writing no file unasked, and `sheet` with its folders given the wrong way round or a photo
 //! the run skipped.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};
