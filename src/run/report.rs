@@ -210,16 +210,94 @@ impl Report {
             return Ok(());
         };
         self.report_path = Some(path.clone());
-        crate::io::write_with(&path, |w| {
+        let written = crate::io::write_with(&path, |w| {
             serde_json::to_writer_pretty(w, &*self).map_err(|e| Error::Encode {
                 path: path.clone(),
                 reason: e.to_string(),
             })
-        })
+        });
+        if written.is_err() {
+            // A full disk or a lost folder must not lose the record of a mission: print it instead.
+            self.report_path = None;
+            self.print_instead(&path, &mut std::io::stderr().lock());
+        }
+        written
+    }
+
+    /// The report as JSON on `to` (stderr), after a line saying why it is there and not in `path`. Errors of `to`
+    /// itself (a closed pipe) are dropped: there is nowhere left to say them.
+    fn print_instead(&self, path: &Path, to: &mut dyn std::io::Write) {
+        let _ = writeln!(
+            to,
+            "abysslight: the run report could not be written to {}; here it is instead:",
+            path.display()
+        );
+        let _ = serde_json::to_writer_pretty(&mut *to, self);
+        let _ = writeln!(to);
     }
 
     /// True when every photo was corrected.
     pub fn all_ok(&self) -> bool {
         self.failed == 0 && self.water_column_failed == 0
+    }
+}
+
+#[cfg(test)]
+mod report_fallback_tests {
+    use super::*;
+
+    /// A report that cannot be written (its folder cannot be made, as on a lost or full disk) is an error, and the whole
+    /// report is printed instead: valid JSON after the line that says why.
+    #[test]
+    fn a_report_that_cannot_be_written_is_printed() {
+        let d = tempfile::tempdir().unwrap();
+        // A file where the report's folder should be: no folder can be made there.
+        std::fs::write(d.path().join("gone"), b"").unwrap();
+        let opts = Options {
+            report: Some(d.path().join("gone/report.json")),
+            ..Options::default()
+        };
+        let mut r = Report {
+            tool: "abysslight".into(),
+            version: String::new(),
+            options: opts.clone(),
+            transfer_assumed: None,
+            window: crate::method::window::WindowChoice {
+                n: 7,
+                p_half: f64::NAN,
+            },
+            layout: None,
+            scatter: ScatterInfo {
+                source: "none".into(),
+                path: None,
+                frames: 0,
+                passes: 0,
+                saved_to: None,
+            },
+            survey_photos: 41,
+            corrected: 41,
+            skipped_existing: 0,
+            peak_photos_in_memory: 0,
+            failed: 0,
+            water_column_failed: 0,
+            ignored_files: 0,
+            floored_pixels: 0,
+            clipped_samples: 0,
+            monitor: Default::default(),
+            frames: Vec::new(),
+            errors: Vec::new(),
+            warnings: Vec::new(),
+            elapsed_s: 0.0,
+            report_path: None,
+        };
+        assert!(r.write(&opts, None).is_err());
+        assert_eq!(r.report_path, None);
+        let mut printed = Vec::new();
+        r.print_instead(&d.path().join("gone/report.json"), &mut printed);
+        let text = String::from_utf8(printed).unwrap();
+        let (line, json) = text.split_once('\n').unwrap();
+        assert!(line.contains("gone/report.json"), "{line}");
+        let back: serde_json::Value = serde_json::from_str(json).unwrap();
+        assert_eq!(back["corrected"], 41);
     }
 }
