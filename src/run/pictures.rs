@@ -17,6 +17,8 @@ struct Series<'a> {
     title: &'a str,
     values: Vec<f32>,
     threshold: f32,
+    /// A second flag threshold above the values (texture kept: structure added).
+    upper: Option<f32>,
 }
 
 /// The series of the overview, one panel each, with their flag thresholds.
@@ -26,34 +28,40 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 
             title: "contamination: share of blocks off the seafloor colour (0 to 1)",
             values: frames.iter().map(|f| f.health.contamination).collect(),
             threshold: t.contamination,
+            upper: None,
         },
         Series {
             title: "change of F from the previous photo (relative: 0.1 = 10 %)",
             values: frames.iter().map(|f| f.health.factor_change).collect(),
             threshold: t.factor_change,
+            upper: None,
         },
         Series {
             title: "colour shift of F against what its level predicts (relative)",
             values: frames.iter().map(|f| f.health.colour_shift).collect(),
             threshold: t.colour_shift,
+            upper: None,
         },
         Series {
             title: "roughness of F: high = scene left in F (relative)",
             values: frames.iter().map(|f| f.health.roughness).collect(),
             threshold: t.roughness,
+            upper: None,
         },
         Series {
-            title: "texture kept by the correction: low = scene left in F (share, 1 = all)",
+            title: "texture kept by the correction: low = scene left in F, high = structure added (share, 1 = all)",
             values: frames.iter().map(|f| f.health.texture_kept).collect(),
             threshold: t.texture_kept,
+            upper: Some(t.structure_added),
         },
         Series {
-            title: "exposure against the window's M: |level - 1| (relative: 0.1 = 10 %)",
+            title: "exposure against the window's M: |level - 1| (0.1 = 10 %; flagged only without the per-photo gain)",
             values: frames
                 .iter()
                 .map(|f| (f.health.level - 1.0).abs())
                 .collect(),
             threshold: t.exposure_jump,
+            upper: None,
         },
     ]
 }
@@ -146,7 +154,7 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
         .iter()
         .copied()
         .filter(|v| v.is_finite())
-        .fold(s.threshold * 1.5, f32::max);
+        .fold(s.threshold.max(s.upper.unwrap_or(0.0)) * 1.5, f32::max);
     let y_of = |v: f32| y0 + h - 1 - ((v / vmax).clamp(0.0, 1.0) * (h - 1) as f32) as i64;
     let band = image::Rgb([255, 200, 200]);
     for (i, fr) in frames.iter().enumerate() {
@@ -157,21 +165,23 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
     let right = f.left + f.plot_w - 1;
     draw::line(img, (f.left, y0), (f.left, y0 + h - 1), BLACK);
     draw::line(img, (f.left, y0 + h - 1), (right, y0 + h - 1), BLACK);
-    for (v, colour) in [
+    let marks = [
         (0.0, BLACK),
         (vmax / 2.0, BLACK),
         (vmax, BLACK),
         (s.threshold, RED),
-    ] {
+    ];
+    for (v, colour) in marks.into_iter().chain(s.upper.map(|u| (u, RED))) {
         let y = y_of(v);
         draw::line(img, (f.left - 4, y), (f.left, y), colour);
         let label = format!("{v:.3}");
         let x = f.left - 6 - draw::text_width(&label, 1) as i64;
         draw::text(img, x, y - 4, &label, 1, colour);
     }
-    let ty = y_of(s.threshold);
-    for x in (f.left..right).step_by(6) {
-        draw::line(img, (x, ty), (x + 2, ty), RED);
+    for ty in std::iter::once(s.threshold).chain(s.upper).map(y_of) {
+        for x in (f.left..right).step_by(6) {
+            draw::line(img, (x, ty), (x + 2, ty), RED);
+        }
     }
     for t in photo_ticks(frames.len()) {
         let x = f.x_of(t);
