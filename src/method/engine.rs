@@ -32,8 +32,9 @@ use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 use crate::method::outliers::bright_spots;
-use crate::method::params::Facts;
+use crate::method::overlap::{chained_pairs, overlap_correction};
 pub use crate::method::params::Params;
+use crate::method::params::{Facts, Steps};
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
 use crate::method::ring::Ring;
@@ -122,6 +123,8 @@ pub struct Engine<T> {
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
+    /// With `steps.overlaps`: the texture of the last photo's block medians, to match the next one against.
+    previous_texture: Option<crate::method::matching::Texture>,
 }
 
 /// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
@@ -239,6 +242,7 @@ impl<T> Engine<T> {
             monitor: Monitor::new(Thresholds::default()).with_window(n),
             ring: Ring::new(n),
             judged_fixed: None,
+            previous_texture: None,
         })
     }
 
@@ -288,19 +292,41 @@ impl<T> Engine<T> {
         let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
             .then(|| bright_spots(&low))
             .filter(|s| !s.is_empty());
+        let step = self.step_from_previous(&low);
         let waiting = Waiting {
             tag,
             photo: (use_ == Use::Correct).then_some(photo),
             use_,
             downsample_ms: ms(t),
         };
-        self.ring.push(RingEntry { low, judged, spots }, waiting);
+        self.ring.push(
+            RingEntry {
+                low,
+                judged,
+                spots,
+                step,
+            },
+            waiting,
+        );
         Ok(self.flush(false))
     }
 
     /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
     pub fn finish(&mut self) -> Vec<Corrected<T>> {
         self.flush(true)
+    }
+
+    /// With `steps.overlaps`: the shift of the ground from the last photo to this one, in blocks, by phase
+    /// correlation of the block medians' textures (`None`: no match, or the step is off).
+    fn step_from_previous(&mut self, low: &Raster) -> Option<(f64, f64)> {
+        use crate::method::matching::{match_pair, reduction, texture};
+        if self.params.method != Method::Abyss || !self.params.steps.overlaps {
+            return None;
+        }
+        let t = texture(low, reduction(low.width, low.height));
+        let m = self.previous_texture.as_ref().map(|p| match_pair(p, &t));
+        self.previous_texture = Some(t);
+        m.filter(|m| m.accepted).map(|m| m.shift)
     }
 
     /// Check a photo against the mission's size (the first photo sets it).
@@ -572,6 +598,7 @@ impl<T> Engine<T> {
         let own = &self.own(i).low;
         let s_low = self.scatter_low.as_ref();
         let m = self.near_window_shape(i, range, own, m, stack.len());
+        let (m, gained) = self.overlap_shape(i, range, m);
         let scale = match (self.params.steps.backscatter_scale, s_low) {
             (Some(v), Some(_)) => vec![v; m.channels],
             (None, Some(s)) => backscatter_scale(&stack, &m, s),
@@ -580,7 +607,12 @@ impl<T> Engine<T> {
         let s_k = s_low.map(|s| scaled(s, &scale));
         let rescaled = scale.iter().any(|&v| v != 1.0);
         let mut f = self.factor_of(&m, if rescaled { s_k.as_ref() } else { s_low });
-        refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params.steps);
+        // The overlaps' own gain, where they gave one, replaces the median's (which follows the photo's nodules).
+        let steps = Steps {
+            photo_gain: self.params.steps.photo_gain && !gained,
+            ..self.params.steps
+        };
+        refine_factor(&mut f, own, &m, s_k.as_ref(), &steps);
         let noise = self.noise_model(photo, &f);
         let blended = noise
             .as_ref()
@@ -614,6 +646,72 @@ impl<T> Engine<T> {
         let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None);
         self.without_spots(&mut m_near, &near_r);
         near_shape(&m, &m_near, s_low)
+    }
+
+    /// With `steps.overlaps`: `M − S` bent to the `F` that the overlaps of the window's photos give
+    /// ([`crate::method::overlap`]), with the window's `M` as the prior for what they leave undetermined.
+    fn overlap_shape(&self, i: usize, range: &Range<usize>, mut m: Raster) -> (Raster, bool) {
+        if !self.params.steps.overlaps {
+            return (m, false);
+        }
+        let entries: Vec<&RingEntry> = self.ring.in_range(range.clone()).collect();
+        let steps: Vec<Option<(f64, f64)>> = entries
+            .iter()
+            .enumerate()
+            .map(|(j, e)| e.step.filter(|_| j > 0))
+            .collect();
+        let pairs = chained_pairs(&steps, m.width, m.height);
+        let s_low = self.scatter_low.as_ref();
+        let lit: Vec<Raster> = entries
+            .iter()
+            .map(|e| less_scatter(&e.low, s_low))
+            .collect();
+        let refs: Vec<&Raster> = lit.iter().collect();
+        let prior = less_scatter(&m, s_low);
+        let Some(overlaps) = overlap_correction(&refs, &pairs, &prior) else {
+            return (m, false);
+        };
+        let use_gain = std::env::var("OV_GAIN").map_or(true, |v| v != "0");
+        let own_gain = &overlaps.gains[i - range.start];
+        let delta = &overlaps.delta;
+        if std::env::var_os("OVDBG").is_some() {
+            let n = delta.data.len() as f64;
+            let mean = delta.data.iter().map(|v| *v as f64).sum::<f64>() / n;
+            let rms = (delta
+                .data
+                .iter()
+                .map(|v| (*v as f64 - mean).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt();
+            let st: Vec<String> = steps
+                .iter()
+                .map(|s| s.map_or("-".into(), |(x, y)| format!("{x:.1},{y:.1}")))
+                .collect();
+            eprintln!(
+                "OV {range:?} pairs {} mean {mean:.3} rms {rms:.3} steps {}",
+                pairs.len(),
+                st.join(" ")
+            );
+        }
+        let c = m.channels;
+        for (k, ((v, p), d)) in m
+            .data
+            .iter_mut()
+            .zip(&prior.data)
+            .zip(&delta.data)
+            .enumerate()
+        {
+            let g = if use_gain {
+                own_gain[k % c] as f32
+            } else {
+                0.0
+            };
+            if *p > 0.0 {
+                *v += p * ((d + g).exp() - 1.0);
+            }
+        }
+        (m, use_gain)
     }
 
     /// The noise and texture measured on the photo (with `denoise`), against its `F`.
@@ -711,6 +809,17 @@ impl Estimate {
     }
 }
 
+/// `r − S` (`r` itself without `S`).
+fn less_scatter(r: &Raster, s: Option<&Raster>) -> Raster {
+    let mut out = r.clone();
+    if let Some(s) = s {
+        for (v, s) in out.data.iter_mut().zip(&s.data) {
+            *v -= s;
+        }
+    }
+    out
+}
+
 /// One flag per `k`×`k` block: does the block, or one of its 8 neighbours, hold a masked pixel? (The margin
 /// keeps the noise-aware blend off overlay pixels an automatic mask missed at its edge.)
 fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
@@ -738,6 +847,8 @@ struct RingEntry {
     low: Raster,
     judged: Option<Raster>,
     spots: Option<Vec<bool>>,
+    /// With `steps.overlaps`: the shift of the ground from the photo before, in blocks (`None`: no match).
+    step: Option<(f64, f64)>,
 }
 
 #[cfg(test)]
