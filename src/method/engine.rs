@@ -33,8 +33,8 @@ use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresho
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 use crate::method::outliers::bright_spots;
 use crate::method::overlap::{chained_pairs, overlap_correction};
+use crate::method::params::Facts;
 pub use crate::method::params::Params;
-use crate::method::params::{Facts, Steps};
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
 use crate::method::ring::Ring;
@@ -598,7 +598,7 @@ impl<T> Engine<T> {
         let own = &self.own(i).low;
         let s_low = self.scatter_low.as_ref();
         let m = self.near_window_shape(i, range, own, m, stack.len());
-        let (m, gained) = self.overlap_shape(i, range, m);
+        let m = self.overlap_shape(range, m);
         let scale = match (self.params.steps.backscatter_scale, s_low) {
             (Some(v), Some(_)) => vec![v; m.channels],
             (None, Some(s)) => backscatter_scale(&stack, &m, s),
@@ -607,12 +607,7 @@ impl<T> Engine<T> {
         let s_k = s_low.map(|s| scaled(s, &scale));
         let rescaled = scale.iter().any(|&v| v != 1.0);
         let mut f = self.factor_of(&m, if rescaled { s_k.as_ref() } else { s_low });
-        // The overlaps' own gain, where they gave one, replaces the median's (which follows the photo's nodules).
-        let steps = Steps {
-            photo_gain: self.params.steps.photo_gain && !gained,
-            ..self.params.steps
-        };
-        refine_factor(&mut f, own, &m, s_k.as_ref(), &steps);
+        refine_factor(&mut f, own, &m, s_k.as_ref(), &self.params.steps);
         let noise = self.noise_model(photo, &f);
         let blended = noise
             .as_ref()
@@ -650,9 +645,9 @@ impl<T> Engine<T> {
 
     /// With `steps.overlaps`: `M − S` bent to the `F` that the overlaps of the window's photos give
     /// ([`crate::method::overlap`]), with the window's `M` as the prior for what they leave undetermined.
-    fn overlap_shape(&self, i: usize, range: &Range<usize>, mut m: Raster) -> (Raster, bool) {
+    fn overlap_shape(&self, range: &Range<usize>, mut m: Raster) -> Raster {
         if !self.params.steps.overlaps {
-            return (m, false);
+            return m;
         }
         let entries: Vec<&RingEntry> = self.ring.in_range(range.clone()).collect();
         let steps: Vec<Option<(f64, f64)>> = entries
@@ -668,50 +663,18 @@ impl<T> Engine<T> {
             .collect();
         let refs: Vec<&Raster> = lit.iter().collect();
         let prior = less_scatter(&m, s_low);
+        // The overlaps' gains (`Overlaps::gains`) are not used: the per-photo gain stays the median's (taking theirs
+        // instead measured worse on the nodule dives: docs/overlaps.md).
         let Some(overlaps) = overlap_correction(&refs, &pairs, &prior) else {
-            return (m, false);
+            return m;
         };
-        let use_gain = std::env::var("OV_GAIN").map_or(true, |v| v != "0");
-        let own_gain = &overlaps.gains[i - range.start];
         let delta = &overlaps.delta;
-        if std::env::var_os("OVDBG").is_some() {
-            let n = delta.data.len() as f64;
-            let mean = delta.data.iter().map(|v| *v as f64).sum::<f64>() / n;
-            let rms = (delta
-                .data
-                .iter()
-                .map(|v| (*v as f64 - mean).powi(2))
-                .sum::<f64>()
-                / n)
-                .sqrt();
-            let st: Vec<String> = steps
-                .iter()
-                .map(|s| s.map_or("-".into(), |(x, y)| format!("{x:.1},{y:.1}")))
-                .collect();
-            eprintln!(
-                "OV {range:?} pairs {} mean {mean:.3} rms {rms:.3} steps {}",
-                pairs.len(),
-                st.join(" ")
-            );
-        }
-        let c = m.channels;
-        for (k, ((v, p), d)) in m
-            .data
-            .iter_mut()
-            .zip(&prior.data)
-            .zip(&delta.data)
-            .enumerate()
-        {
-            let g = if use_gain {
-                own_gain[k % c] as f32
-            } else {
-                0.0
-            };
+        for ((v, p), d) in m.data.iter_mut().zip(&prior.data).zip(&delta.data) {
             if *p > 0.0 {
-                *v += p * ((d + g).exp() - 1.0);
+                *v += p * (d.exp() - 1.0);
             }
         }
-        (m, use_gain)
+        m
     }
 
     /// The noise and texture measured on the photo (with `denoise`), against its `F`.
