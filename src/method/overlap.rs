@@ -383,6 +383,7 @@ pub fn overlap_correction(lit: &[&Raster], pairs: &[Pair], prior: &Raster) -> Op
 }
 
 /// [`overlap_correction`], robust or not (the plain weighted least squares, for the tests).
+#[allow(clippy::needless_range_loop)] // channels index both the gains and the interleaved blocks
 fn overlap_correction_with(
     lit: &[&Raster],
     pairs: &[Pair],
@@ -430,6 +431,7 @@ fn overlap_correction_with(
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // the brute force is written with indices, as on paper
 mod tests {
     use super::*;
 
