@@ -13,7 +13,8 @@
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
 //! `--columns NAME[,NAME]` keeps only those of the columns above (the oracle and the window's floor are always
 //! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
-//! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead.
+//! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead (`--told`: with their
+//! true coverage, as the twelve are scored).
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
 //! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
@@ -132,6 +133,7 @@ fn main() {
     let mut size = (320usize, 240usize);
     let mut held_out = false;
     let mut nodules = false;
+    let mut told_all = false;
     let mut columns: Option<Vec<String>> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -155,6 +157,7 @@ fn main() {
             "--ablation" => ablation = true,
             "--held-out" => held_out = true,
             "--nodules" => nodules = true,
+            "--told" => told_all = true,
             "--columns" => {
                 columns = Some(
                     args.next()
@@ -262,7 +265,8 @@ fn main() {
         (true, true) => (NODULES_HELD_OUT, matrix::nodule_held_out_seed),
     };
     // The coverage each column is told: the twelve's, or none (a nodule field corrected as a user would).
-    let told = |spec: &matrix::DiveSpec| spec.told.then_some(spec.contamination);
+    // `--told`: every dive's true coverage, the nodule fields' too.
+    let told = |spec: &matrix::DiveSpec| (spec.told || told_all).then_some(spec.contamination);
     for (i, spec) in dives.iter().enumerate() {
         if only
             .as_ref()
@@ -570,6 +574,11 @@ fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
             contamination: None,
             window: Some(7),
             near_window: Some(0),
+            ..o
+        }),
+        ("abyss-overlaps", |o| Options {
+            method: Method::Abyss,
+            overlaps: true,
             ..o
         }),
         ("abyss-bright-spots", |o| Options {

@@ -30,6 +30,7 @@ const ENGINE_OPTIONS: &[&str] = &[
     "level_by_light",
     "no_level_by_light",
     "bright_spots",
+    "overlaps",
 ];
 
 /// Flags of the command that a Python call has no use for.

@@ -528,6 +528,15 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_METHOD)]
     bright_spots: bool,
 
+    /// --method abyss: bend F to the ratios of overlapping photos (off by default).
+    ///
+    /// Consecutive photos see the same seafloor shifted; the ratio of two photos at the same ground is the ratio
+    /// of F at the two places in the frame, whatever lies there, so nodules, burrows and fauna that held the
+    /// window's median cancel. F is fitted to the ratios of every registered pair of the window; what the shifts
+    /// leave open (across the track, the overall level) comes from the window's median. See docs/overlaps.md.
+    #[arg(long, help_heading = H_METHOD)]
+    overlaps: bool,
+
     /// Photos in the sliding window whose median gives F (odd) [default: auto].
     ///
     /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
@@ -785,6 +794,7 @@ fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
     o.denoise &= !args.no_denoise;
     o.level_by_light &= !args.no_level_by_light;
     o.bright_spots |= args.bright_spots;
+    o.overlaps |= args.overlaps;
     if let Some(WindowArg(n)) = args.window {
         // `auto` also undoes a config file's window.
         o.window = n;

@@ -32,6 +32,7 @@ use crate::method::median::{block_median, stack_median, stack_quantile};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health, Monitor, Thresholds};
 use crate::method::noise::{block_stats, level_by_light, Blended, NoiseModel};
 use crate::method::outliers::bright_spots;
+use crate::method::overlap::{chained_pairs, overlap_correction};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
@@ -127,6 +128,8 @@ pub struct Engine<T> {
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
     /// Each photo's window, quantile and near window, chosen per stretch ([`Engine::set_stretches`]).
     stretches: Option<Vec<Choice>>,
+    /// With `steps.overlaps`: the texture of the last photo's block medians, to match the next one against.
+    previous_texture: Option<crate::method::matching::Texture>,
 }
 
 /// The table of `Engine::median_linear_8`: every value an 8-bit block median takes, computed as `block_median`
@@ -247,6 +250,7 @@ impl<T> Engine<T> {
             ring: Ring::new(n),
             judged_fixed: None,
             stretches: None,
+            previous_texture: None,
         })
     }
 
@@ -363,19 +367,41 @@ impl<T> Engine<T> {
         let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
             .then(|| bright_spots(&low))
             .filter(|s| !s.is_empty());
+        let step = self.step_from_previous(&low);
         let waiting = Waiting {
             tag,
             photo: (use_ == Use::Correct).then_some(photo),
             use_,
             downsample_ms: ms(t),
         };
-        self.ring.push(RingEntry { low, judged, spots }, waiting);
+        self.ring.push(
+            RingEntry {
+                low,
+                judged,
+                spots,
+                step,
+            },
+            waiting,
+        );
         Ok(self.flush(false))
     }
 
     /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
     pub fn finish(&mut self) -> Vec<Corrected<T>> {
         self.flush(true)
+    }
+
+    /// With `steps.overlaps`: the shift of the ground from the last photo to this one, in blocks, by phase
+    /// correlation of the block medians' textures (`None`: no match, or the step is off).
+    fn step_from_previous(&mut self, low: &Raster) -> Option<(f64, f64)> {
+        use crate::method::matching::{match_pair, reduction, texture};
+        if self.params.method != Method::Abyss || !self.params.steps.overlaps {
+            return None;
+        }
+        let t = texture(low, reduction(low.width, low.height));
+        let m = self.previous_texture.as_ref().map(|p| match_pair(p, &t));
+        self.previous_texture = Some(t);
+        m.filter(|m| m.accepted).map(|m| m.shift)
     }
 
     /// Check a photo against the mission's size (the first photo sets it).
@@ -688,6 +714,7 @@ impl<T> Engine<T> {
         let own = &self.own(i).low;
         let s_low = self.scatter_low.as_ref();
         let m = self.near_window_shape(i, range, own, m, stack.len());
+        let m = self.overlap_shape(range, m);
         let scale = match (self.params.steps.backscatter_scale, s_low) {
             (Some(v), Some(_)) => vec![v; m.channels],
             (None, Some(s)) => backscatter_scale(&stack, &m, s),
@@ -733,6 +760,40 @@ impl<T> Engine<T> {
         let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None, self.quantile_of(i));
         self.without_spots(&mut m_near, &near_r);
         near_shape(&m, &m_near, s_low)
+    }
+
+    /// With `steps.overlaps`: `M − S` bent to the `F` that the overlaps of the window's photos give
+    /// ([`crate::method::overlap`]), with the window's `M` as the prior for what they leave undetermined.
+    fn overlap_shape(&self, range: &Range<usize>, mut m: Raster) -> Raster {
+        if !self.params.steps.overlaps {
+            return m;
+        }
+        let entries: Vec<&RingEntry> = self.ring.in_range(range.clone()).collect();
+        let steps: Vec<Option<(f64, f64)>> = entries
+            .iter()
+            .enumerate()
+            .map(|(j, e)| e.step.filter(|_| j > 0))
+            .collect();
+        let pairs = chained_pairs(&steps, m.width, m.height);
+        let s_low = self.scatter_low.as_ref();
+        let lit: Vec<Raster> = entries
+            .iter()
+            .map(|e| less_scatter(&e.low, s_low))
+            .collect();
+        let refs: Vec<&Raster> = lit.iter().collect();
+        let prior = less_scatter(&m, s_low);
+        // The overlaps' gains (`Overlaps::gains`) are not used: the per-photo gain stays the median's (taking theirs
+        // instead measured worse on the nodule dives: docs/overlaps.md).
+        let Some(overlaps) = overlap_correction(&refs, &pairs, &prior) else {
+            return m;
+        };
+        let delta = &overlaps.delta;
+        for ((v, p), d) in m.data.iter_mut().zip(&prior.data).zip(&delta.data) {
+            if *p > 0.0 {
+                *v += p * (d.exp() - 1.0);
+            }
+        }
+        m
     }
 
     /// The noise and texture measured on the photo (with `denoise`), against its `F`.
@@ -830,6 +891,17 @@ impl Estimate {
     }
 }
 
+/// `r − S` (`r` itself without `S`).
+fn less_scatter(r: &Raster, s: Option<&Raster>) -> Raster {
+    let mut out = r.clone();
+    if let Some(s) = s {
+        for (v, s) in out.data.iter_mut().zip(&s.data) {
+            *v -= s;
+        }
+    }
+    out
+}
+
 /// One flag per `k`×`k` block: does the block, or one of its 8 neighbours, hold a masked pixel? (The margin
 /// keeps the noise-aware blend off overlay pixels an automatic mask missed at its edge.)
 fn masked_blocks(m: &Mask, k: usize) -> Vec<bool> {
@@ -857,6 +929,8 @@ struct RingEntry {
     low: Raster,
     judged: Option<Raster>,
     spots: Option<Vec<bool>>,
+    /// With `steps.overlaps`: the shift of the ground from the photo before, in blocks (`None`: no match).
+    step: Option<(f64, f64)>,
 }
 
 #[cfg(test)]

@@ -9,8 +9,7 @@
 //! overlap over at least [`MIN_OVERLAP`] of their area and the texture images correlate there (normalised
 //! cross-correlation at least [`MIN_NCC`]).
 //!
-//! The FFT is written out (radix 2, on power-of-two sizes the texture images are padded to): at 256–512 pixels a
-//! side it is a few dozen lines and fast enough (milliseconds a pair), so no FFT crate is added.
+//! The FFT is rustfft's, on the power-of-two sizes the texture images are padded to.
 
 use crate::method::raster::Raster;
 
@@ -178,80 +177,43 @@ pub fn remove_fixed_pattern(textures: &mut [Texture]) {
     }
 }
 
-/// In-place radix-2 FFT of `re`/`im` (length a power of two); `inverse` without the `1/n` factor.
+/// In-place FFT of `re`/`im` (one row); `inverse` without the `1/n` factor.
 #[cfg(test)]
 pub(crate) fn fft(re: &mut [f64], im: &mut [f64], inverse: bool) {
-    fft_with(re, im, &twiddles(re.len(), inverse));
-}
-
-/// `e^(∓2πik/n)` for `k < n/2` (the sign by direction): the butterflies' factors, computed once per size.
-fn twiddles(n: usize, inverse: bool) -> Vec<(f64, f64)> {
-    let sign = if inverse { 1.0 } else { -1.0 };
-    (0..n / 2)
-        .map(|k| {
-            let a = sign * std::f64::consts::TAU * k as f64 / n as f64;
-            (a.cos(), a.sin())
-        })
-        .collect()
-}
-
-/// [`fft`] with the factors of [`twiddles`] for this length.
-fn fft_with(re: &mut [f64], im: &mut [f64], table: &[(f64, f64)]) {
     let n = re.len();
-    debug_assert!(n.is_power_of_two());
-    debug_assert_eq!(table.len(), n / 2);
-    let mut j = 0;
-    for i in 1..n {
-        let mut bit = n >> 1;
-        while j & bit != 0 {
-            j ^= bit;
-            bit >>= 1;
-        }
-        j |= bit;
-        if i < j {
-            re.swap(i, j);
-            im.swap(i, j);
-        }
-    }
-    let mut len = 2;
-    while len <= n {
-        let step = n / len;
-        for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (wr, wi) = table[k * step];
-                let (a, b) = (start + k, start + k + len / 2);
-                let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
-                re[b] = re[a] - xr;
-                im[b] = im[a] - xi;
-                re[a] += xr;
-                im[a] += xi;
-            }
-        }
-        len <<= 1;
-    }
+    fft2(re, im, n, 1, inverse);
 }
 
-/// 2-D FFT of a row-major `w`×`h` complex image (both powers of two).
+/// 2-D FFT of a row-major `w`×`h` complex image (rows, then columns; rustfft's plans, any size); `inverse` without
+/// the `1/(w·h)` factor.
 pub(crate) fn fft2(re: &mut [f64], im: &mut [f64], w: usize, h: usize, inverse: bool) {
-    let (row_table, column_table) = (twiddles(w, inverse), twiddles(h, inverse));
-    for y in 0..h {
-        fft_with(
-            &mut re[y * w..(y + 1) * w],
-            &mut im[y * w..(y + 1) * w],
-            &row_table,
-        );
-    }
-    let (mut cr, mut ci) = (vec![0.0; h], vec![0.0; h]);
+    use rustfft::{num_complex::Complex, FftDirection, FftPlanner};
+    let direction = if inverse {
+        FftDirection::Inverse
+    } else {
+        FftDirection::Forward
+    };
+    let mut planner = FftPlanner::<f64>::new();
+    let mut buf: Vec<Complex<f64>> = re
+        .iter()
+        .zip(im.iter())
+        .map(|(&r, &i)| Complex::new(r, i))
+        .collect();
+    planner.plan_fft(w, direction).process(&mut buf);
+    let mut column = vec![Complex::new(0.0, 0.0); h];
+    let plan = planner.plan_fft(h, direction);
     for x in 0..w {
-        for y in 0..h {
-            cr[y] = re[y * w + x];
-            ci[y] = im[y * w + x];
+        for (y, c) in column.iter_mut().enumerate() {
+            *c = buf[y * w + x];
         }
-        fft_with(&mut cr, &mut ci, &column_table);
-        for y in 0..h {
-            re[y * w + x] = cr[y];
-            im[y * w + x] = ci[y];
+        plan.process(&mut column);
+        for (y, c) in column.iter().enumerate() {
+            buf[y * w + x] = *c;
         }
+    }
+    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&buf) {
+        *r = c.re;
+        *i = c.im;
     }
 }
 

@@ -12,6 +12,7 @@
 //! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
 //! - [`outliers`]: bright spots that move (laser dots, highlights), and `M` where they held the window;
 //! - [`stretch`]: the window per stretch of the mission, from its dark share and the camera's motion;
+//! - [`overlap`]: `F` from the ratios of overlapping photos, where the window's `M` holds the scene;
 //! - [`monitor`]: health figures that say where the method's assumptions fail;
 //! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
 //! - [`raster`] and [`transfer`]: photos, low-resolution images and camera curves.
@@ -28,6 +29,7 @@ pub mod median;
 pub mod monitor;
 pub mod noise;
 pub mod outliers;
+pub mod overlap;
 pub mod params;
 pub mod raster;
 pub mod refine;

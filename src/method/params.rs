@@ -171,6 +171,10 @@ pub struct Steps {
     /// With `denoise`: even out the blend's block levels across light levels
     /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
+    /// Bend `F` to the ratios of the window's overlapping photos, registered by phase correlation
+    /// ([`crate::method::overlap`]): nodules, burrows and fauna that held the window's `M` cancel in them.
+    /// Default: false.
+    pub overlaps: bool,
 }
 
 impl Default for Steps {
@@ -183,6 +187,7 @@ impl Default for Steps {
             relative_floor: 0.001,
             denoise: true,
             level_by_light: true,
+            overlaps: false,
         }
     }
 }

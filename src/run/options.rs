@@ -189,6 +189,10 @@ pub struct Options {
     /// dots at their full brightness, which raises the overlap difference: docs/evaluation.md).
     #[serde(default)]
     pub bright_spots: bool,
+    /// `method = abyss`: bend `F` to the ratios of the window's overlapping photos, where nodules, burrows and
+    /// fauna cancel ([`crate::method::overlap`]). Default: false (docs/overlaps.md).
+    #[serde(default)]
+    pub overlaps: bool,
 }
 
 fn default_relative_floor() -> f32 {
@@ -280,6 +284,7 @@ impl Default for Options {
             denoise: true,
             level_by_light: true,
             bright_spots: false,
+            overlaps: false,
         }
     }
 }
@@ -489,6 +494,7 @@ impl Options {
             denoise,
             level_by_light,
             bright_spots,
+            overlaps,
             // The run's: where photos come from and go to, and how the run goes.
             water_column: _,
             scatter: _,
@@ -530,6 +536,7 @@ impl Options {
                 relative_floor,
                 denoise,
                 level_by_light,
+                overlaps,
             },
         })
     }

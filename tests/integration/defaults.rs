@@ -240,6 +240,13 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
                 ..base.clone()
             },
         ),
+        (
+            "overlaps",
+            Options {
+                overlaps: true,
+                ..base.clone()
+            },
+        ),
     ];
     for (name, o) in &changed {
         assert_ne!(
@@ -260,6 +267,7 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
     let s = Options {
         bright_spots: true,
         photo_gain: false,
+        overlaps: true,
         ..base.clone()
     }
     .params()
@@ -269,6 +277,7 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
         Steps {
             bright_spots: true,
             photo_gain: false,
+            overlaps: true,
             ..Steps::default()
         }
     );
