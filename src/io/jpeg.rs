@@ -191,6 +191,41 @@ pub fn nearest_quality(luma: &[u16; 64], chroma: Option<&[u16; 64]>) -> u8 {
     best.1
 }
 
+/// Store the quantisation tables of a DQT segment `seg` (in natural order) into `tables`.
+fn read_dqt(seg: &[u8], tables: &mut [Option<[u16; 64]>; 4]) {
+    let mut s = seg;
+    while let Some((&pq_tq, rest)) = s.split_first() {
+        let (precision, id) = (pq_tq >> 4, usize::from(pq_tq & 15));
+        let size = if precision == 0 { 64 } else { 128 };
+        let Some(values) = rest.get(..size) else {
+            break;
+        };
+        let mut t = [0u16; 64];
+        for (k, &pos) in ZIGZAG.iter().enumerate() {
+            t[pos] = if precision == 0 {
+                u16::from(values[k])
+            } else {
+                u16::from_be_bytes([values[2 * k], values[2 * k + 1]])
+            };
+        }
+        if id < 4 {
+            tables[id] = Some(t);
+        }
+        s = &rest[size..];
+    }
+}
+
+/// The (component id, h, v, table id) of each component of a frame header segment `seg`.
+fn read_sof(seg: &[u8]) -> Option<Vec<(u8, u8, u8, u8)>> {
+    let n = usize::from(*seg.get(5)?);
+    (0..n)
+        .map(|i| {
+            let c = seg.get(6 + 3 * i..9 + 3 * i)?;
+            Some((c[0], c[1] >> 4, c[1] & 15, c[2] & 3))
+        })
+        .collect::<Option<Vec<_>>>()
+}
+
 /// Read the headers of a JPEG held in memory (at least up to its first scan): frame components, their sampling
 /// factors and quantisation tables. `None` if it does not start like a JPEG or has no frame header before its
 /// first scan.
@@ -222,38 +257,10 @@ pub fn parse(bytes: &[u8]) -> Option<JpegCoding> {
         let seg = bytes.get(at + 2..at + len.max(2))?;
         at += len.max(2);
         match marker {
-            0xdb => {
-                let mut s = seg;
-                while let Some((&pq_tq, rest)) = s.split_first() {
-                    let (precision, id) = (pq_tq >> 4, usize::from(pq_tq & 15));
-                    let size = if precision == 0 { 64 } else { 128 };
-                    let Some(values) = rest.get(..size) else {
-                        break;
-                    };
-                    let mut t = [0u16; 64];
-                    for (k, &pos) in ZIGZAG.iter().enumerate() {
-                        t[pos] = if precision == 0 {
-                            u16::from(values[k])
-                        } else {
-                            u16::from_be_bytes([values[2 * k], values[2 * k + 1]])
-                        };
-                    }
-                    if id < 4 {
-                        tables[id] = Some(t);
-                    }
-                    s = &rest[size..];
-                }
-            }
+            0xdb => read_dqt(seg, &mut tables),
             // SOF0..SOF15 except DHT (c4), JPG (c8) and DAC (cc).
             0xc0..=0xcf if !matches!(marker, 0xc4 | 0xc8 | 0xcc) => {
-                let n = usize::from(*seg.get(5)?);
-                let comps = (0..n)
-                    .map(|i| {
-                        let c = seg.get(6 + 3 * i..9 + 3 * i)?;
-                        Some((c[0], c[1] >> 4, c[1] & 15, c[2] & 3))
-                    })
-                    .collect::<Option<Vec<_>>>()?;
-                frame = Some(comps);
+                frame = Some(read_sof(seg)?);
             }
             _ => {}
         }

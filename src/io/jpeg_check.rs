@@ -429,19 +429,18 @@ pub fn dimensions(mut r: impl std::io::Read + std::io::Seek) -> Result<(usize, u
     }
 }
 
-/// Huffman-decode one baseline scan starting at `start`; returns the position where its data ends.
-#[allow(clippy::too_many_arguments)]
-fn scan_baseline(
-    data: &[u8],
-    start: usize,
+/// One scan component: (blocks per MCU, DC table, AC table).
+type ScanPart<'t> = (usize, &'t Huffman, &'t Huffman);
+
+/// The components of a scan from its header `seg`, and the number of MCUs (or blocks, for one component) it holds.
+fn scan_parts<'t>(
     seg: &[u8],
     width: usize,
     height: usize,
     comps: &[Component],
-    dc: &[Option<Huffman>; 4],
-    ac: &[Option<Huffman>; 4],
-    restart: usize,
-) -> Result<usize, Why> {
+    dc: &'t [Option<Huffman>; 4],
+    ac: &'t [Option<Huffman>; 4],
+) -> Result<(Vec<ScanPart<'t>>, usize), Why> {
     let ns = *seg.first().ok_or("bad scan header")? as usize;
     if ns == 0 || seg.len() < 1 + 2 * ns + 3 {
         return Err("bad scan header".into());
@@ -480,6 +479,49 @@ fn scan_baseline(
         Some(n) => n,
         None => width.div_ceil(8 * hmax) * height.div_ceil(8 * vmax),
     };
+    Ok((parts, mcus))
+}
+
+/// Huffman-decode one block's DC and AC coefficients, checking only that they are well formed.
+fn skip_block(bits: &mut Bits, d: &Huffman, a: &Huffman) -> Result<(), Why> {
+    let s = bits.decode(d)? as u32;
+    if s > 16 {
+        return Err("corrupt compressed data (bad DC size)".into());
+    }
+    bits.skip(s);
+    let mut k = 1;
+    while k < 64 {
+        let rs = bits.decode_ac(a)?;
+        let (r, s) = ((rs >> 4) as usize, rs & 15);
+        if s == 0 {
+            if r == 15 {
+                k += 16;
+                continue;
+            }
+            break;
+        }
+        k += r + 1;
+    }
+    if k > 64 {
+        return Err("corrupt compressed data (more than 64 coefficients in a block)".into());
+    }
+    Ok(())
+}
+
+/// Huffman-decode one baseline scan starting at `start`; returns the position where its data ends.
+#[allow(clippy::too_many_arguments)]
+fn scan_baseline(
+    data: &[u8],
+    start: usize,
+    seg: &[u8],
+    width: usize,
+    height: usize,
+    comps: &[Component],
+    dc: &[Option<Huffman>; 4],
+    ac: &[Option<Huffman>; 4],
+    restart: usize,
+) -> Result<usize, Why> {
+    let (parts, mcus) = scan_parts(seg, width, height, comps, dc, ac)?;
     let mut bits = Bits::new(data, start);
     let short = |done: usize| {
         format!(
@@ -505,29 +547,7 @@ fn scan_baseline(
         }
         for &(blocks, d, a) in &parts {
             for _ in 0..blocks {
-                let s = bits.decode(d)? as u32;
-                if s > 16 {
-                    return Err("corrupt compressed data (bad DC size)".into());
-                }
-                bits.skip(s);
-                let mut k = 1;
-                while k < 64 {
-                    let rs = bits.decode_ac(a)?;
-                    let (r, s) = ((rs >> 4) as usize, rs & 15);
-                    if s == 0 {
-                        if r == 15 {
-                            k += 16;
-                            continue;
-                        }
-                        break;
-                    }
-                    k += r + 1;
-                }
-                if k > 64 {
-                    return Err(
-                        "corrupt compressed data (more than 64 coefficients in a block)".into(),
-                    );
-                }
+                skip_block(&mut bits, d, a)?;
             }
         }
         if bits.ended && !bits.within_data() {

@@ -102,6 +102,53 @@ fn skip_entry(
     }
 }
 
+/// Why a walk error skips its entry, for the report.
+fn walk_error_reason(e: &walkdir::Error) -> String {
+    if let Some(ancestor) = e.loop_ancestor() {
+        format!(
+            "symbolic link loop (leads back to {}); skipped",
+            ancestor.display()
+        )
+    } else if e
+        .io_error()
+        .is_some_and(|i| i.kind() == std::io::ErrorKind::NotFound)
+    {
+        "dangling symbolic link (its target does not exist); skipped".to_string()
+    } else {
+        format!(
+            "{}; skipped",
+            e.io_error()
+                .map_or_else(|| e.to_string(), |i| i.to_string())
+        )
+    }
+}
+
+/// Why an entry of the walk is skipped (a link into `exclude`, a name not UTF-8), if it is.
+fn skip_reason(item: &walkdir::DirEntry, dir: &Path, exclude: &[&Path]) -> Option<&'static str> {
+    if item.path_is_symlink()
+        && exclude
+            .iter()
+            .any(|x| crate::io::paths::is_within(item.path(), x))
+    {
+        return Some(
+            "a symbolic link into the output folder: outputs are never read back as inputs; skipped",
+        );
+    }
+    if item.depth() > 0
+        && item
+            .path()
+            .strip_prefix(dir)
+            .ok()
+            .and_then(|r| r.to_str())
+            .is_none()
+    {
+        return Some(
+            "name is not valid UTF-8 (cannot be named in the report or mirrored reliably); rename it; skipped",
+        );
+    }
+    None
+}
+
 /// [`find_photos`], and entries reached through symbolic links that lead into one of `exclude` (the output
 /// folder: a survey link pointing at `--out` must not read old outputs back as photos) are skipped entries.
 pub(crate) fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Found> {
@@ -122,23 +169,7 @@ pub(crate) fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Fou
             Ok(i) => i,
             Err(e) => {
                 let path = e.path().unwrap_or(dir);
-                let reason = if let Some(ancestor) = e.loop_ancestor() {
-                    format!(
-                        "symbolic link loop (leads back to {}); skipped",
-                        ancestor.display()
-                    )
-                } else if e
-                    .io_error()
-                    .is_some_and(|i| i.kind() == std::io::ErrorKind::NotFound)
-                {
-                    "dangling symbolic link (its target does not exist); skipped".to_string()
-                } else {
-                    format!(
-                        "{}; skipped",
-                        e.io_error()
-                            .map_or_else(|| e.to_string(), |i| i.to_string())
-                    )
-                };
+                let reason = walk_error_reason(&e);
                 found.skipped.push(Skipped {
                     path: lossy(path),
                     reason,
@@ -146,33 +177,8 @@ pub(crate) fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Fou
                 continue;
             }
         };
-        if item.path_is_symlink()
-            && exclude
-                .iter()
-                .any(|x| crate::io::paths::is_within(item.path(), x))
-        {
-            skip_entry(
-                &mut found,
-                &mut walker,
-                &item,
-                "a symbolic link into the output folder: outputs are never read back as inputs; skipped",
-            );
-            continue;
-        }
-        if item.depth() > 0
-            && item
-                .path()
-                .strip_prefix(dir)
-                .ok()
-                .and_then(|r| r.to_str())
-                .is_none()
-        {
-            skip_entry(
-                &mut found,
-                &mut walker,
-                &item,
-                "name is not valid UTF-8 (cannot be named in the report or mirrored reliably); rename it; skipped",
-            );
+        if let Some(reason) = skip_reason(&item, dir, exclude) {
+            skip_entry(&mut found, &mut walker, &item, reason);
             continue;
         }
         if !item.file_type().is_file() {
@@ -643,6 +649,59 @@ impl EncodeSettings {
     }
 }
 
+/// Encode `photo` (8-bit samples) as JPEG into `w`.
+fn encode_jpeg<W: Write>(
+    photo: &Photo,
+    settings: EncodeSettings,
+    w: W,
+) -> std::result::Result<(), String> {
+    let l = photo.layout;
+    let Samples::U8(c) = &photo.samples else {
+        return Err("JPEG holds 8-bit samples only".into());
+    };
+    if l.width > u16::MAX as usize || l.height > u16::MAX as usize {
+        return Err("too large for JPEG (65535 pixels a side at most)".into());
+    }
+    #[cfg(feature = "turbojpeg")]
+    {
+        let bytes = crate::io::jpeg::turbo::encode(
+            c,
+            l.width,
+            l.height,
+            l.channels,
+            settings.jpeg_quality,
+            settings.jpeg_subsampling,
+        )?;
+        let mut w = w;
+        w.write_all(&bytes).map_err(|e| e.to_string())
+    }
+    #[cfg(not(feature = "turbojpeg"))]
+    {
+        let (format, subsampling) = if l.channels == 1 {
+            (
+                libjpeg_turbo_rs::PixelFormat::Grayscale,
+                libjpeg_turbo_rs::Subsampling::S444,
+            )
+        } else {
+            (
+                libjpeg_turbo_rs::PixelFormat::Rgb,
+                settings.jpeg_subsampling.rust_encoder(),
+            )
+        };
+        let bytes = libjpeg_turbo_rs::compress(
+            c,
+            l.width,
+            l.height,
+            format,
+            settings.jpeg_quality,
+            subsampling,
+        )
+        .map_err(|e| e.to_string())?;
+        let mut w = w;
+        w.write_all(&bytes).map_err(|e| e.to_string())
+    }
+}
+
 /// Encode `photo` in `format` into `w`.
 pub fn encode_to<W: Write>(
     photo: &Photo,
@@ -650,54 +709,8 @@ pub fn encode_to<W: Write>(
     settings: EncodeSettings,
     w: W,
 ) -> std::result::Result<(), String> {
-    let l = photo.layout;
     match format {
-        ImageFormat::Jpeg => {
-            let Samples::U8(c) = &photo.samples else {
-                return Err("JPEG holds 8-bit samples only".into());
-            };
-            if l.width > u16::MAX as usize || l.height > u16::MAX as usize {
-                return Err("too large for JPEG (65535 pixels a side at most)".into());
-            }
-            #[cfg(feature = "turbojpeg")]
-            {
-                let bytes = crate::io::jpeg::turbo::encode(
-                    c,
-                    l.width,
-                    l.height,
-                    l.channels,
-                    settings.jpeg_quality,
-                    settings.jpeg_subsampling,
-                )?;
-                let mut w = w;
-                w.write_all(&bytes).map_err(|e| e.to_string())
-            }
-            #[cfg(not(feature = "turbojpeg"))]
-            {
-                let (format, subsampling) = if l.channels == 1 {
-                    (
-                        libjpeg_turbo_rs::PixelFormat::Grayscale,
-                        libjpeg_turbo_rs::Subsampling::S444,
-                    )
-                } else {
-                    (
-                        libjpeg_turbo_rs::PixelFormat::Rgb,
-                        settings.jpeg_subsampling.rust_encoder(),
-                    )
-                };
-                let bytes = libjpeg_turbo_rs::compress(
-                    c,
-                    l.width,
-                    l.height,
-                    format,
-                    settings.jpeg_quality,
-                    subsampling,
-                )
-                .map_err(|e| e.to_string())?;
-                let mut w = w;
-                w.write_all(&bytes).map_err(|e| e.to_string())
-            }
-        }
+        ImageFormat::Jpeg => encode_jpeg(photo, settings, w),
         ImageFormat::Png => {
             let enc = image::codecs::png::PngEncoder::new_with_quality(
                 w,

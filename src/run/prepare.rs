@@ -244,15 +244,9 @@ fn warn_if_most_is_hidden(mask: &Mask, warnings: &mut Warnings) {
     }
 }
 
-/// `--mask`, united with what `--mask-auto` finds.
-fn mask(
-    opts: &Options,
-    transfer: Transfer,
-    plan: &Plan,
-    progress: &dyn Progress,
-    warnings: &mut Warnings,
-) -> Result<Option<Mask>> {
-    let mut mask = match opts.mask.as_deref() {
+/// The `--mask` file, if one is given.
+fn user_mask(opts: &Options, progress: &dyn Progress) -> Result<Option<Mask>> {
+    let mask = match opts.mask.as_deref() {
         Some(p) => {
             let m = Mask::load(p)?;
             progress.stage(&format!(
@@ -264,9 +258,16 @@ fn mask(
         }
         None => None,
     };
-    if !opts.mask_auto {
-        return Ok(mask);
-    }
+    Ok(mask)
+}
+
+/// Per-pixel medians of up to three thirds of a sample of the mission's photos, for `--mask-auto`.
+fn static_medians(
+    opts: &Options,
+    plan: &Plan,
+    progress: &dyn Progress,
+    warnings: &mut Warnings,
+) -> Result<Vec<Raster>> {
     let sample: Vec<Entry> = spread_indices(plan.found.photos.len(), 45)
         .into_iter()
         .map(|i| plan.found.photos[i].clone())
@@ -291,6 +292,22 @@ fn mask(
             medians.push(m.to_raster());
         }
     }
+    Ok(medians)
+}
+
+/// `--mask`, united with what `--mask-auto` finds.
+fn mask(
+    opts: &Options,
+    transfer: Transfer,
+    plan: &Plan,
+    progress: &dyn Progress,
+    warnings: &mut Warnings,
+) -> Result<Option<Mask>> {
+    let mut mask = user_mask(opts, progress)?;
+    if !opts.mask_auto {
+        return Ok(mask);
+    }
+    let medians = static_medians(opts, plan, progress, warnings)?;
     if medians.is_empty() || medians.iter().any(|m| m.layout() != medians[0].layout()) {
         warnings.warn(
             "--mask-auto found no photos of the mission's size that decode: no mask found"

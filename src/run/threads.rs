@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{bounded, Sender};
+use crossbeam_channel::{bounded, Receiver, Sender};
 
 use crate::error::{Error, Result};
 use crate::io::paths::check_no_links_below;
@@ -180,6 +180,9 @@ fn threads(opts: &Options) -> usize {
         .max(1)
 }
 
+/// A decoded photo on its way from the reader thread: the item, the photo with its live count, the decode time.
+type Decoded = (Item, Result<(Photo, Live)>, f64);
+
 /// The engine's side of the stream: photos in, corrected photos to the writers, the rest recorded.
 struct Feed<'a> {
     opts: &'a Options,
@@ -201,6 +204,59 @@ impl Feed<'_> {
             self.outcome.errors.push(FileError::from_error(path, &e));
             self.progress.photo_done(path, false);
         }
+    }
+
+    /// Push every decoded photo from the channel until the stream or the chunk ends; true if the stream ended.
+    fn drain(
+        &mut self,
+        engine: &mut Engine<Tag>,
+        dec_rx: Receiver<Decoded>,
+        last_needed: usize,
+        total_items: usize,
+    ) -> Result<bool> {
+        let mut reached_end = true;
+        for (item, photo, decode_ms) in dec_rx {
+            if self.progress.cancelled() {
+                return Err(Error::Usage(
+                    "interrupted: the photos written so far are complete; run again with resume to finish"
+                        .into(),
+                ));
+            }
+            self.outcome.streamed += 1;
+            let index = item.index;
+            match photo {
+                Err(e) => self.fail(&item.entry.path, item.role, e),
+                Ok((photo, photo_live)) => self.push(engine, item, photo, photo_live, decode_ms)?,
+            }
+            // A shard stops reading once every photo of its chunk has been corrected.
+            if index + 1 >= last_needed && self.pending == 0 {
+                reached_end = index + 1 == total_items;
+                break;
+            }
+        }
+        Ok(reached_end)
+    }
+
+    /// Flush the engine if the stream ended, warn about a short mission, and hand back the outcome.
+    fn finish(mut self, engine: &mut Engine<Tag>, reached_end: bool, n: usize) -> Result<Outcome> {
+        if reached_end {
+            let out = engine.finish();
+            self.emit(out)?;
+            let seen = engine.accepted();
+            if seen > 0 && seen < n {
+                let m = format!(
+                    "only {seen} usable survey photo(s), fewer than the window n = {n}: every photo's F is the \
+                     median of all of them"
+                );
+                self.progress.warn(&m);
+                self.outcome.warnings.push(m);
+            }
+        }
+        self.outcome.layout = engine.layout();
+        let mut outcome = self.outcome;
+        outcome.frames = self.resumed;
+        outcome.flagged_lit = self.flagged.kept;
+        Ok(outcome)
     }
 
     /// Give one decoded photo to the engine and pass on what comes out.
@@ -381,46 +437,8 @@ pub fn stream(
             resumed: Vec::new(),
             flagged: FlaggedSample::default(),
         };
-        let mut reached_end = true;
-        for (item, photo, decode_ms) in dec_rx {
-            if progress.cancelled() {
-                return Err(Error::Usage(
-                    "interrupted: the photos written so far are complete; run again with resume to finish"
-                        .into(),
-                ));
-            }
-            feed.outcome.streamed += 1;
-            let index = item.index;
-            match photo {
-                Err(e) => feed.fail(&item.entry.path, item.role, e),
-                Ok((photo, photo_live)) => {
-                    feed.push(&mut engine, item, photo, photo_live, decode_ms)?
-                }
-            }
-            // A shard stops reading once every photo of its chunk has been corrected.
-            if index + 1 >= last_needed && feed.pending == 0 {
-                reached_end = index + 1 == total_items;
-                break;
-            }
-        }
-        if reached_end {
-            let out = engine.finish();
-            feed.emit(out)?;
-            let seen = engine.accepted();
-            if seen > 0 && seen < n {
-                let m = format!(
-                    "only {seen} usable survey photo(s), fewer than the window n = {n}: every photo's F is the \
-                     median of all of them"
-                );
-                progress.warn(&m);
-                feed.outcome.warnings.push(m);
-            }
-        }
-        feed.outcome.layout = engine.layout();
-        let mut outcome = feed.outcome;
-        outcome.frames = feed.resumed;
-        outcome.flagged_lit = feed.flagged.kept;
-        Ok(outcome)
+        let reached_end = feed.drain(&mut engine, dec_rx, last_needed, total_items)?;
+        feed.finish(&mut engine, reached_end, n)
     });
     progress.finish();
     if let Ok(o) = &mut outcome {
