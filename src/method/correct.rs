@@ -908,7 +908,18 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         f[i] = if ok { f[i] * f[i] * lv * vpat[ch] } else { 0.0 };
     }
     pixel_ratios_avx2::<C>(f, ax, lx, b.prior_precision);
-    // Pass 3.
+    let clipped = blend_pass3(lx, wx, ax, f);
+    codes_into(row, lx, curve);
+    clipped as u64
+}
+
+/// Pass 3 of [`blend_row_passes`]: `lx = w·Â + (1 − w)·A_low·r`, counting the samples outside 0..1.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn blend_pass3(lx: &mut [f32], wx: &[f32], ax: &[f32], f: &[f32]) -> u32 {
     let mut clipped = 0u32;
     for (((l, &w), &a), &r) in lx.iter_mut().zip(wx).zip(ax.iter()).zip(f.iter()) {
         let v = w * a + (1.0 - w) * l.max(LEVEL_MIN) * r;
@@ -918,8 +929,7 @@ unsafe fn blend_row_passes<T: Sample, const C: usize>(
         clipped += o as u32;
         *l = v;
     }
-    codes_into(row, lx, curve);
-    clipped as u64
+    clipped
 }
 
 /// `row[k] = ` the code of linear light `l[k]` (8 at a time by [`codes_into_avx2`] for a non-linear curve).

@@ -820,49 +820,7 @@ impl Monitor {
         let mut h = self.observe_at(f, fit.contamination, q);
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
-        // Reduced so that its long side stays under 2·STILL_MATCH_SIDE: a 12 MP photo's 500×375 block medians are
-        // matched at 250×187 (FFT 256×256 instead of 512×512, a quarter of the work); photos up to ~3000 px wide
-        // are matched at full block resolution, as before.
-        let scale = crate::method::matching::reduction_to(own.width, own.height, STILL_MATCH_SIDE);
-        let texture = crate::method::matching::texture(own, scale);
-        if let Some(prev) = &self.previous_texture {
-            if (prev.width, prev.height) == (texture.width, texture.height)
-                && texture.width >= MIN_ROUGHNESS_SIZE.0
-                && texture.height >= MIN_ROUGHNESS_SIZE.1
-            {
-                let m = crate::method::matching::match_pair(prev, &texture);
-                h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
-                h.motion_ncc = Some(m.ncc as f32);
-                if self.recent_motion.len() == STILL_PHOTOS {
-                    self.recent_motion.pop_front();
-                }
-                self.recent_motion
-                    .push_back((m.shift.0.hypot(m.shift.1) as f32, m.ncc as f32));
-            }
-        }
-        // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
-        let short_side = (texture.width.min(texture.height) * scale) as f32;
-        self.previous_texture = Some(texture);
-        // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
-        // benthic, Sparus). Judged on the median of the last few trusted matches.
-        if self.recent_motion.len() == STILL_PHOTOS {
-            let med = |v: &mut Vec<f32>| {
-                v.sort_by(f32::total_cmp);
-                v[v.len() / 2]
-            };
-            let ncc = med(&mut self.recent_motion.iter().map(|m| m.1).collect());
-            let step = med(&mut self.recent_motion.iter().map(|m| m.0).collect());
-            let n = if self.window > 0 {
-                self.window
-            } else {
-                STILL_DEFAULT_WINDOW
-            };
-            let span = step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
-            h.window_span = Some(span);
-            if ncc >= STILL_NCC && span < STILL_SPAN {
-                h.flags.push(Flag::CameraStill { span });
-            }
-        }
+        self.observe_stillness(own, &mut h);
         if (fit.level - 1.0).abs() > t.exposure_jump {
             match self.gain {
                 true => h.exposure_absorbed = true,
@@ -911,24 +869,7 @@ impl Monitor {
                 share: contamination,
             });
         }
-        if let Some(prev) = &self.previous {
-            let change = factor_change(f, prev);
-            h.factor_change = change;
-            // The median change so far, by selection (linear in the mission's length, not n log n a photo).
-            let sorted = &mut self.sorted_changes;
-            sorted.clear();
-            sorted.extend_from_slice(&self.changes);
-            let typical = if sorted.is_empty() {
-                0.0
-            } else {
-                let mid = sorted.len() / 2;
-                *sorted.select_nth_unstable_by(mid, f32::total_cmp).1
-            };
-            if change > t.factor_change && change > t.factor_change_ratio * typical {
-                h.flags.push(Flag::FactorChange { change });
-            }
-            self.changes.push(change);
-        }
+        self.observe_factor_change(f, &mut h);
         h.roughness = self.scratch.roughness(f);
         if h.roughness > t.roughness {
             h.flags.push(Flag::SceneInFactor {
@@ -986,6 +927,75 @@ impl Monitor {
             p => *p = Some(f.clone()),
         }
         h
+    }
+    /// Match the photo's texture with the previous photo's (`h.motion`), and flag a camera that hardly moves.
+    fn observe_stillness(&mut self, own: &Raster, h: &mut Health) {
+        // Reduced so that its long side stays under 2·STILL_MATCH_SIDE: a 12 MP photo's 500×375 block medians are
+        // matched at 250×187 (FFT 256×256 instead of 512×512, a quarter of the work); photos up to ~3000 px wide
+        // are matched at full block resolution, as before.
+        let scale = crate::method::matching::reduction_to(own.width, own.height, STILL_MATCH_SIDE);
+        let texture = crate::method::matching::texture(own, scale);
+        if let Some(prev) = &self.previous_texture {
+            if (prev.width, prev.height) == (texture.width, texture.height)
+                && texture.width >= MIN_ROUGHNESS_SIZE.0
+                && texture.height >= MIN_ROUGHNESS_SIZE.1
+            {
+                let m = crate::method::matching::match_pair(prev, &texture);
+                h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
+                h.motion_ncc = Some(m.ncc as f32);
+                if self.recent_motion.len() == STILL_PHOTOS {
+                    self.recent_motion.pop_front();
+                }
+                self.recent_motion
+                    .push_back((m.shift.0.hypot(m.shift.1) as f32, m.ncc as f32));
+            }
+        }
+        // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
+        let short_side = (texture.width.min(texture.height) * scale) as f32;
+        self.previous_texture = Some(texture);
+        // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
+        // benthic, Sparus). Judged on the median of the last few trusted matches.
+        if self.recent_motion.len() == STILL_PHOTOS {
+            let med = |v: &mut Vec<f32>| {
+                v.sort_by(f32::total_cmp);
+                v[v.len() / 2]
+            };
+            let ncc = med(&mut self.recent_motion.iter().map(|m| m.1).collect());
+            let step = med(&mut self.recent_motion.iter().map(|m| m.0).collect());
+            let n = if self.window > 0 {
+                self.window
+            } else {
+                STILL_DEFAULT_WINDOW
+            };
+            let span = step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
+            h.window_span = Some(span);
+            if ncc >= STILL_NCC && span < STILL_SPAN {
+                h.flags.push(Flag::CameraStill { span });
+            }
+        }
+    }
+
+    /// The factor image's change from the previous photo's (`h.factor_change`), flagged when unusually large.
+    fn observe_factor_change(&mut self, f: &Raster, h: &mut Health) {
+        let t = self.thresholds;
+        if let Some(prev) = &self.previous {
+            let change = factor_change(f, prev);
+            h.factor_change = change;
+            // The median change so far, by selection (linear in the mission's length, not n log n a photo).
+            let sorted = &mut self.sorted_changes;
+            sorted.clear();
+            sorted.extend_from_slice(&self.changes);
+            let typical = if sorted.is_empty() {
+                0.0
+            } else {
+                let mid = sorted.len() / 2;
+                *sorted.select_nth_unstable_by(mid, f32::total_cmp).1
+            };
+            if change > t.factor_change && change > t.factor_change_ratio * typical {
+                h.flags.push(Flag::FactorChange { change });
+            }
+            self.changes.push(change);
+        }
     }
 }
 

@@ -173,7 +173,7 @@ impl NoiseModel {
         let mut measured = 0;
         for ch in 0..c {
             // (F, var, diag, level)
-            let mut pts: Vec<(f32, f32, f32, f32)> = blocks
+            let pts: Vec<(f32, f32, f32, f32)> = blocks
                 .iter()
                 .map(|b| (f.data[b.index * c + ch], b.var[ch], b.diag[ch], b.mean[ch]))
                 .filter(|(f, v, d, l)| {
@@ -186,66 +186,11 @@ impl NoiseModel {
                 continue;
             }
             measured += 1;
-            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let n = pts.len();
-            let dim = &pts[..(n / 10).max(5)];
-            let top = &pts[n - (n / 4).max(5)..];
-            // A channel that gets no light anywhere (its brightest quarter's median F under MIN_LIT_F) has no
-            // measurable texture: dividing by a near-zero F² would make one up.
-            let unlit = top[top.len() / 2].0 < MIN_LIT_F;
-            let bright: Vec<(f32, f32, f32, f32)> = top
-                .iter()
-                .copied()
-                .filter(|p| p.0 > 0.0 && !unlit)
-                .collect();
-            let raw_median = |mut v: Vec<f32>| {
-                if v.is_empty() {
-                    0.0
-                } else {
-                    quantile(&mut v, 0.5)
-                }
-            };
-            let median_of = |v: Vec<f32>| raw_median(v).max(0.0);
-            // The dim blocks by level: lower and upper half.
-            let mut by_level: Vec<(f32, f32, f32, f32)> = dim.to_vec();
-            by_level.sort_by(|a, b| a.3.total_cmp(&b.3));
-            let half = by_level.len() / 2;
-            let level0 = raw_median(by_level.iter().map(|p| p.3).collect());
-            let (mut sigma2, mut slope, mut tau_d2) = (0.0f32, 0.0f32, 0.0f32);
-            let at = |s2: f32, b: f32, l: f32| noise_line(s2, b, level0, l);
-            for _ in 0..2 {
-                let resid = |p: &(f32, f32, f32, f32)| p.2 - tau_d2 * p.0.max(0.0).powi(2);
-                sigma2 = median_of(dim.iter().map(resid).collect());
-                let (lo, hi) = by_level.split_at(half);
-                let (l1, l2) = (
-                    raw_median(lo.iter().map(|p| p.3).collect()),
-                    raw_median(hi.iter().map(|p| p.3).collect()),
-                );
-                let (d1, d2) = (
-                    raw_median(lo.iter().map(resid).collect()),
-                    raw_median(hi.iter().map(resid).collect()),
-                );
-                slope = if l2 - l1 > 1e-6 {
-                    ((d2 - d1) / (l2 - l1)).max(0.0)
-                } else {
-                    0.0
-                };
-                tau_d2 = median_of(
-                    bright
-                        .iter()
-                        .map(|&(f, _, d, l)| (d - at(sigma2, slope, l)) / (f * f))
-                        .collect(),
-                );
-            }
-            noise_var[ch] = sigma2;
-            noise_slope[ch] = slope;
-            noise_level[ch] = level0;
-            texture_var[ch] = median_of(
-                bright
-                    .iter()
-                    .map(|&(f, v, _, l)| (v - at(sigma2, slope, l)) / (f * f))
-                    .collect(),
-            );
+            let fitted = fit_channel(pts);
+            noise_var[ch] = fitted.noise_var;
+            noise_slope[ch] = fitted.noise_slope;
+            noise_level[ch] = fitted.noise_level;
+            texture_var[ch] = fitted.texture_var;
         }
         (measured > 0).then_some(NoiseModel {
             noise_var,
@@ -322,21 +267,8 @@ impl NoiseModel {
         let mut level = f.clone();
         let mut weight = f.clone();
         let median_var = std::f32::consts::FRAC_PI_2 / (k * k) as f32;
-        // Prior on the relative detail ρ = A/A_low (1 ± τ/C): its precision, from the channels' texture. The same
-        // prior holds the block levels' shared relative level λ* below.
-        let rel: f32 = (0..c)
-            .map(|ch| self.texture_var[ch] / (colour[ch] * colour[ch]))
-            .sum::<f32>()
-            / c as f32;
-        let prior = if rel > 0.0 { 1.0 / rel } else { 1e6 };
-        // Wiener weight of a signal against a noise variance (1 where neither is measured).
-        let wiener = |signal: f32, noise: f32| {
-            if signal + noise > 0.0 {
-                signal / (signal + noise)
-            } else {
-                1.0
-            }
-        };
+        // The same prior holds the block levels' shared relative level λ* below.
+        let prior = self.detail_prior(colour, c);
         let (mut own_rel, mut w, mut w_low) = (vec![f32::NAN; c], vec![1.0f32; c], vec![1.0f32; c]);
         for b in 0..f.data.len() / c {
             // Per channel: the pixel weight, the block's own relative level λ_c = ((median − S)/F)/C and the
@@ -379,18 +311,125 @@ impl NoiseModel {
         Blended {
             level,
             weight,
-            // A channel without measured texture (black or clipped throughout) cannot guide the others.
-            noise_var: (0..c)
-                .map(|ch| {
-                    if self.texture_var[ch] > 0.0 {
-                        self.noise_var[ch]
-                    } else {
-                        f32::INFINITY
-                    }
-                })
-                .collect(),
+            noise_var: self.guide_noise_var(c),
             prior_precision: prior,
         }
+    }
+
+    /// The precision of the prior on the relative detail ρ = A/A_low (1 ± τ/C), from the channels' texture.
+    fn detail_prior(&self, colour: &[f32], c: usize) -> f32 {
+        let rel: f32 = (0..c)
+            .map(|ch| self.texture_var[ch] / (colour[ch] * colour[ch]))
+            .sum::<f32>()
+            / c as f32;
+        if rel > 0.0 {
+            1.0 / rel
+        } else {
+            1e6
+        }
+    }
+
+    /// Each of the `c` channels' `σ²`, infinite for a channel without measured texture (black or clipped throughout): it
+    /// cannot guide the others.
+    fn guide_noise_var(&self, c: usize) -> Vec<f32> {
+        (0..c)
+            .map(|ch| {
+                if self.texture_var[ch] > 0.0 {
+                    self.noise_var[ch]
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .collect()
+    }
+}
+
+/// Wiener weight of a signal against a noise variance (1 where neither is measured).
+fn wiener(signal: f32, noise: f32) -> f32 {
+    if signal + noise > 0.0 {
+        signal / (signal + noise)
+    } else {
+        1.0
+    }
+}
+
+/// One channel's noise and texture fit (see [`NoiseModel::fit`]).
+struct ChannelFit {
+    noise_var: f32,
+    texture_var: f32,
+    noise_slope: f32,
+    noise_level: f32,
+}
+
+/// The median of `v` (0 when empty).
+fn raw_median(mut v: Vec<f32>) -> f32 {
+    if v.is_empty() {
+        0.0
+    } else {
+        quantile(&mut v, 0.5)
+    }
+}
+
+/// The median of `v`, at least 0.
+fn median_of(v: Vec<f32>) -> f32 {
+    raw_median(v).max(0.0)
+}
+
+/// Fit one channel's `σ²` line and `τ²` from its `(F, var, diag, level)` points (at least 20, see [`NoiseModel::fit`]).
+fn fit_channel(mut pts: Vec<(f32, f32, f32, f32)>) -> ChannelFit {
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let n = pts.len();
+    let dim = &pts[..(n / 10).max(5)];
+    let top = &pts[n - (n / 4).max(5)..];
+    // A channel that gets no light anywhere (its brightest quarter's median F under MIN_LIT_F) has no
+    // measurable texture: dividing by a near-zero F² would make one up.
+    let unlit = top[top.len() / 2].0 < MIN_LIT_F;
+    let bright: Vec<(f32, f32, f32, f32)> = top
+        .iter()
+        .copied()
+        .filter(|p| p.0 > 0.0 && !unlit)
+        .collect();
+    // The dim blocks by level: lower and upper half.
+    let mut by_level: Vec<(f32, f32, f32, f32)> = dim.to_vec();
+    by_level.sort_by(|a, b| a.3.total_cmp(&b.3));
+    let half = by_level.len() / 2;
+    let level0 = raw_median(by_level.iter().map(|p| p.3).collect());
+    let (mut sigma2, mut slope, mut tau_d2) = (0.0f32, 0.0f32, 0.0f32);
+    let at = |s2: f32, b: f32, l: f32| noise_line(s2, b, level0, l);
+    for _ in 0..2 {
+        let resid = |p: &(f32, f32, f32, f32)| p.2 - tau_d2 * p.0.max(0.0).powi(2);
+        sigma2 = median_of(dim.iter().map(resid).collect());
+        let (lo, hi) = by_level.split_at(half);
+        let (l1, l2) = (
+            raw_median(lo.iter().map(|p| p.3).collect()),
+            raw_median(hi.iter().map(|p| p.3).collect()),
+        );
+        let (d1, d2) = (
+            raw_median(lo.iter().map(resid).collect()),
+            raw_median(hi.iter().map(resid).collect()),
+        );
+        slope = if l2 - l1 > 1e-6 {
+            ((d2 - d1) / (l2 - l1)).max(0.0)
+        } else {
+            0.0
+        };
+        tau_d2 = median_of(
+            bright
+                .iter()
+                .map(|&(f, _, d, l)| (d - at(sigma2, slope, l)) / (f * f))
+                .collect(),
+        );
+    }
+    ChannelFit {
+        noise_var: sigma2,
+        noise_slope: slope,
+        noise_level: level0,
+        texture_var: median_of(
+            bright
+                .iter()
+                .map(|&(f, v, _, l)| (v - at(sigma2, slope, l)) / (f * f))
+                .collect(),
+        ),
     }
 }
 

@@ -227,16 +227,7 @@ pub fn estimate_banded<E: Sync>(
                 l
             }
             Some((l, d)) if l != photo.layout || d != photo.depth() => {
-                on_error(Error::Mismatch {
-                    path: name(e),
-                    reason: format!(
-                        "water-column frame is {} {}-bit, the others are {} {}-bit; left out of the scatter estimate",
-                        photo.layout,
-                        photo.depth().bits(),
-                        l,
-                        d.bits()
-                    ),
-                });
+                on_error(mismatch(name(e), &photo, l, d));
                 return Ok(());
             }
             Some((l, _)) => l,
@@ -265,18 +256,7 @@ pub fn estimate_banded<E: Sync>(
             })?;
         }
         let out = &mut q[y0 * row_len..y1 * row_len];
-        let band_ref = &band;
-        out.par_chunks_mut(row_len).enumerate().for_each_init(
-            || vec![0f32; row_len],
-            |median, (r, out_row)| {
-                let base = r * row_len;
-                let cols: Vec<&[u16]> = band_ref.iter().map(|f| &f[base..base + row_len]).collect();
-                column_median(&cols, median);
-                for (o, m) in out_row.iter_mut().zip(median.iter()) {
-                    *o = grid_index(*m / max);
-                }
-            },
-        );
+        band_median(out, &band, row_len, max);
         passes += 1;
         y0 = y1;
     }
@@ -286,6 +266,36 @@ pub fn estimate_banded<E: Sync>(
         frames: usable.len(),
         passes,
     }))
+}
+
+/// The error for a water-column frame whose layout or bit depth `photo` differs from the others' (`l`, `d`).
+fn mismatch(path: PathBuf, photo: &Photo, l: Layout, d: BitDepth) -> Error {
+    Error::Mismatch {
+        path,
+        reason: format!(
+            "water-column frame is {} {}-bit, the others are {} {}-bit; left out of the scatter estimate",
+            photo.layout,
+            photo.depth().bits(),
+            l,
+            d.bits()
+        ),
+    }
+}
+
+/// Fill `out` (rows of `row_len`) with the grid index of each sample's median over the frames' `band`, over `max`.
+fn band_median(out: &mut [u16], band: &[Vec<u16>], row_len: usize, max: f32) {
+    let band_ref = band;
+    out.par_chunks_mut(row_len).enumerate().for_each_init(
+        || vec![0f32; row_len],
+        |median, (r, out_row)| {
+            let base = r * row_len;
+            let cols: Vec<&[u16]> = band_ref.iter().map(|f| &f[base..base + row_len]).collect();
+            column_median(&cols, median);
+            for (o, m) in out_row.iter_mut().zip(median.iter()) {
+                *o = grid_index(*m / max);
+            }
+        },
+    );
 }
 
 #[cfg(test)]
