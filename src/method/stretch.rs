@@ -171,17 +171,16 @@ fn reference(greys: &VecDeque<Vec<f32>>) -> Vec<f32> {
         .collect()
 }
 
-/// The dark share of a photo's grey levels `own` against `reference`, and which blocks are dark. Blocks where the
-/// reference is dim (under 5 % of its 95th percentile: corners the lights miss) are not judged.
-fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
+/// `own / reference` per block where the reference is lit (at least 5 % of its 95th percentile: corners the lights
+/// miss are not judged), `NaN` elsewhere and where either is not finite (masked).
+fn lit_ratios(own: &[f32], reference: &[f32]) -> Vec<f32> {
     let mut lit: Vec<f32> = reference
         .iter()
         .copied()
         .filter(|v| v.is_finite())
         .collect();
     let top = quantile(&mut lit, 0.95);
-    let ratio: Vec<f32> = own
-        .iter()
+    own.iter()
         .zip(reference)
         .map(|(&o, &r)| {
             if r.is_finite() && o.is_finite() && r > 0.05 * top && top > 0.0 {
@@ -190,7 +189,13 @@ fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
                 f32::NAN
             }
         })
-        .collect();
+        .collect()
+}
+
+/// The dark share of a photo's grey levels `own` against `reference`, and which blocks are dark. Blocks where the
+/// reference is dim (under 5 % of its 95th percentile: corners the lights miss) are not judged.
+fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
+    let ratio = lit_ratios(own, reference);
     let mut judged: Vec<f32> = ratio.iter().copied().filter(|v| v.is_finite()).collect();
     if judged.is_empty() {
         return 0.0;
@@ -210,22 +215,9 @@ fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
 /// A photo's scene at block resolution: `ln(own / reference)` less its box average (a sixteenth of the frame:
 /// the lights' changing shape and the photo's exposure go), 0 where not judged (dim or masked blocks).
 fn scene(own: &[f32], reference: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
-    let mut lit: Vec<f32> = reference
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    let top = quantile(&mut lit, 0.95);
-    let log: Vec<f32> = own
-        .iter()
-        .zip(reference)
-        .map(|(&o, &r)| {
-            if o.is_finite() && r.is_finite() && r > 0.05 * top && o > 0.0 && top > 0.0 {
-                (o / r).ln()
-            } else {
-                f32::NAN
-            }
-        })
+    let log: Vec<f32> = lit_ratios(own, reference)
+        .into_iter()
+        .map(|q| if q > 0.0 { q.ln() } else { f32::NAN })
         .collect();
     let valid: Vec<f32> = log
         .iter()
