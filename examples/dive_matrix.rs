@@ -507,6 +507,11 @@ fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {
 #[allow(clippy::type_complexity)]
 fn ablations() -> Vec<(&'static str, fn(Options) -> Options)> {
     vec![
+        ("abyss-no-levelling", |o| Options {
+            method: Method::Abyss,
+            level_exposures: false,
+            ..o
+        }),
         ("abyss-no-gain", |o| Options {
             method: Method::Abyss,
             photo_gain: false,

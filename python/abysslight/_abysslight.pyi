@@ -71,8 +71,8 @@ class Engine:
 
     Options are `abysslight correct`'s method options by their long names with '_': window, contamination,
     risk, downsample, near_window, seafloor_colour, factor_floor, transfer, method, degree, relative_floor,
-    photo_gain / no_photo_gain, backscatter_scale, denoise / no_denoise, level_by_light / no_level_by_light,
-    bright_spots. None given: the command's defaults. transfer="auto" (the default) means what the command assumes
+    level_exposures / no_level_exposures, photo_gain / no_photo_gain, backscatter_scale, denoise / no_denoise,
+    level_by_light / no_level_by_light, bright_spots. None given: the command's defaults. transfer="auto" (the default) means what the command assumes
     for a file that declares no colour information: linear; give transfer="srgb" for arrays from JPEGs or
     sRGB-encoded cameras.
     """

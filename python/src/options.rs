@@ -22,6 +22,8 @@ const ENGINE_OPTIONS: &[&str] = &[
     "method",
     "degree",
     "relative_floor",
+    "level_exposures",
+    "no_level_exposures",
     "photo_gain",
     "no_photo_gain",
     "backscatter_scale",
@@ -37,7 +39,7 @@ const ENGINE_OPTIONS: &[&str] = &[
 const COMMAND_ONLY: &[&str] = &["dry_run", "quiet", "help", "watch"];
 
 /// On/off options the command turns off with `--no-NAME`: `NAME=False` is accepted too.
-const NEGATABLE: &[&str] = &["photo_gain", "denoise", "level_by_light"];
+const NEGATABLE: &[&str] = &["level_exposures", "photo_gain", "denoise", "level_by_light"];
 
 /// The options of an `Engine`: only the method's, with placeholders for the folders `correct` requires.
 pub fn engine_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {

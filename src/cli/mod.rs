@@ -486,6 +486,15 @@ struct CorrectArgs {
     #[arg(long, value_name = "SHARE", help_heading = H_METHOD)]
     relative_floor: Option<f32>,
 
+    /// --method abyss: do not level the window's photos to one exposure before its M (on by default).
+    ///
+    /// Where the exposure jumps from photo to photo (a sledge that lifts and drops, an automatic exposure: some
+    /// photo more than 10 % off its neighbours in every channel), the window's median at most blocks is the photo
+    /// whose level is the middle one, and F takes that photo's burrows and nodules whole (ghosts); each photo of
+    /// such a window is divided by its gain against the window's M before the median. A smooth drift is left alone.
+    #[arg(long, help_heading = H_METHOD)]
+    no_level_exposures: bool,
+
     /// --method abyss: no per-photo gain against the window (on by default).
     #[arg(long, help_heading = H_METHOD)]
     no_photo_gain: bool,
@@ -790,6 +799,7 @@ fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
     if let Some(NearArg(v)) = args.near_window {
         o.near_window = v;
     }
+    o.level_exposures &= !args.no_level_exposures;
     o.photo_gain &= !args.no_photo_gain;
     o.denoise &= !args.no_denoise;
     o.level_by_light &= !args.no_level_by_light;

@@ -36,7 +36,7 @@ use crate::method::overlap::{chained_pairs, overlap_correction};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
-use crate::method::refine::{backscatter_scale, near_shape, refine_factor, scaled};
+use crate::method::refine::{backscatter_scale, levelled_stack, near_shape, refine_factor, scaled};
 use crate::method::ring::Ring;
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::stretch::Choice;
@@ -468,7 +468,16 @@ impl<T> Engine<T> {
         match (self.params.method, mission_mean) {
             (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
             (Method::Polynomial, _) => polynomial_m(own, s_low, self.params.degree),
-            (Method::Abyss, _) if q != 0.5 => stack_quantile(stack, q as f64),
+            (Method::Abyss, _) => {
+                let m = quantile_or_median(stack, q);
+                if !self.params.steps.level_exposures {
+                    return m;
+                }
+                match levelled_stack(stack, &m, s_low, q as f64) {
+                    Some(levelled) => quantile_or_median(&levelled.iter().collect::<Vec<_>>(), q),
+                    None => m,
+                }
+            }
             _ => stack_median(stack),
         }
     }
@@ -931,6 +940,15 @@ struct RingEntry {
     spots: Option<Vec<bool>>,
     /// With `steps.overlaps`: the shift of the ground from the photo before, in blocks (`None`: no match).
     step: Option<(f64, f64)>,
+}
+
+/// The window's `M` at quantile `q` (the median at 0.5).
+fn quantile_or_median(stack: &[&Raster], q: f32) -> Raster {
+    if q != 0.5 {
+        stack_quantile(stack, q as f64)
+    } else {
+        stack_median(stack)
+    }
 }
 
 #[cfg(test)]

@@ -160,6 +160,10 @@ pub struct Steps {
     /// (`backscatter_scale`). Default: `Some(1.0)` (`S` as measured: the estimate is
     /// biased low on red-starved channels).
     pub backscatter_scale: Option<f32>,
+    /// Where the exposure jumps from photo to photo within the window, its photos levelled to one exposure (each
+    /// by its gain against the window's `M`) before `M` is taken (`levelled_stack`): the median otherwise takes
+    /// the middle-exposure photo's scene whole (ghosts). Default: true.
+    pub level_exposures: bool,
     /// One robust gain per photo and channel against its window's `M`. Default: true.
     pub photo_gain: bool,
     /// The floor of `F` as a share of the photo's lit level, with a smooth hand-over
@@ -183,6 +187,7 @@ impl Default for Steps {
             bright_spots: false,
             near_window: None,
             backscatter_scale: Some(1.0),
+            level_exposures: true,
             photo_gain: true,
             relative_floor: 0.001,
             denoise: true,

@@ -166,6 +166,11 @@ pub struct Options {
     /// docs/evaluation.md).
     #[serde(default = "default_relative_floor")]
     pub relative_floor: f32,
+    /// `method = abyss`: where the exposure jumps from photo to photo within the window, its photos levelled to one
+    /// exposure (each by its gain against the window's `M`) before `M` is taken (`levelled_stack`): the median
+    /// otherwise takes the middle-exposure photo's scene whole into `F` (ghosts). Default: true.
+    #[serde(default = "default_true")]
+    pub level_exposures: bool,
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
     #[serde(default = "default_true")]
     pub photo_gain: bool,
@@ -279,6 +284,7 @@ impl Default for Options {
             limit: None,
             report: None,
             relative_floor: default_relative_floor(),
+            level_exposures: true,
             photo_gain: true,
             backscatter_scale: default_scale(),
             denoise: true,
@@ -489,6 +495,7 @@ impl Options {
             method,
             degree,
             relative_floor,
+            level_exposures,
             photo_gain,
             backscatter_scale,
             denoise,
@@ -532,6 +539,7 @@ impl Options {
                 bright_spots,
                 near_window,
                 backscatter_scale,
+                level_exposures,
                 photo_gain,
                 relative_floor,
                 denoise,

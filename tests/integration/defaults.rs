@@ -206,6 +206,13 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
             },
         ),
         (
+            "level_exposures",
+            Options {
+                level_exposures: false,
+                ..base.clone()
+            },
+        ),
+        (
             "photo_gain",
             Options {
                 photo_gain: false,
@@ -266,6 +273,7 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
     assert_eq!(c.near_window(), Some(7));
     let s = Options {
         bright_spots: true,
+        level_exposures: false,
         photo_gain: false,
         overlaps: true,
         ..base.clone()
@@ -276,6 +284,7 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
         s.steps,
         Steps {
             bright_spots: true,
+            level_exposures: false,
             photo_gain: false,
             overlaps: true,
             ..Steps::default()
