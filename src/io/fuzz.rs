@@ -11,6 +11,7 @@ use std::io::Cursor;
 
 use proptest::prelude::*;
 
+use crate::io::metadata::png::chunk;
 use crate::io::metadata::Metadata;
 use crate::io::pnm::{decode_frame_unguarded, FrameSplitter};
 use crate::io::{decode_unguarded, header_size, jpeg_check};
@@ -33,17 +34,6 @@ fn jpeg(progressive: bool, restart: u16) -> Vec<u8> {
     out
 }
 
-fn png_chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
-    let mut c = (data.len() as u32).to_be_bytes().to_vec();
-    c.extend_from_slice(kind);
-    c.extend_from_slice(data);
-    let mut h = crc32fast::Hasher::new();
-    h.update(kind);
-    h.update(data);
-    c.extend_from_slice(&h.finalize().to_be_bytes());
-    c
-}
-
 fn png() -> Vec<u8> {
     let img = image::RgbImage::from_raw(40, 24, pixels(40, 24)).unwrap();
     let mut plain = Vec::new();
@@ -55,15 +45,12 @@ fn png() -> Vec<u8> {
         e.write_all(d).unwrap();
         e.finish().unwrap()
     };
-    let mut extra = png_chunk(b"tEXt", b"Comment\0a survey photo");
-    extra.extend(png_chunk(
-        b"zTXt",
-        &[b"Note\0\0".as_slice(), &z(&[b'n'; 3000])].concat(),
-    ));
-    extra.extend(png_chunk(
-        b"iCCP",
-        &[b"icc\0\0".as_slice(), &z(&[7u8; 600])].concat(),
-    ));
+    let mut extra = Vec::new();
+    chunk(&mut extra, b"tEXt", b"Comment\0a survey photo");
+    let note = [b"Note\0\0".as_slice(), &z(&[b'n'; 3000])].concat();
+    chunk(&mut extra, b"zTXt", &note);
+    let icc = [b"icc\0\0".as_slice(), &z(&[7u8; 600])].concat();
+    chunk(&mut extra, b"iCCP", &icc);
     // After the 33 bytes of signature and IHDR.
     [&plain[..33], &extra, &plain[33..]].concat()
 }

@@ -1184,13 +1184,7 @@ mod tests {
 
     #[test]
     fn grouped_expansion_matches_pixel_by_pixel() {
-        let mut r = 0x9E37_79B9u32;
-        let mut next = move || {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            r
-        };
+        let mut next = crate::method::xorshift32(0x9E37_79B9);
         for width in [1usize, 5, 7, 8, 9, 16, 23, 37, 64, 100, 333] {
             for k in [1usize, 2, 3, 5, 8, 13, 16] {
                 let tx = taps(width, k);
@@ -1289,12 +1283,9 @@ mod tests {
                 }
             }
         }
-        let mut r = 0x1234_5678u32;
+        let mut next = crate::method::xorshift32(0x1234_5678);
         for _ in 0..200_000 {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            let x = f32::from_bits(r);
+            let x = f32::from_bits(next());
             for max in [255.0f32, 65535.0] {
                 assert_eq!(code_of(x, max), x.clamp(0.0, max) as i32 as u16, "x = {x}");
             }
@@ -1645,13 +1636,7 @@ mod tests {
             eprintln!("no AVX2: pixel_ratios_avx2 is not used on this CPU");
             return;
         }
-        let mut r = 0x9E37_79B9u32;
-        let mut next = move || {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            r
-        };
+        let mut next = crate::method::xorshift32(0x9E37_79B9);
         fn check<const C: usize>(next: &mut dyn FnMut() -> u32, px: usize) {
             let n = px * C;
             let mut value = |special: f32| -> f32 {
@@ -1687,13 +1672,7 @@ mod tests {
             eprintln!("no AVX2: the passes are not used on this CPU");
             return;
         }
-        let mut r = 0x2545_F491u32;
-        let mut next = move || {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            r
-        };
+        let mut next = crate::method::xorshift32(0x2545_F491);
         for t in [Transfer::Srgb, Transfer::Linear] {
             for len in [1usize, 7, 8, 13, 61, 200] {
                 passes_agree::<u8, 3>(&mut next, t, 256, len);

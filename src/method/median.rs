@@ -690,13 +690,8 @@ mod tests {
 
     #[test]
     fn stack_quantile_against_sorting() {
-        let mut r = 0x1357_9BDFu32;
-        let mut next = move || {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            (r % 1000) as f32 / 999.0
-        };
+        let mut rng = crate::method::xorshift32(0x1357_9BDF);
+        let mut next = move || (rng() % 1000) as f32 / 999.0;
         // Up to 256 frames the sorting network's path, above it (and with NaN, below) the selection's.
         for n in [1usize, 2, 5, 7, 13, 300] {
             let frames: Vec<Raster> = (0..n)

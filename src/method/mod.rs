@@ -38,3 +38,15 @@ pub mod scatter;
 pub mod stretch;
 pub mod transfer;
 pub mod window;
+
+/// Marsaglia's xorshift32 from `seed` (not 0): deterministic pseudo-random numbers for the unit tests.
+#[cfg(test)]
+pub(crate) fn xorshift32(seed: u32) -> impl FnMut() -> u32 {
+    let mut r = seed;
+    move || {
+        r ^= r << 13;
+        r ^= r >> 17;
+        r ^= r << 5;
+        r
+    }
+}

@@ -588,16 +588,11 @@ mod tests {
         seed: u32,
         mut value: impl FnMut(usize, f32, &mut dyn FnMut() -> f32) -> f32,
     ) -> (Photo, Raster) {
-        let mut r = seed;
+        let mut next = crate::method::xorshift32(seed);
         let mut gauss = move || {
             // Irwin–Hall: sum of 12 uniforms minus 6, unit variance.
             (0..12)
-                .map(|_| {
-                    r ^= r << 13;
-                    r ^= r >> 17;
-                    r ^= r << 5;
-                    r as f32 / u32::MAX as f32
-                })
+                .map(|_| next() as f32 / u32::MAX as f32)
                 .sum::<f32>()
                 - 6.0
         };
@@ -938,16 +933,13 @@ mod tests {
     }
 
     fn levels_sized(w: usize, h: usize, bias: impl Fn(f32) -> f32) -> (Raster, Raster, Vec<f32>) {
-        let mut r = 0x9E37_79B9u32;
+        let mut next = crate::method::xorshift32(0x9E37_79B9);
         let mut v = Vec::new();
         let f = Raster::from_fn(w, h, 1, |x, y, _| {
             0.002 + (x as f32 / (w - 1) as f32).powi(2) * (1.0 - 0.3 * y as f32 / h as f32)
         });
         let level = Raster::from_fn(w, h, 1, |x, y, _| {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            let dev = 0.8 + 0.4 * (r as f32 / u32::MAX as f32);
+            let dev = 0.8 + 0.4 * (next() as f32 / u32::MAX as f32);
             v.push(dev);
             0.4 * bias(f.get(x, y, 0)) * dev
         });

@@ -355,13 +355,7 @@ mod tests {
             return;
         }
         use std::arch::x86_64::*;
-        let mut r = 0x2468_ACE1u32;
-        let mut next = move || {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            r
-        };
+        let mut next = crate::method::xorshift32(0x2468_ACE1);
         let mut packed_seen = [false; 2];
         for (t, levels) in [
             (Transfer::Srgb, 256),

@@ -411,40 +411,25 @@ fn frame_for_pictures(f: &Value) -> FrameReport {
     let num = |k: &str| h[k].as_f64().map_or(f32::NAN, |v| v as f32);
     let flagged = h["flags"].as_array().is_some_and(|a| !a.is_empty());
     let path = |k: &str| PathBuf::from(f[k].as_str().unwrap_or_default());
-    FrameReport {
-        input: path("input"),
-        output: path("output"),
-        index: f["index"].as_u64().unwrap_or(0) as usize,
-        window: [0, 0],
-        decode_ms: 0.0,
-        estimate_ms: 0.0,
-        correct_ms: 0.0,
-        encode_ms: 0.0,
-        floored_pixels: 0,
-        clipped_samples: 0,
-        resumed: false,
-        health: Health {
-            contamination: num("contamination"),
-            level: num("level"),
-            texture_kept: num("texture_kept"),
-            factor_change: num("factor_change"),
-            colour_shift: num("colour_shift"),
-            roughness: num("roughness"),
-            flags: if flagged {
-                vec![Flag::ShortMission {
-                    photos: 0,
-                    window: 0,
-                }]
-            } else {
-                Vec::new()
-            },
-            ..Health::default()
+    let health = Health {
+        contamination: num("contamination"),
+        level: num("level"),
+        texture_kept: num("texture_kept"),
+        factor_change: num("factor_change"),
+        colour_shift: num("colour_shift"),
+        roughness: num("roughness"),
+        flags: if flagged {
+            vec![Flag::ShortMission {
+                photos: 0,
+                window: 0,
+            }]
+        } else {
+            Vec::new()
         },
-        window_auto: None,
-        backscatter_scale: Vec::new(),
-        noise_sigma: Vec::new(),
-        texture_sigma: Vec::new(),
-    }
+        ..Health::default()
+    };
+    let index = f["index"].as_u64().unwrap_or(0) as usize;
+    FrameReport::pictured(path("input"), path("output"), index, health)
 }
 
 /// Folder of a shard's kept `F·C` images of flagged photos.

@@ -626,23 +626,13 @@ mod tests {
 
     fn frames(n: usize, dir: &Path) -> Vec<FrameReport> {
         (0..n)
-            .map(|i| FrameReport {
-                input: dir.join(format!("in{i}.png")),
-                output: dir.join(format!("out{i}.png")),
-                index: i,
-                window: [0, 0],
-                decode_ms: 0.0,
-                estimate_ms: 0.0,
-                correct_ms: 0.0,
-                encode_ms: 0.0,
-                floored_pixels: 0,
-                clipped_samples: 0,
-                resumed: false,
-                health: Default::default(),
-                backscatter_scale: Vec::new(),
-                noise_sigma: Vec::new(),
-                texture_sigma: Vec::new(),
-                window_auto: None,
+            .map(|i| {
+                FrameReport::pictured(
+                    dir.join(format!("in{i}.png")),
+                    dir.join(format!("out{i}.png")),
+                    i,
+                    Default::default(),
+                )
             })
             .collect()
     }

@@ -110,6 +110,36 @@ pub struct FrameReport {
     pub window_auto: Option<WindowAuto>,
 }
 
+impl FrameReport {
+    /// A frame known only by its paths, index and health, as the run pictures read it: no window, timings or pixel
+    /// counts (all 0), no per-channel measurements.
+    pub(crate) fn pictured(
+        input: PathBuf,
+        output: PathBuf,
+        index: usize,
+        health: crate::method::monitor::Health,
+    ) -> FrameReport {
+        FrameReport {
+            input,
+            output,
+            index,
+            window: [0, 0],
+            decode_ms: 0.0,
+            estimate_ms: 0.0,
+            correct_ms: 0.0,
+            encode_ms: 0.0,
+            floored_pixels: 0,
+            clipped_samples: 0,
+            resumed: false,
+            health,
+            backscatter_scale: Vec::new(),
+            noise_sigma: Vec::new(),
+            texture_sigma: Vec::new(),
+            window_auto: None,
+        }
+    }
+}
+
 /// What `--window auto` chose for one photo ([`crate::method::stretch::Choice`]), and why in words.
 #[derive(Debug, Clone, Serialize)]
 pub struct WindowAuto {

@@ -2,22 +2,11 @@
 
 use crate::common;
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use abysslight::{correct_mission, Options, Shard, Silent};
 use common::*;
-
-/// Every output photo below `dir` (not `_abysslight/`), as relative path → bytes.
-fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    abysslight::io::find_photos(dir)
-        .unwrap()
-        .photos
-        .into_iter()
-        .map(|e| (e.relative, std::fs::read(e.path).unwrap()))
-        .collect()
-}
 
 fn opts(root: &Path, survey: &str, out: &str, n: usize) -> Options {
     Options {
@@ -121,7 +110,6 @@ fn kill_9_leaves_only_complete_outputs_and_resume_finishes_identically() {
     let d = tempfile::tempdir().unwrap();
     let dive = dive(400, 300, 40, 0, 0.2, false, 8);
     write_all(&dive.photos, &d.path().join("survey"), "img", "png");
-    let bin = env!("CARGO_BIN_EXE_abysslight");
     let args = |out: &str| {
         vec![
             "correct".to_string(),
@@ -136,7 +124,7 @@ fn kill_9_leaves_only_complete_outputs_and_resume_finishes_identically() {
             "-q".into(),
         ]
     };
-    assert!(Command::new(bin)
+    assert!(Command::new(BIN)
         .args(args("reference"))
         .status()
         .unwrap()
@@ -144,7 +132,7 @@ fn kill_9_leaves_only_complete_outputs_and_resume_finishes_identically() {
     let reference = outputs(&d.path().join("reference"));
     assert_eq!(reference.len(), 40);
 
-    let mut child = Command::new(bin).args(args("out")).spawn().unwrap();
+    let mut child = Command::new(BIN).args(args("out")).spawn().unwrap();
     let out = d.path().join("out");
     let started = std::time::Instant::now();
     loop {
@@ -173,7 +161,7 @@ fn kill_9_leaves_only_complete_outputs_and_resume_finishes_identically() {
     }
     let mut resume = args("out");
     resume.push("--resume".into());
-    assert!(Command::new(bin).args(resume).status().unwrap().success());
+    assert!(Command::new(BIN).args(resume).status().unwrap().success());
     assert_eq!(outputs(&out), reference);
 }
 

@@ -9,27 +9,12 @@
 use crate::common;
 
 use std::io::Write;
-use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
+use common::{moving_mission, png_chunk, report, s, stderr, BIN};
 
 /// Address space the runs may use, in KiB: a mission of tiny photos needs well under a tenth of it.
 const LIMIT_KIB: u64 = 700_000;
-
-/// A small dive whose seafloor moves from photo to photo (so that `--mask-auto` finds only what is static):
-/// `root/survey/img1.png`… and `root/water/w1.png`…, 48 × 32.
-fn moving_mission(root: &Path, photos: usize) -> (std::path::PathBuf, std::path::PathBuf) {
-    let dive = common::dive(48, 32, photos, 3, 0.2, false, 5);
-    let (survey, water) = (root.join("survey"), root.join("water"));
-    common::write_all(&dive.photos, &survey, "img", "png");
-    common::write_all(&dive.water, &water, "w", "png");
-    (survey, water)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// `abysslight ARGS` under `ulimit -v LIMIT_KIB`, with `stdin` on its standard input.
 fn limited(args: &[&str], stdin: &[u8]) -> Output {
@@ -55,15 +40,6 @@ fn limited_to(kib: u64, args: &[&str], stdin: &[u8]) -> Output {
     child.wait_with_output().unwrap()
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(out.join("_abysslight/report.json")).expect("no report");
-    serde_json::from_str(&text).unwrap()
-}
-
 fn jpeg(seed: u32) -> Vec<u8> {
     let px: Vec<u8> = (0..32 * 24)
         .flat_map(|i| {
@@ -78,23 +54,11 @@ fn jpeg(seed: u32) -> Vec<u8> {
     out
 }
 
-/// A PNG chunk: length, type, data, CRC.
-fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
-    let mut c = (data.len() as u32).to_be_bytes().to_vec();
-    c.extend_from_slice(kind);
-    c.extend_from_slice(data);
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(kind);
-    crc.update(data);
-    c.extend_from_slice(&crc.finalize().to_be_bytes());
-    c
-}
-
 fn ihdr(w: u32, h: u32, colour: u8) -> Vec<u8> {
     let mut d = w.to_be_bytes().to_vec();
     d.extend_from_slice(&h.to_be_bytes());
     d.extend_from_slice(&[8, colour, 0, 0, 0]);
-    chunk(b"IHDR", &d)
+    png_chunk(b"IHDR", &d)
 }
 
 /// A valid JPEG followed by 3 GB of zeros (a sparse tail: nothing is written) is decoded from the part its header
@@ -180,8 +144,8 @@ fn mask_auto_never_decodes_a_photo_of_another_size() {
     }
     let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
     png.extend(ihdr(w, h, 0));
-    png.extend(chunk(b"IDAT", &z.finish().unwrap()));
-    png.extend(chunk(b"IEND", b""));
+    png.extend(png_chunk(b"IDAT", &z.finish().unwrap()));
+    png.extend(png_chunk(b"IEND", b""));
     assert!(png.len() < 1 << 20, "the big photo should be a small file");
     std::fs::write(survey.join("img4b.png"), &png).unwrap();
     let out = d.path().join("out");

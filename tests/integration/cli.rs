@@ -3,26 +3,14 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 use common::*;
-
-fn abysslight(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_abysslight"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run abysslight")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 #[test]
 fn window_prints_n_and_p_half() {
     let d = tempfile::tempdir().unwrap();
-    let o = abysslight(
+    let o = abysslight_in(
         &["window", "--contamination", "0.2", "--risk", "0.05"],
         d.path(),
     );
@@ -30,7 +18,7 @@ fn window_prints_n_and_p_half() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("n = 7"), "{out}");
     assert!(out.contains("0.033344"), "{out}");
-    let o = abysslight(&["window", "--contamination", "0.6"], d.path());
+    let o = abysslight_in(&["window", "--contamination", "0.6"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("0.5"), "{}", stderr(&o));
 }
@@ -39,24 +27,10 @@ fn window_prints_n_and_p_half() {
 fn bad_photo_is_reported_and_the_batch_goes_on() {
     let d = tempfile::tempdir().unwrap();
     let dive = dive(32, 24, 6, 3, 0.1, false, 1);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "jpg");
+    write_dive(&dive, d.path(), "jpg");
     std::fs::write(d.path().join("survey/img4.jpg"), b"\xff\xd8\xff truncated").unwrap();
     std::fs::write(d.path().join("survey/readme.txt"), b"notes").unwrap();
-    let o = abysslight(
-        &[
-            "correct",
-            "--water-column",
-            "water",
-            "--survey",
-            "survey",
-            "--out",
-            "out",
-            "--window",
-            "3",
-        ],
-        d.path(),
-    );
+    let o = correct_dive(d.path(), "out", &["--window", "3"]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("img4.jpg"), "{err}");
@@ -90,7 +64,7 @@ fn output_inside_input_is_refused_before_any_work() {
     let dive = dive(16, 16, 3, 0, 0.0, false, 2);
     write_all(&dive.photos, &d.path().join("survey"), "img", "png");
     for out in ["survey", "survey/corrected"] {
-        let o = abysslight(&["correct", "--survey", "survey", "--out", out], d.path());
+        let o = abysslight_in(&["correct", "--survey", "survey", "--out", out], d.path());
         assert_eq!(o.status.code(), Some(2));
         assert!(stderr(&o).contains("--out"), "{}", stderr(&o));
     }
@@ -101,22 +75,22 @@ fn output_inside_input_is_refused_before_any_work() {
 #[test]
 fn usage_errors_exit_2_with_a_clear_message() {
     let d = tempfile::tempdir().unwrap();
-    let o = abysslight(
+    let o = abysslight_in(
         &["correct", "--survey", "nowhere", "--out", "out"],
         d.path(),
     );
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("nowhere"), "{}", stderr(&o));
-    let o = abysslight(&["correct", "--survey", "."], d.path());
+    let o = abysslight_in(&["correct", "--survey", "."], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--out"));
-    let o = abysslight(
+    let o = abysslight_in(
         &["correct", "--survey", ".", "--out", "o", "--window", "4"],
         d.path(),
     );
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("odd"), "{}", stderr(&o));
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--survey",
@@ -130,7 +104,7 @@ fn usage_errors_exit_2_with_a_clear_message() {
     );
     assert_eq!(o.status.code(), Some(2));
     std::fs::create_dir(d.path().join("empty")).unwrap();
-    let o = abysslight(&["correct", "--survey", "empty", "--out", "o"], d.path());
+    let o = abysslight_in(&["correct", "--survey", "empty", "--out", "o"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(
         stderr(&o).contains("no photos") && stderr(&o).contains("empty"),
@@ -149,7 +123,7 @@ fn config_file_with_flag_override() {
         "survey = \"survey\"\nout = \"corrected\"\nwindow = 5\nnear-window = \"auto\"\nseafloor-colour = \"#8a7560\"\n",
     )
     .unwrap();
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--config",
@@ -177,7 +151,7 @@ fn config_file_with_flag_override() {
         report["options"]["seafloor-colour"],
         "0.5411765,0.45882353,0.3764706"
     );
-    let o = abysslight(&["correct", "--config", "m/missing.toml"], d.path());
+    let o = abysslight_in(&["correct", "--config", "m/missing.toml"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("missing.toml"));
 }
@@ -187,7 +161,7 @@ fn plain_log_lines_when_not_on_a_terminal() {
     let d = tempfile::tempdir().unwrap();
     let dive = dive(16, 16, 3, 0, 0.0, false, 5);
     write_all(&dive.photos, &d.path().join("survey"), "img", "png");
-    let o = abysslight(&["correct", "--survey", "survey", "--out", "out"], d.path());
+    let o = abysslight_in(&["correct", "--survey", "survey", "--out", "out"], d.path());
     assert!(o.status.success());
     let err = stderr(&o);
     assert!(err.contains("[3/3] done"), "{err}");
@@ -195,10 +169,6 @@ fn plain_log_lines_when_not_on_a_terminal() {
         err.contains("S = 0"),
         "missing water column is warned about: {err}"
     );
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// Headings of a clap help text: unindented lines ending in ':' ("Inputs:", "Run control:").
@@ -212,8 +182,8 @@ fn headings(help: &str) -> Vec<String> {
 #[test]
 fn correct_help_groups_options_shows_required_arguments_and_examples() {
     let d = tempfile::tempdir().unwrap();
-    let short = stdout(&abysslight(&["correct", "-h"], d.path()));
-    let long = stdout(&abysslight(&["correct", "--help"], d.path()));
+    let short = stdout(&abysslight_in(&["correct", "-h"], d.path()));
+    let long = stdout(&abysslight_in(&["correct", "--help"], d.path()));
     for h in [&short, &long] {
         let found = headings(h);
         for want in ["Inputs", "Outputs", "Method", "Monitoring", "Run control"] {
@@ -241,12 +211,12 @@ fn correct_help_groups_options_shows_required_arguments_and_examples() {
 #[test]
 fn each_subcommand_has_its_own_help_and_the_top_level_lists_them() {
     let d = tempfile::tempdir().unwrap();
-    let scatter = stdout(&abysslight(&["scatter", "--help"], d.path()));
+    let scatter = stdout(&abysslight_in(&["scatter", "--help"], d.path()));
     assert!(scatter.contains("water-column"), "{scatter}");
     for correct_only in ["every photo was corrected", "report.json", "--resume"] {
         assert!(!scatter.contains(correct_only), "{correct_only}: {scatter}");
     }
-    let top = abysslight(&["--help"], d.path());
+    let top = abysslight_in(&["--help"], d.path());
     assert!(top.status.success());
     let top = stdout(&top);
     for sub in [
@@ -275,7 +245,7 @@ fn each_subcommand_has_its_own_help_and_the_top_level_lists_them() {
 #[test]
 fn completions_and_manpage_come_from_the_same_definition() {
     let d = tempfile::tempdir().unwrap();
-    let bash = abysslight(&["completions", "bash"], d.path());
+    let bash = abysslight_in(&["completions", "bash"], d.path());
     assert!(bash.status.success(), "{}", stderr(&bash));
     let bash = stdout(&bash);
     assert!(
@@ -283,22 +253,24 @@ fn completions_and_manpage_come_from_the_same_definition() {
         "{bash}"
     );
     for shell in ["zsh", "fish", "powershell", "elvish"] {
-        let o = abysslight(&["completions", shell], d.path());
+        let o = abysslight_in(&["completions", shell], d.path());
         assert!(o.status.success(), "{shell}: {}", stderr(&o));
         assert!(stdout(&o).contains("water-column"), "{shell}");
     }
     assert_eq!(
-        abysslight(&["completions", "tcsh"], d.path()).status.code(),
+        abysslight_in(&["completions", "tcsh"], d.path())
+            .status
+            .code(),
         Some(2)
     );
-    let man = abysslight(&["manpage"], d.path());
+    let man = abysslight_in(&["manpage"], d.path());
     assert!(man.status.success());
     let man = stdout(&man);
     assert!(man.contains(".TH") && man.contains("correct"), "{man}");
-    let man = stdout(&abysslight(&["manpage", "correct"], d.path()));
+    let man = stdout(&abysslight_in(&["manpage", "correct"], d.path()));
     assert!(man.contains(".TH") && man.contains("correct"), "{man}");
     assert!(man.contains("survey"), "{man}");
-    let o = abysslight(&["manpage", "nonsense"], d.path());
+    let o = abysslight_in(&["manpage", "nonsense"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("nonsense"));
 }
@@ -333,7 +305,7 @@ fn readme_options_table_matches_correct_help() {
     let readme_flags = flags_in(&rows);
     assert!(readme_flags.len() > 20, "{readme_flags:?}");
     let d = tempfile::tempdir().unwrap();
-    let help = stdout(&abysslight(&["correct", "--help"], d.path()));
+    let help = stdout(&abysslight_in(&["correct", "--help"], d.path()));
     let help_flags: Vec<String> = help
         .lines()
         .map(str::trim_start)
@@ -360,19 +332,8 @@ fn previews_sheet_summary_and_rerun_note() {
     let d = tempfile::tempdir().unwrap();
     // Three photos and the default window of 7: every photo is flagged ("too few photos for the window").
     let dive = dive(48, 32, 3, 3, 0.1, false, 8);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
-    let args = [
-        "correct",
-        "--water-column",
-        "water",
-        "--survey",
-        "survey",
-        "--out",
-        "out",
-        "--save-factors",
-    ];
-    let o = abysslight(&args, d.path());
+    write_dive(&dive, d.path(), "png");
+    let o = correct_dive(d.path(), "out", &["--save-factors"]);
     let err = stderr(&o);
     assert!(o.status.success(), "{err}");
     assert!(!err.contains("note:"), "a new folder needs no note: {err}");
@@ -401,7 +362,7 @@ fn previews_sheet_summary_and_rerun_note() {
         "scaled to its range, not black: {brightest}"
     );
     // A before/after sheet from the CLI: input | corrected | F·C, 3 rows of 200-pixel tiles.
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "sheet",
             "survey",
@@ -428,7 +389,7 @@ fn previews_sheet_summary_and_rerun_note() {
     );
     // Without saved factors: two columns, and the message says how to get the third.
     std::fs::remove_dir_all(d.path().join("out/_abysslight/factors")).unwrap();
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "sheet",
             "survey",
@@ -450,18 +411,20 @@ fn previews_sheet_summary_and_rerun_note() {
         "{:?}",
         (two.width(), sheet.width())
     );
-    let o = abysslight(&["sheet", "nowhere", "out", "s.png"], d.path());
+    let o = abysslight_in(&["sheet", "nowhere", "out", "s.png"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("nowhere"));
     // Running again into the same folder says what happens to what is there.
-    let err = stderr(&abysslight(&args, d.path()));
+    let err = stderr(&correct_dive(d.path(), "out", &["--save-factors"]));
     assert!(
         err.contains("note:") && err.contains("overwritten"),
         "{err}"
     );
-    let mut resume = args.to_vec();
-    resume.push("--resume");
-    let err = stderr(&abysslight(&resume, d.path()));
+    let err = stderr(&correct_dive(
+        d.path(),
+        "out",
+        &["--save-factors", "--resume"],
+    ));
     assert!(
         err.contains("note:") && err.contains("--resume keeps"),
         "{err}"
@@ -484,7 +447,7 @@ fn ctrl_c_in_a_batch_run_says_how_to_resume_and_exits_130() {
         .status()
         .unwrap();
     assert!(fifo.success());
-    let mut child = Command::new(env!("CARGO_BIN_EXE_abysslight"))
+    let mut child = Command::new(BIN)
         .args([
             "correct",
             "--scatter",
@@ -530,23 +493,11 @@ fn ctrl_c_in_a_batch_run_says_how_to_resume_and_exits_130() {
 fn dry_run_writes_nothing_and_limit_corrects_the_first_photos_as_a_whole_run_does() {
     let d = tempfile::tempdir().unwrap();
     let dive = dive(32, 24, 9, 3, 0.1, false, 2);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    write_dive(&dive, d.path(), "png");
     let run = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "correct",
-            "--water-column",
-            "water",
-            "--survey",
-            "survey",
-            "--out",
-            out,
-            "--window",
-            "3",
-            "--quiet",
-        ];
+        let mut args = vec!["--window", "3", "--quiet"];
         args.extend_from_slice(extra);
-        abysslight(&args, d.path())
+        correct_dive(d.path(), out, &args)
     };
     let listing = |dir: &Path| -> Vec<std::path::PathBuf> {
         let mut v: Vec<_> = walk(dir);
@@ -613,7 +564,7 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
     for (encode, said) in [("srgb", "PNG sRGB chunk"), ("linear", "PNG gAMA 1.0")] {
         let dive = d.path().join(format!("dive-{encode}"));
         let dive_s = dive.to_str().unwrap();
-        let o = abysslight(
+        let o = abysslight_in(
             &[
                 "simulate",
                 "--out",
@@ -644,7 +595,7 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
                 out,
             ];
             args.extend_from_slice(extra);
-            abysslight(&args, d.path())
+            abysslight_in(&args, d.path())
         };
         let o = correct(&auto, &[]);
         assert!(o.status.success(), "{}", stderr(&o));
@@ -669,7 +620,7 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
     // An explicit curve wins over what the files say, and auto can be asked for by name.
     let dive_s = d.path().join("dive-srgb");
     let survey = format!("{}/survey", dive_s.display());
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--survey",
@@ -687,7 +638,7 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
         "{}",
         stdout(&o)
     );
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--survey",

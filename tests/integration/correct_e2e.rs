@@ -16,8 +16,7 @@ fn corrected_photos_match_albedo_up_to_a_per_channel_scale() {
     let d = tempfile::tempdir().unwrap();
     let frames = 20;
     let dive = dive(128, 96, frames, 9, 0.2, false, 7);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    let inputs = write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    let inputs = write_dive(&dive, d.path(), "png");
     // The user states the contamination; the window follows from it (n = 13 for c = 0.2 at 1 % risk).
     let opts = Options {
         water_column: Some(d.path().join("water")),
@@ -159,8 +158,7 @@ fn sixteen_bit_tree_is_mirrored_in_natural_order() {
 fn saved_scatter_reused_gives_identical_output() {
     let d = tempfile::tempdir().unwrap();
     let dive = dive(48, 32, 7, 5, 0.2, false, 5);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "jpg");
+    write_dive(&dive, d.path(), "jpg");
     let first = Options {
         water_column: Some(d.path().join("water")),
         survey: Some(d.path().join("survey")),
@@ -225,8 +223,7 @@ fn automatic_block_size_follows_the_photo_size_and_the_method() {
     for (w, h, method, given, want) in cases {
         let d = tempfile::tempdir().unwrap();
         let dive = dive(w, h, 5, 3, 0.1, false, 11);
-        write_all(&dive.water, &d.path().join("water"), "w", "png");
-        write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+        write_dive(&dive, d.path(), "png");
         let report = run(&Options {
             water_column: Some(d.path().join("water")),
             survey: Some(d.path().join("survey")),

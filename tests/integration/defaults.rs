@@ -3,7 +3,6 @@
 //! `Options` to `Params` carries every setting of the method.
 
 use std::path::Path;
-use std::process::Command;
 
 use abysslight::Engine;
 use abysslight::Transfer;
@@ -13,11 +12,7 @@ use abysslight::{Photo, Samples};
 use abysslight::{Scatter, SeafloorColour};
 
 fn run(args: &[&str], cwd: &Path) {
-    let o = Command::new(env!("CARGO_BIN_EXE_abysslight"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap();
+    let o = crate::common::abysslight_in(args, cwd);
     assert!(
         o.status.success(),
         "{args:?}: {}",

@@ -8,20 +8,11 @@ use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{report, s, BIN};
 
 /// `root/survey` (6 photos) and `root/water` (3 frames).
 fn mission(root: &Path) -> (PathBuf, PathBuf) {
     common::tiny_mission(root, 6)
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(out.join("_abysslight/report.json")).expect("no report");
-    serde_json::from_str(&text).unwrap()
 }
 
 /// A pipe whose reading end is already closed: every write to it fails with EPIPE.

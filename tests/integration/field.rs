@@ -82,8 +82,7 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
     let mut dive = dive(W, H, frames, 7, 0.2, false, 17);
     burn_in(&mut dive.photos);
     burn_in(&mut dive.water);
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    write_dive(&dive, d.path(), "png");
     truth_mask().save(&d.path().join("mask.png")).unwrap();
     let base = Options {
         water_column: Some(d.path().join("water")),
@@ -222,8 +221,7 @@ fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
             }
         }
     }
-    write_all(&dive.water, &d.path().join("water"), "w", "png");
-    write_all(&dive.photos, &d.path().join("survey"), "img", "png");
+    write_dive(&dive, d.path(), "png");
     // Corrected red over albedo red in a disc at `x` (the dot and its edge), against the same in a ring around it:
     // 1 where the correction leaves no stain.
     let stain = |c: &[f32], t: &[f32], x: usize| {

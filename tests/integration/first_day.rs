@@ -6,34 +6,18 @@
 use crate::common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use common::*;
 
-fn abysslight(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_abysslight"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run abysslight")
-}
-
 fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    (stdout(o), stderr(o))
 }
 
 /// A small photo of a varied pattern, `w`×`h`, saved at `path` (PNG or JPEG by its name).
 fn photo(path: &Path, w: u32, h: u32, i: u32) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    image::RgbImage::from_fn(w, h, |x, y| {
-        let v = ((x * 7 + y * 13 + i * 31) % 200 + 30) as u8;
-        image::Rgb([v, v / 2, 255 - v])
-    })
-    .save(path)
-    .unwrap();
+    pattern(w, h, i).save(path).unwrap();
 }
 
 #[test]
@@ -54,7 +38,7 @@ fn dry_run_reports_what_would_go_wrong_and_writes_nothing() {
     let dry = |extra: &[&str]| {
         let mut args = vec!["correct", "--dry-run", "--survey", "survey", "--out", "out"];
         args.extend(extra);
-        let o = abysslight(&args, d.path());
+        let o = abysslight_in(&args, d.path());
         assert!(o.status.success(), "{:?}", text(&o));
         text(&o).0
     };
@@ -98,7 +82,7 @@ fn a_water_column_that_is_the_survey_is_a_warning_before_and_during_a_run() {
         let mut args = vec!["correct", "--survey", "survey", "--water-column", water];
         args.extend(["--out", "out", "--window", "3"]);
         args.extend(extra);
-        abysslight(&args, d.path())
+        abysslight_in(&args, d.path())
     };
     let (out, _) = text(&run("survey", &["--dry-run"]));
     assert!(out.contains(&format!("warning: {said}")), "{out}");
@@ -121,7 +105,7 @@ fn a_water_column_that_is_the_survey_is_a_warning_before_and_during_a_run() {
 #[test]
 fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_when_asked() {
     let d = tempfile::tempdir().unwrap();
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "simulate",
             "--out",
@@ -137,7 +121,7 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
     );
     assert!(o.status.success(), "{:?}", text(&o));
     // The simulated dive is encoded linearly; this run took the photos for sRGB.
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--survey",
@@ -154,7 +138,7 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
         d.path(),
     );
     assert!(o.status.success(), "{:?}", text(&o));
-    let o = abysslight(&["evaluate", "--truth", "dive", "out"], d.path());
+    let o = abysslight_in(&["evaluate", "--truth", "dive", "out"], d.path());
     let (table, err) = text(&o);
     assert!(o.status.success(), "{err}");
     assert!(table.contains("| out | 8 |"), "{table}");
@@ -180,7 +164,7 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
     assert_eq!(files, ["dive", "out"], "evaluate wrote nothing unasked");
 
     // Scored with the run's own curve: no warning; --json writes where asked.
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "evaluate",
             "--truth",
@@ -208,7 +192,7 @@ fn sheet_takes_swapped_folders_the_right_way_round_and_labels_skipped_photos() {
     let (survey, _) = tiny_mission(d.path(), 6);
     // A photo of another size, last in the dive: the run skips it.
     photo(&survey.join("IMG_0006.png"), 16, 12, 9);
-    let o = abysslight(
+    let o = abysslight_in(
         &[
             "correct",
             "--survey",
@@ -225,7 +209,7 @@ fn sheet_takes_swapped_folders_the_right_way_round_and_labels_skipped_photos() {
     assert_eq!(o.status.code(), Some(1), "{:?}", text(&o));
     let sheet = |a: &str, b: &str, png: &str| {
         let args = ["sheet", a, b, png, "--rows", "7", "--width", "160"];
-        let o = abysslight(&args, d.path());
+        let o = abysslight_in(&args, d.path());
         assert!(o.status.success(), "{:?}", text(&o));
         text(&o).1
     };

@@ -2,14 +2,11 @@
 //! --width` huge aborted, `bench --size 0x0` panicked, `evaluate --cell 1e-300` grew without bound, `simulate
 //! --noise nan` wrote black photos, `--limit` near 2^64 with `--shard` wrote nothing and exited 0).
 
-use std::path::Path;
+use crate::common;
+
 use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{s, BIN};
 
 #[test]
 fn out_of_range_numbers_are_usage_errors_naming_the_flag() {

@@ -2,35 +2,15 @@
 //! folder. Each scenario runs in fresh temp folders, and every input file is hashed before and after it: inputs
 //! are never modified, whatever the outcome.
 
-use std::collections::BTreeMap;
-use std::hash::{Hash, Hasher};
+use crate::common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use abysslight::io::{decode, find_photos, majority_size, Entry};
 use abysslight::{Options, Silent};
+use common::{json, pattern, report, s, snapshot, stderr, tiny_mission, BIN};
 use proptest::prelude::*;
-
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-/// Hash of every file below the given paths (links not followed), by path.
-fn snapshot(paths: &[&Path]) -> BTreeMap<PathBuf, u64> {
-    let mut m = BTreeMap::new();
-    for root in paths {
-        for e in walkdir::WalkDir::new(root)
-            .follow_links(false)
-            .into_iter()
-            .flatten()
-        {
-            if e.file_type().is_file() {
-                let mut h = std::collections::hash_map::DefaultHasher::new();
-                std::fs::read(e.path()).unwrap_or_default().hash(&mut h);
-                m.insert(e.path().to_owned(), h.finish());
-            }
-        }
-    }
-    m
-}
 
 /// Run `scenario` and assert that no file below `inputs` changed, appeared or vanished.
 fn untouched<T>(inputs: &[&Path], scenario: impl FnOnce() -> T) -> T {
@@ -39,33 +19,6 @@ fn untouched<T>(inputs: &[&Path], scenario: impl FnOnce() -> T) -> T {
     let r = scenario();
     assert_eq!(snapshot(inputs), before, "an input was modified");
     r
-}
-
-/// A tiny photo with some texture: `seed` varies the content.
-fn photo(w: u32, h: u32, seed: u32) -> image::RgbImage {
-    image::RgbImage::from_fn(w, h, |x, y| {
-        let v = (x * 7 + y * 13 + seed * 31) % 200 + 30;
-        image::Rgb([v as u8, (v / 2) as u8, (255 - v) as u8])
-    })
-}
-
-/// `root/survey` with `n` PNG photos 32×24 and `root/water` with 3 frames.
-fn mission(root: &Path, n: u32) -> (PathBuf, PathBuf) {
-    let survey = root.join("survey");
-    let water = root.join("water");
-    std::fs::create_dir_all(&survey).unwrap();
-    std::fs::create_dir_all(&water).unwrap();
-    for i in 0..n {
-        photo(32, 24, i)
-            .save(survey.join(format!("IMG_{i:04}.png")))
-            .unwrap();
-    }
-    for i in 0..3 {
-        image::RgbImage::from_pixel(32, 24, image::Rgb([10 + i as u8, 12, 14]))
-            .save(water.join(format!("wc{i}.png")))
-            .unwrap();
-    }
-    (survey, water)
 }
 
 fn run(args: &[&str]) -> Output {
@@ -81,24 +34,12 @@ fn code(o: &Output) -> i32 {
     o.status.code().unwrap_or(-1)
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn report(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
 // --- 1. path safety ---------------------------------------------------------------------------------------------
 
 #[test]
 fn outputs_over_in_or_around_inputs_are_refused() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 3);
+    let (survey, water) = tiny_mission(d.path(), 3);
     let nested_water = survey.join("water");
     std::fs::create_dir_all(&nested_water).unwrap();
     std::fs::copy(water.join("wc0.png"), nested_water.join("wc0.png")).unwrap();
@@ -154,9 +95,9 @@ fn outputs_over_in_or_around_inputs_are_refused() {
 #[test]
 fn writes_never_follow_a_link_out_of_the_output_folder() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 4);
+    let (survey, water) = tiny_mission(d.path(), 4);
     std::fs::create_dir_all(survey.join("a")).unwrap();
-    photo(32, 24, 9)
+    pattern(32, 24, 9)
         .save(survey.join("a/IMG_0009.png"))
         .unwrap();
     let outside = d.path().join("outside");
@@ -183,7 +124,7 @@ fn writes_never_follow_a_link_out_of_the_output_folder() {
     assert!(stderr(&o).contains("symbolic link"), "{}", stderr(&o));
     assert_eq!(std::fs::read_dir(&outside).unwrap().count(), 0);
     assert!(out.join("IMG_0003.png").is_file());
-    let r = report(&out.join("_abysslight/report.json"));
+    let r = report(&out);
     assert_eq!(r["failed"], 1);
 }
 
@@ -191,7 +132,7 @@ fn writes_never_follow_a_link_out_of_the_output_folder() {
 #[test]
 fn a_survey_link_to_the_output_folder_is_not_read_back() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 4);
+    let (survey, water) = tiny_mission(d.path(), 4);
     let out = d.path().join("out");
     let o = run(&["--survey", s(&survey), "--out", s(&out), "--window", "3"]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
@@ -200,7 +141,7 @@ fn a_survey_link_to_the_output_folder_is_not_read_back() {
         run(&["--survey", s(&survey), "--out", s(&out), "--window", "3"])
     });
     assert_eq!(code(&o), 1, "{}", stderr(&o));
-    let r = report(&out.join("_abysslight/report.json"));
+    let r = report(&out);
     assert_eq!(r["survey_photos"], 4, "outputs were read back as photos");
     assert_eq!(r["corrected"], 4);
     assert!(r["errors"].to_string().contains("output folder"), "{r}");
@@ -209,7 +150,7 @@ fn a_survey_link_to_the_output_folder_is_not_read_back() {
 // --- 2. decoding that notices missing data -----------------------------------------------------------------------
 
 fn jpeg(w: u16, h: u16, restart: Option<u16>) -> Vec<u8> {
-    let img = photo(w as u32, h as u32, 3);
+    let img = pattern(w as u32, h as u32, 3);
     let mut out = Vec::new();
     let mut enc = jpeg_encoder::Encoder::new(&mut out, 90);
     if let Some(r) = restart {
@@ -394,7 +335,7 @@ fn huge_pnm_header_on_stdin_is_one_failed_frame_and_the_report_is_written() {
     }
     let o = child.wait_with_output().unwrap();
     assert_eq!(code(&o), 1, "{}", stderr(&o));
-    let r = report(&rep);
+    let r = json(&rep);
     assert_eq!(r["corrected"], 3);
     assert!(r["errors"].to_string().contains("1000000x1000000"), "{r}");
 }
@@ -406,7 +347,7 @@ fn huge_pnm_header_on_stdin_is_one_failed_frame_and_the_report_is_written() {
 fn stray_entries_are_named_skipped_entries() {
     use std::os::unix::ffi::OsStrExt;
     let d = tempfile::tempdir().unwrap();
-    let (survey, _) = mission(d.path(), 4);
+    let (survey, _) = tiny_mission(d.path(), 4);
     std::os::unix::fs::symlink(d.path().join("gone"), survey.join("dangling.png")).unwrap();
     std::fs::create_dir_all(survey.join("loop")).unwrap();
     std::os::unix::fs::symlink(&survey, survey.join("loop/back")).unwrap();
@@ -428,7 +369,7 @@ fn stray_entries_are_named_skipped_entries() {
         run(&["--survey", s(&survey), "--out", s(&out), "--window", "3"])
     });
     assert_eq!(code(&o), 1, "{}", stderr(&o));
-    let r = report(&out.join("_abysslight/report.json"));
+    let r = report(&out);
     assert_eq!(r["corrected"], 4);
     assert_eq!(r["errors"].as_array().unwrap().len(), 3, "{r}");
 }
@@ -443,7 +384,7 @@ fn the_mission_size_is_the_majority_of_the_first_headers() {
         .enumerate()
     {
         let p = d.path().join(format!("p{i}.png"));
-        photo(*w, *h, i as u32).save(&p).unwrap();
+        pattern(*w, *h, i as u32).save(&p).unwrap();
         entries.push(Entry {
             relative: p.file_name().unwrap().into(),
             path: p,
@@ -473,7 +414,7 @@ fn the_mission_size_is_the_majority_of_the_first_headers() {
 #[test]
 fn the_numeric_flags_of_issue_13_are_usage_errors() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 3);
+    let (survey, water) = tiny_mission(d.path(), 3);
     let out = d.path().join("out");
     for (flag, value, extra) in [
         ("--downsample", "4294967296", None),
@@ -550,7 +491,7 @@ proptest! {
     #[test]
     fn random_numbers_never_panic(flag in prop::sample::select(NUMERIC_FLAGS), v in value(), k in value()) {
         let d = tempfile::tempdir().unwrap();
-        let (survey, water) = mission(d.path(), 4);
+        let (survey, water) = tiny_mission(d.path(), 4);
         let out = d.path().join("out");
         let v = match flag {
             "--shard" => format!("{v}/{k}"),
@@ -601,7 +542,7 @@ proptest! {
 #[test]
 fn a_concurrent_run_and_other_options_are_refused_stale_temps_removed() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 4);
+    let (survey, water) = tiny_mission(d.path(), 4);
     let out = d.path().join("out");
     let o = run(&["--survey", s(&survey), "--out", s(&out), "--window", "3"]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
@@ -662,7 +603,7 @@ fn a_concurrent_run_and_other_options_are_refused_stale_temps_removed() {
 #[test]
 fn library_run_refuses_the_same_paths() {
     let d = tempfile::tempdir().unwrap();
-    let (survey, water) = mission(d.path(), 3);
+    let (survey, water) = tiny_mission(d.path(), 3);
     let opts = Options {
         survey: Some(survey.clone()),
         out: Some(d.path().join("x/../survey/out")),

@@ -6,37 +6,7 @@
 
 use crate::common;
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-/// A small dive whose seafloor moves from photo to photo (so that `--mask-auto` finds only what is static):
-/// `root/survey/img1.png`… and `root/water/w1.png`…, 48 × 32.
-fn moving_mission(root: &Path, photos: usize) -> (std::path::PathBuf, std::path::PathBuf) {
-    let dive = common::dive(48, 32, photos, 3, 0.2, false, 5);
-    let (survey, water) = (root.join("survey"), root.join("water"));
-    common::write_all(&dive.photos, &survey, "img", "png");
-    common::write_all(&dive.water, &water, "w", "png");
-    (survey, water)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn report(out: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(out.join("_abysslight/report.json")).expect("no report");
-    serde_json::from_str(&text).unwrap()
-}
+use common::{abysslight, moving_mission, report, s, stderr};
 
 /// Camera JPEGs (no colour information: cameras write them sRGB-encoded, and `--transfer auto` takes `srgb` in a
 /// batch run): a watch over the same folder writes the same bytes (before: the watch assumed `linear`, and every
@@ -56,7 +26,7 @@ fn watch_equals_batch_on_camera_jpegs() {
         std::fs::remove_file(&p).unwrap();
     }
     let (batch, live) = (d.path().join("batch"), d.path().join("live"));
-    let o = run(&[
+    let o = abysslight(&[
         "correct",
         "--survey",
         s(&survey),
@@ -68,7 +38,7 @@ fn watch_equals_batch_on_camera_jpegs() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("camera curve srgb"), "{}", stderr(&o));
     #[rustfmt::skip]
-    let o = run(&["correct", "--survey", s(&survey), "--out", s(&live), "--window", "3", "--watch",
+    let o = abysslight(&["correct", "--survey", s(&survey), "--out", s(&live), "--window", "3", "--watch",
                   "--poll-interval", "40", "--idle-timeout", "1"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("camera curve srgb"), "{}", stderr(&o));
@@ -99,7 +69,7 @@ fn an_odd_first_photo_leaves_mask_auto_on() {
         .unwrap();
     let out = d.path().join("out");
     #[rustfmt::skip]
-    let o = run(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
+    let o = abysslight(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
                   "--window", "3", "--mask-auto"]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     let mask = image::open(out.join("_abysslight/mask-auto.png")).expect("no mask-auto.png");
@@ -122,7 +92,7 @@ fn a_mask_hiding_most_of_the_frame_is_warned_about_and_reported() {
     .unwrap();
     let out = d.path().join("out");
     #[rustfmt::skip]
-    let o = run(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
+    let o = abysslight(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
                   "--window", "3", "--mask", s(&mask)]);
     let err = stderr(&o);
     assert!(err.contains("hides 90 % of the frame"), "{err}");
@@ -142,7 +112,7 @@ fn a_mask_hiding_most_of_the_frame_is_warned_about_and_reported() {
     .unwrap();
     let out = d.path().join("out2");
     #[rustfmt::skip]
-    let o = run(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
+    let o = abysslight(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out),
                   "--window", "3", "--mask", s(&mask)]);
     assert!(!stderr(&o).contains("of the frame"), "{}", stderr(&o));
 }

@@ -1,6 +1,8 @@
 //! Issue 14: a JPEG output is written with its JPEG input's chroma subsampling and (estimated) quality, unless
 //! `--jpeg-quality` / `--jpeg-subsampling` say otherwise; what is read back from the output files is checked.
 
+use crate::common::abysslight_in;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -98,8 +100,8 @@ fn explicit_quality_and_subsampling_win() {
         );
     }
     // The same through the command line.
-    let o = Command::new(env!("CARGO_BIN_EXE_abysslight"))
-        .args([
+    let o = abysslight_in(
+        &[
             "correct",
             "--water-column",
             "wc",
@@ -113,10 +115,9 @@ fn explicit_quality_and_subsampling_win() {
             "60",
             "--jpeg-subsampling",
             "422",
-        ])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
+        ],
+        d.path(),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let outs = codings(&d.path().join("cli"));
     assert_eq!(outs.len(), 5);
@@ -126,12 +127,18 @@ fn explicit_quality_and_subsampling_win() {
             (Some(60), Some(Subsampling::S422))
         );
     }
-    let bad = Command::new(env!("CARGO_BIN_EXE_abysslight"))
-        .args(["correct", "--survey", "survey", "--out", "x"])
-        .args(["--jpeg-subsampling", "411"])
-        .current_dir(d.path())
-        .output()
-        .unwrap();
+    let bad = abysslight_in(
+        &[
+            "correct",
+            "--survey",
+            "survey",
+            "--out",
+            "x",
+            "--jpeg-subsampling",
+            "411",
+        ],
+        d.path(),
+    );
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("444, 422 or 420"));
 }

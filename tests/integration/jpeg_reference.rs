@@ -4,6 +4,8 @@
 //! port of libjpeg-turbo's decoder) agree within 3 levels per sample and 0.5 on average (the chroma upsampling
 //! filters of the two decoders differ by up to 3 levels on subsampled files; 4:4:4 and grey agree within 1).
 
+use crate::common::png_chunk;
+
 use std::path::Path;
 
 use abysslight::Samples;
@@ -141,18 +143,6 @@ fn a_cmyk_jpeg_decodes_to_the_rgb_it_was_made_from() {
     );
 }
 
-/// A PNG chunk: length, type, data, CRC.
-fn chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
-    let mut c = (data.len() as u32).to_be_bytes().to_vec();
-    c.extend_from_slice(kind);
-    c.extend_from_slice(data);
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(kind);
-    crc.update(data);
-    c.extend_from_slice(&crc.finalize().to_be_bytes());
-    c
-}
-
 /// A PNG written by hand (no encoder shared with the decoders): `rows` already packed, filter type 0 each.
 fn png(w: u32, h: u32, depth: u8, colour: u8, plte: Option<&[u8]>, rows: &[Vec<u8>]) -> Vec<u8> {
     use std::io::Write;
@@ -165,12 +155,12 @@ fn png(w: u32, h: u32, depth: u8, colour: u8, plte: Option<&[u8]>, rows: &[Vec<u
         z.write_all(r).unwrap();
     }
     let mut f = b"\x89PNG\r\n\x1a\n".to_vec();
-    f.extend(chunk(b"IHDR", &ihdr));
+    f.extend(png_chunk(b"IHDR", &ihdr));
     if let Some(p) = plte {
-        f.extend(chunk(b"PLTE", p));
+        f.extend(png_chunk(b"PLTE", p));
     }
-    f.extend(chunk(b"IDAT", &z.finish().unwrap()));
-    f.extend(chunk(b"IEND", b""));
+    f.extend(png_chunk(b"IDAT", &z.finish().unwrap()));
+    f.extend(png_chunk(b"IEND", b""));
     f
 }
 

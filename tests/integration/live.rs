@@ -14,7 +14,7 @@ use abysslight::{Layout, Photo, Samples};
 use common::*;
 
 fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_abysslight"))
+    Command::new(BIN)
 }
 
 fn run(args: &[&str], cwd: &Path, stdin: &[u8]) -> Output {
@@ -34,10 +34,6 @@ fn run(args: &[&str], cwd: &Path, stdin: &[u8]) -> Output {
     let out = child.wait_with_output().unwrap();
     feeder.join().unwrap();
     out
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// A binary PPM/PGM frame written by hand (with a comment in the header), independent of abysslight's writer.

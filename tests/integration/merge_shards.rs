@@ -3,23 +3,12 @@
 
 use crate::common;
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use abysslight::merge_shards;
 use abysslight::{correct_mission, Options, Photo, Shard, Silent};
 use common::*;
 use serde_json::Value;
-
-/// Every output photo below `dir` (not `_abysslight/`), as relative path → bytes.
-fn outputs(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    abysslight::io::find_photos(dir)
-        .unwrap()
-        .photos
-        .into_iter()
-        .map(|e| (e.relative, std::fs::read(e.path).unwrap()))
-        .collect()
-}
 
 fn opts(root: &Path, out: &str) -> Options {
     Options {
@@ -42,11 +31,6 @@ fn run_shard(root: &Path, out: &str, index: usize, count: usize, o: Options) {
         .join(out)
         .join(format!("_abysslight/report-shard-{index}-of-{count}.json"))
         .is_file());
-}
-
-fn report(dir: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("_abysslight/report.json")).unwrap())
-        .unwrap()
 }
 
 /// `photo` twice as bright: an exposure jump the monitor flags.

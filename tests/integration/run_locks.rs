@@ -9,11 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{s, BIN};
 
 /// `root/survey` (8 photos) and `root/water` (3 frames).
 fn mission(root: &Path) -> (PathBuf, PathBuf) {

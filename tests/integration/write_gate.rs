@@ -6,40 +6,11 @@
 
 use crate::common;
 
-use std::collections::BTreeMap;
-use std::hash::{Hash, Hasher};
 use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_abysslight");
-
-/// Hash of every file below the given paths (links not followed), by path.
-fn snapshot(paths: &[&Path]) -> BTreeMap<PathBuf, u64> {
-    let mut m = BTreeMap::new();
-    for root in paths {
-        for e in walkdir::WalkDir::new(root)
-            .follow_links(false)
-            .into_iter()
-            .flatten()
-        {
-            if e.file_type().is_file() {
-                let mut h = std::collections::hash_map::DefaultHasher::new();
-                std::fs::read(e.path()).unwrap_or_default().hash(&mut h);
-                m.insert(e.path().to_owned(), h.finish());
-            }
-        }
-    }
-    m
-}
-
-fn abysslight(args: &[&str]) -> Output {
-    Command::new(BIN).args(args).output().unwrap()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{abysslight, s, snapshot};
 
 /// A small mission and one corrected folder, plus the odd things a path can point at.
 struct Site {

@@ -38,7 +38,7 @@
 
 pub(crate) mod ifd;
 mod jpeg;
-mod png;
+pub(crate) mod png;
 #[cfg(test)]
 mod round_trip;
 mod tiff;

@@ -6,6 +6,9 @@ use std::path::{Path, PathBuf};
 use abysslight::io::{write_atomic, EncodeSettings};
 use abysslight::{Layout, Photo, Samples};
 
+mod command;
+pub use command::*;
+
 /// xorshift64*: deterministic, dependency-free test randomness.
 pub struct Rng(u64);
 
@@ -248,6 +251,14 @@ pub fn scaled_error(got: &[Vec<f32>], truth: &[Vec<f32>]) -> f64 {
     err / mag
 }
 
+/// A small photo of a varied pattern, `w`×`h`: `seed` varies the content.
+pub fn pattern(w: u32, h: u32, seed: u32) -> image::RgbImage {
+    image::RgbImage::from_fn(w, h, |x, y| {
+        let v = ((x * 7 + y * 13 + seed * 31) % 200 + 30) as u8;
+        image::Rgb([v, v / 2, 255 - v])
+    })
+}
+
 /// A tiny mission on disk for the tests of files and runs: `root/survey` (`photos` 32×24 PNGs of a varied
 /// pattern) and `root/water` (3 dark frames). Returns both folders.
 pub fn tiny_mission(root: &Path, photos: u32) -> (PathBuf, PathBuf) {
@@ -257,12 +268,9 @@ pub fn tiny_mission(root: &Path, photos: u32) -> (PathBuf, PathBuf) {
         std::fs::create_dir_all(d).unwrap();
     }
     for i in 0..photos {
-        image::RgbImage::from_fn(32, 24, |x, y| {
-            let v = ((x * 7 + y * 13 + i * 31) % 200 + 30) as u8;
-            image::Rgb([v, v / 2, 255 - v])
-        })
-        .save(survey.join(format!("IMG_{i:04}.png")))
-        .unwrap();
+        pattern(32, 24, i)
+            .save(survey.join(format!("IMG_{i:04}.png")))
+            .unwrap();
     }
     for i in 0..3u8 {
         image::RgbImage::from_pixel(32, 24, image::Rgb([10 + i, 12, 14]))
@@ -270,4 +278,44 @@ pub fn tiny_mission(root: &Path, photos: u32) -> (PathBuf, PathBuf) {
             .unwrap();
     }
     (survey, water)
+}
+
+/// Write a dive as a mission: `root/water/w1.png`… and `root/survey/img1.<ext>`…; returns the survey photos' paths.
+pub fn write_dive(dive: &Dive, root: &Path, ext: &str) -> Vec<PathBuf> {
+    write_all(&dive.water, &root.join("water"), "w", "png");
+    write_all(&dive.photos, &root.join("survey"), "img", ext)
+}
+
+/// `abysslight correct` on the mission [`write_dive`] wrote in `root`, into `root/<out>`, with `extra` arguments.
+pub fn correct_dive(root: &Path, out: &str, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "correct",
+        "--water-column",
+        "water",
+        "--survey",
+        "survey",
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(extra);
+    abysslight_in(&args, root)
+}
+
+/// A small dive whose seafloor moves from photo to photo (so that `--mask-auto` finds only what is static):
+/// `root/survey/img1.png`… and `root/water/w1.png`…, 48 × 32. Returns both folders.
+pub fn moving_mission(root: &Path, photos: usize) -> (PathBuf, PathBuf) {
+    write_dive(&dive(48, 32, photos, 3, 0.2, false, 5), root, "png");
+    (root.join("survey"), root.join("water"))
+}
+
+/// A PNG chunk written by hand (independent of the library's writer): length, type, data, CRC.
+pub fn png_chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+    let mut c = (data.len() as u32).to_be_bytes().to_vec();
+    c.extend_from_slice(kind);
+    c.extend_from_slice(data);
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(kind);
+    crc.update(data);
+    c.extend_from_slice(&crc.finalize().to_be_bytes());
+    c
 }
