@@ -77,8 +77,9 @@ struct Bits<'a> {
     pos: usize,
     acc: u64,
     n: u32,
+    /// Bits pushed into `acc` since the start: all, and those from the file (not padding).
+    pushed: u64,
     real_pushed: u64,
-    consumed: u64,
     /// The marker (second byte) the segment stopped at, if any; `pos` is at its `0xFF`.
     marker: Option<u8>,
     ended: bool,
@@ -91,15 +92,37 @@ impl<'a> Bits<'a> {
             pos,
             acc: 0,
             n: 0,
+            pushed: 0,
             real_pushed: 0,
-            consumed: 0,
             marker: None,
             ended: false,
         }
     }
 
+    /// Push bytes until more than 56 bits are held: eight bytes at once where none of them is `0xFF`.
     #[inline]
     fn fill(&mut self) {
+        if self.n <= 56 && !self.ended {
+            if let Some(b) = self.data.get(self.pos..self.pos + 8) {
+                let w = u64::from_be_bytes(b.try_into().expect("8 bytes"));
+                // A zero byte of `!w` is an `0xFF` byte of `w` (exact: no false positives or negatives).
+                let x = !w;
+                if x.wrapping_sub(0x0101_0101_0101_0101) & !x & 0x8080_8080_8080_8080 == 0 {
+                    let k = (56 - self.n) / 8 + 1;
+                    self.acc |= (w >> (64 - 8 * k)) << (64 - self.n - 8 * k);
+                    self.pos += k as usize;
+                    self.n += 8 * k;
+                    self.pushed += 8 * k as u64;
+                    self.real_pushed += 8 * k as u64;
+                    return;
+                }
+            }
+        }
+        self.fill_bytes();
+    }
+
+    /// [`Bits::fill`] byte by byte: stuffed bytes, fill bytes, markers and the end.
+    fn fill_bytes(&mut self) {
         while self.n <= 56 {
             let mut byte = 0u8;
             let mut real = false;
@@ -132,6 +155,7 @@ impl<'a> Bits<'a> {
             }
             self.acc |= (byte as u64) << (56 - self.n);
             self.n += 8;
+            self.pushed += 8;
             if real {
                 self.real_pushed += 8;
             }
@@ -145,14 +169,14 @@ impl<'a> Bits<'a> {
         }
         self.acc <<= k;
         self.n -= k;
-        self.consumed += k as u64;
     }
 
     /// The fast table's entry for the next bits, `(symbol, code length)`; length 0 when the code is longer than
     /// [`FAST`] bits (then [`Bits::decode_long`]).
     #[inline(always)]
     fn peek_fast(&mut self, t: &Huffman) -> (u8, u8) {
-        if self.n < 16 {
+        // At least 32 bits held: a fast code and its up to 15 extra bits need no fill in between.
+        if self.n < 32 {
             self.fill();
         }
         t.fast[(self.acc >> (64 - FAST)) as usize]
@@ -191,7 +215,9 @@ impl<'a> Bits<'a> {
     fn decode_ac(&mut self, t: &Huffman) -> Result<u8, Why> {
         let (sym, len) = self.peek_fast(t);
         if len > 0 {
-            self.skip(len as u32 + (sym & 15) as u32);
+            let k = len as u32 + (sym & 15) as u32;
+            self.acc <<= k;
+            self.n -= k;
             return Ok(sym);
         }
         let sym = self.decode_long(t)?;
@@ -201,7 +227,7 @@ impl<'a> Bits<'a> {
 
     /// Whether the bits taken so far were all in the file (not padding past a marker or the end).
     fn within_data(&self) -> bool {
-        self.consumed <= self.real_pushed
+        self.pushed - self.n as u64 <= self.real_pushed
     }
 }
 
