@@ -598,6 +598,77 @@ fn next_marker_any(d: &[u8], mut pos: usize) -> usize {
     d.len()
 }
 
+/// Verdicts of [`check_all`] on JPEGs found complete, kept while a run reads its photos more than once (the survey
+/// of `--window auto`, then the correction): a later read of the same bytes takes the verdict instead of walking
+/// the entropy data again. Keyed by the bytes' length and two hashes of them with random keys of this process
+/// (SipHash; 128 bits in all): a file that changed in between is a new key, checked again.
+struct Remembered {
+    hashers: [std::hash::RandomState; 2],
+    verdicts: std::collections::HashMap<(usize, u64, u64), bool>,
+    /// Runs that asked for it: the verdicts go when the last one ends.
+    users: usize,
+}
+
+/// At most this many verdicts kept (about 10 MB); past them photos are checked on every read.
+const MAX_REMEMBERED: usize = 1 << 18;
+
+static REMEMBERED: std::sync::Mutex<Option<Remembered>> = std::sync::Mutex::new(None);
+
+fn remembered() -> std::sync::MutexGuard<'static, Option<Remembered>> {
+    REMEMBERED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// While held, [`check_all_remembered`] keeps the verdicts of the JPEGs it finds complete.
+pub(crate) struct RememberChecks(());
+
+impl RememberChecks {
+    pub(crate) fn start() -> Self {
+        let mut r = remembered();
+        let r = r.get_or_insert_with(|| Remembered {
+            hashers: Default::default(),
+            verdicts: Default::default(),
+            users: 0,
+        });
+        r.users += 1;
+        RememberChecks(())
+    }
+}
+
+impl Drop for RememberChecks {
+    fn drop(&mut self) {
+        let mut r = remembered();
+        if let Some(m) = r.as_mut() {
+            m.users -= 1;
+            if m.users == 0 {
+                *r = None;
+            }
+        }
+    }
+}
+
+/// [`check_all`], or its verdict on the same bytes earlier while a [`RememberChecks`] is held.
+pub(crate) fn check_all_remembered(data: &[u8]) -> Result<bool, Why> {
+    use std::hash::BuildHasher;
+    let Some(hashers) = remembered().as_ref().map(|r| r.hashers.clone()) else {
+        return check_all(data);
+    };
+    let key = (
+        data.len(),
+        hashers[0].hash_one(data),
+        hashers[1].hash_one(data),
+    );
+    if let Some(&v) = remembered().as_ref().and_then(|r| r.verdicts.get(&key)) {
+        return Ok(v);
+    }
+    let v = check_all(data)?;
+    if let Some(r) = remembered().as_mut() {
+        if r.verdicts.len() < MAX_REMEMBERED {
+            r.verdicts.insert(key, v);
+        }
+    }
+    Ok(v)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -674,5 +745,32 @@ mod tests {
                 assert_eq!(bits.marker, Some(0xD9), "case {case}");
             }
         }
+    }
+
+    /// A verdict is taken again for the same bytes only: a copy cut short and closed with an end marker is
+    /// checked (and refused) however often the complete file was seen.
+    #[test]
+    fn a_remembered_verdict_is_for_the_same_bytes_only() {
+        use libjpeg_turbo_rs::{compress, PixelFormat, Subsampling};
+        use std::hash::BuildHasher;
+        let px: Vec<u8> = (0..96 * 64 * 3).map(|i| (i * 37 % 251) as u8).collect();
+        let jpeg = compress(&px, 96, 64, PixelFormat::Rgb, 92, Subsampling::S420).unwrap();
+        let cut = [&jpeg[..jpeg.len() * 2 / 3], &[0xFF, 0xD9][..]].concat();
+        assert_eq!(check_all(&jpeg), Ok(false));
+        assert!(check_all(&cut).is_err());
+        let keep = RememberChecks::start();
+        for _ in 0..3 {
+            assert_eq!(check_all_remembered(&jpeg), Ok(false));
+            assert!(check_all_remembered(&cut).is_err());
+        }
+        let held = |b: &[u8]| {
+            let r = remembered();
+            let r = r.as_ref().expect("held while a RememberChecks lives");
+            let k = (b.len(), r.hashers[0].hash_one(b), r.hashers[1].hash_one(b));
+            r.verdicts.get(&k).copied()
+        };
+        assert_eq!(held(&jpeg), Some(false));
+        assert_eq!(held(&cut), None);
+        drop(keep);
     }
 }
