@@ -268,6 +268,15 @@ pub fn overlap_ncc(a: &Texture, b: &Texture, dx: isize, dy: isize) -> (f64, f64)
     (ncc, n / (w * h) as f64)
 }
 
+/// The spectrum of a texture image as [`match_pair`] takes it (Hann-windowed, zero-padded to powers of two): a
+/// sequence matched photo by photo computes each photo's once ([`match_spectra`]).
+pub(crate) type Spectrum = (Vec<f64>, Vec<f64>);
+
+/// The [`Spectrum`] of `t`.
+pub(crate) fn texture_spectrum(t: &Texture) -> Spectrum {
+    spectrum(t, t.width.next_power_of_two(), t.height.next_power_of_two())
+}
+
 /// Match texture image `b` against `a` (same size) by phase correlation; see [`Match`].
 pub fn match_pair(a: &Texture, b: &Texture) -> Match {
     assert_eq!(
@@ -275,9 +284,23 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
         (b.width, b.height),
         "texture sizes differ"
     );
+    match_spectra(a, b, &texture_spectrum(a), &texture_spectrum(b))
+}
+
+/// [`match_pair`] of `a` and `b` given their [`texture_spectrum`]s.
+pub(crate) fn match_spectra(
+    a: &Texture,
+    b: &Texture,
+    (ar, ai): &Spectrum,
+    (br, bi): &Spectrum,
+) -> Match {
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "texture sizes differ"
+    );
     let (pw, ph) = (a.width.next_power_of_two(), a.height.next_power_of_two());
-    let (ar, ai) = spectrum(a, pw, ph);
-    let (br, bi) = spectrum(b, pw, ph);
+    assert_eq!(ar.len(), pw * ph, "a spectrum of another size");
     // conj(A)·B / |A·B|: its inverse peaks at the shift of b against a.
     let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
     for i in 0..pw * ph {
@@ -322,5 +345,44 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
         ncc,
         overlap,
         accepted: overlap >= MIN_OVERLAP && ncc >= MIN_NCC,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A texture image of a smooth random pattern seen at offset `(ox, oy)`.
+    fn shifted(ox: usize, oy: usize) -> Texture {
+        let (w, h) = (70, 50);
+        let v = |x: usize, y: usize| {
+            let (x, y) = ((x + ox) as f32, (y + oy) as f32);
+            (0.37 * x).sin() * (0.23 * y).cos()
+                + (0.11 * x + 0.31 * y).sin()
+                + 0.5 * (0.05 * x * y).sin()
+        };
+        Texture {
+            width: w,
+            height: h,
+            scale: 3,
+            data: (0..w * h).map(|i| v(i % w, i / w)).collect(),
+        }
+    }
+
+    /// A sequence matched with each texture's spectrum computed once gives what matching each pair afresh gives,
+    /// bit for bit.
+    #[test]
+    fn spectra_computed_once_match_as_pairs_do() {
+        let textures: Vec<Texture> = [(0, 0), (4, 1), (9, 3), (9, 3), (15, 2)]
+            .iter()
+            .map(|&(x, y)| shifted(x, y))
+            .collect();
+        let spectra: Vec<Spectrum> = textures.iter().map(texture_spectrum).collect();
+        for i in 1..textures.len() {
+            let (a, b) = (&textures[i - 1], &textures[i]);
+            let once = match_spectra(a, b, &spectra[i - 1], &spectra[i]);
+            assert_eq!(once, match_pair(a, b), "pair {i}");
+            assert!(once.accepted, "pair {i}: {once:?}");
+        }
     }
 }
