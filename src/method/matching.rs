@@ -131,12 +131,18 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
 pub(crate) fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| -> Vec<f32> {
         let mut out = vec![0.0f32; src.len()];
+        let last = len.saturating_sub(1);
+        let n = (2 * r + 1) as f64;
         for k in 0..count {
-            let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
-            let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
-            for i in 0..len as isize {
-                out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
-                acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
+            let (src, out) = (&src[k * step..], &mut out[k * step..]);
+            let at = |i: usize| src[i * stride] as f64;
+            let mut acc: f64 = (-(r as isize)..=r as isize)
+                .map(|i| at(i.clamp(0, last as isize) as usize))
+                .sum();
+            // The samples entering and leaving the running sum, clamped to the edges as one index each.
+            for i in 0..len {
+                out[i * stride] = (acc / n) as f32;
+                acc += at((i + r + 1).min(last)) - at(i.saturating_sub(r));
             }
         }
         out
@@ -366,6 +372,59 @@ mod tests {
             height: h,
             scale: 3,
             data: (0..w * h).map(|i| v(i % w, i / w)).collect(),
+        }
+    }
+
+    /// The running sums of [`box_blur`] with each index clamped in the sum (the form before the edges were
+    /// clamped once per index): the reference the kernel must equal bit for bit.
+    fn box_blur_clamped(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+        let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| {
+            let mut out = vec![0.0f32; src.len()];
+            for k in 0..count {
+                let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
+                let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
+                for i in 0..len as isize {
+                    out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
+                    acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
+                }
+            }
+            out
+        };
+        let rows = pass(v, w, 1, h, w);
+        pass(&rows, h, w, w, 1)
+    }
+
+    #[test]
+    fn box_blur_is_the_clamped_running_sum_and_near_the_square_mean() {
+        for (w, h, r) in [(1, 1, 1), (7, 3, 2), (40, 25, 5), (13, 31, 20), (64, 2, 1)] {
+            let v: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 2654435761usize) % 1000) as f32 / 37.0 - 9.0)
+                .collect();
+            let got = box_blur(&v, w, h, r);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&got),
+                bits(&box_blur_clamped(&v, w, h, r)),
+                "{w}x{h} r {r}"
+            );
+            // Brute force: the mean over the square, samples past an edge taken from the edge.
+            let c = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    let mut sum = 0.0f64;
+                    for dy in -(r as isize)..=r as isize {
+                        for dx in -(r as isize)..=r as isize {
+                            sum += v[c(y + dy, h) * w + c(x + dx, w)] as f64;
+                        }
+                    }
+                    let want = sum / ((2 * r + 1) * (2 * r + 1)) as f64;
+                    let g = got[y as usize * w + x as usize] as f64;
+                    assert!(
+                        (g - want).abs() < 1e-4,
+                        "{w}x{h} r {r} at ({x}, {y}): {g} {want}"
+                    );
+                }
+            }
         }
     }
 
