@@ -77,8 +77,9 @@ struct Bits<'a> {
     pos: usize,
     acc: u64,
     n: u32,
+    /// Bits pushed into `acc` since the start: all, and those from the file (not padding).
+    pushed: u64,
     real_pushed: u64,
-    consumed: u64,
     /// The marker (second byte) the segment stopped at, if any; `pos` is at its `0xFF`.
     marker: Option<u8>,
     ended: bool,
@@ -91,15 +92,37 @@ impl<'a> Bits<'a> {
             pos,
             acc: 0,
             n: 0,
+            pushed: 0,
             real_pushed: 0,
-            consumed: 0,
             marker: None,
             ended: false,
         }
     }
 
+    /// Push bytes until more than 56 bits are held: eight bytes at once where none of them is `0xFF`.
     #[inline]
     fn fill(&mut self) {
+        if self.n <= 56 && !self.ended {
+            if let Some(b) = self.data.get(self.pos..self.pos + 8) {
+                let w = u64::from_be_bytes(b.try_into().expect("8 bytes"));
+                // A zero byte of `!w` is an `0xFF` byte of `w` (exact: no false positives or negatives).
+                let x = !w;
+                if x.wrapping_sub(0x0101_0101_0101_0101) & !x & 0x8080_8080_8080_8080 == 0 {
+                    let k = (56 - self.n) / 8 + 1;
+                    self.acc |= (w >> (64 - 8 * k)) << (64 - self.n - 8 * k);
+                    self.pos += k as usize;
+                    self.n += 8 * k;
+                    self.pushed += 8 * k as u64;
+                    self.real_pushed += 8 * k as u64;
+                    return;
+                }
+            }
+        }
+        self.fill_bytes();
+    }
+
+    /// [`Bits::fill`] byte by byte: stuffed bytes, fill bytes, markers and the end.
+    fn fill_bytes(&mut self) {
         while self.n <= 56 {
             let mut byte = 0u8;
             let mut real = false;
@@ -132,6 +155,7 @@ impl<'a> Bits<'a> {
             }
             self.acc |= (byte as u64) << (56 - self.n);
             self.n += 8;
+            self.pushed += 8;
             if real {
                 self.real_pushed += 8;
             }
@@ -145,14 +169,14 @@ impl<'a> Bits<'a> {
         }
         self.acc <<= k;
         self.n -= k;
-        self.consumed += k as u64;
     }
 
     /// The fast table's entry for the next bits, `(symbol, code length)`; length 0 when the code is longer than
     /// [`FAST`] bits (then [`Bits::decode_long`]).
     #[inline(always)]
     fn peek_fast(&mut self, t: &Huffman) -> (u8, u8) {
-        if self.n < 16 {
+        // At least 32 bits held: a fast code and its up to 15 extra bits need no fill in between.
+        if self.n < 32 {
             self.fill();
         }
         t.fast[(self.acc >> (64 - FAST)) as usize]
@@ -191,7 +215,9 @@ impl<'a> Bits<'a> {
     fn decode_ac(&mut self, t: &Huffman) -> Result<u8, Why> {
         let (sym, len) = self.peek_fast(t);
         if len > 0 {
-            self.skip(len as u32 + (sym & 15) as u32);
+            let k = len as u32 + (sym & 15) as u32;
+            self.acc <<= k;
+            self.n -= k;
             return Ok(sym);
         }
         let sym = self.decode_long(t)?;
@@ -201,7 +227,7 @@ impl<'a> Bits<'a> {
 
     /// Whether the bits taken so far were all in the file (not padding past a marker or the end).
     fn within_data(&self) -> bool {
-        self.consumed <= self.real_pushed
+        self.pushed - self.n as u64 <= self.real_pushed
     }
 }
 
@@ -572,6 +598,77 @@ fn next_marker_any(d: &[u8], mut pos: usize) -> usize {
     d.len()
 }
 
+/// Verdicts of [`check_all`] on JPEGs found complete, kept while a run reads its photos more than once (the survey
+/// of `--window auto`, then the correction): a later read of the same bytes takes the verdict instead of walking
+/// the entropy data again. Keyed by the bytes' length and two hashes of them with random keys of this process
+/// (SipHash; 128 bits in all): a file that changed in between is a new key, checked again.
+struct Remembered {
+    hashers: [std::hash::RandomState; 2],
+    verdicts: std::collections::HashMap<(usize, u64, u64), bool>,
+    /// Runs that asked for it: the verdicts go when the last one ends.
+    users: usize,
+}
+
+/// At most this many verdicts kept (about 10 MB); past them photos are checked on every read.
+const MAX_REMEMBERED: usize = 1 << 18;
+
+static REMEMBERED: std::sync::Mutex<Option<Remembered>> = std::sync::Mutex::new(None);
+
+fn remembered() -> std::sync::MutexGuard<'static, Option<Remembered>> {
+    REMEMBERED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// While held, [`check_all_remembered`] keeps the verdicts of the JPEGs it finds complete.
+pub(crate) struct RememberChecks(());
+
+impl RememberChecks {
+    pub(crate) fn start() -> Self {
+        let mut r = remembered();
+        let r = r.get_or_insert_with(|| Remembered {
+            hashers: Default::default(),
+            verdicts: Default::default(),
+            users: 0,
+        });
+        r.users += 1;
+        RememberChecks(())
+    }
+}
+
+impl Drop for RememberChecks {
+    fn drop(&mut self) {
+        let mut r = remembered();
+        if let Some(m) = r.as_mut() {
+            m.users -= 1;
+            if m.users == 0 {
+                *r = None;
+            }
+        }
+    }
+}
+
+/// [`check_all`], or its verdict on the same bytes earlier while a [`RememberChecks`] is held.
+pub(crate) fn check_all_remembered(data: &[u8]) -> Result<bool, Why> {
+    use std::hash::BuildHasher;
+    let Some(hashers) = remembered().as_ref().map(|r| r.hashers.clone()) else {
+        return check_all(data);
+    };
+    let key = (
+        data.len(),
+        hashers[0].hash_one(data),
+        hashers[1].hash_one(data),
+    );
+    if let Some(&v) = remembered().as_ref().and_then(|r| r.verdicts.get(&key)) {
+        return Ok(v);
+    }
+    let v = check_all(data)?;
+    if let Some(r) = remembered().as_mut() {
+        if r.verdicts.len() < MAX_REMEMBERED {
+            r.verdicts.insert(key, v);
+        }
+    }
+    Ok(v)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -648,5 +745,32 @@ mod tests {
                 assert_eq!(bits.marker, Some(0xD9), "case {case}");
             }
         }
+    }
+
+    /// A verdict is taken again for the same bytes only: a copy cut short and closed with an end marker is
+    /// checked (and refused) however often the complete file was seen.
+    #[test]
+    fn a_remembered_verdict_is_for_the_same_bytes_only() {
+        use libjpeg_turbo_rs::{compress, PixelFormat, Subsampling};
+        use std::hash::BuildHasher;
+        let px: Vec<u8> = (0..96 * 64 * 3).map(|i| (i * 37 % 251) as u8).collect();
+        let jpeg = compress(&px, 96, 64, PixelFormat::Rgb, 92, Subsampling::S420).unwrap();
+        let cut = [&jpeg[..jpeg.len() * 2 / 3], &[0xFF, 0xD9][..]].concat();
+        assert_eq!(check_all(&jpeg), Ok(false));
+        assert!(check_all(&cut).is_err());
+        let keep = RememberChecks::start();
+        for _ in 0..3 {
+            assert_eq!(check_all_remembered(&jpeg), Ok(false));
+            assert!(check_all_remembered(&cut).is_err());
+        }
+        let held = |b: &[u8]| {
+            let r = remembered();
+            let r = r.as_ref().expect("held while a RememberChecks lives");
+            let k = (b.len(), r.hashers[0].hash_one(b), r.hashers[1].hash_one(b));
+            r.verdicts.get(&k).copied()
+        };
+        assert_eq!(held(&jpeg), Some(false));
+        assert_eq!(held(&cut), None);
+        drop(keep);
     }
 }

@@ -427,8 +427,8 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
     let (width, height) = dec.dimensions().ok_or("JPEG without dimensions")?;
     check_size(width, height)?;
     // zune-jpeg, even strict, fills data missing at the end with grey: check that it is all there first.
-    let non_interleaved =
-        crate::io::jpeg_check::check_all(data).map_err(|why| format!("incomplete JPEG: {why}"))?;
+    let non_interleaved = crate::io::jpeg_check::check_all_remembered(data)
+        .map_err(|why| format!("incomplete JPEG: {why}"))?;
     let grey = matches!(
         dec.input_colorspace(),
         Some(ColorSpace::Luma | ColorSpace::LumaA)

@@ -131,12 +131,18 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
 pub(crate) fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| -> Vec<f32> {
         let mut out = vec![0.0f32; src.len()];
+        let last = len.saturating_sub(1);
+        let n = (2 * r + 1) as f64;
         for k in 0..count {
-            let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
-            let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
-            for i in 0..len as isize {
-                out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
-                acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
+            let (src, out) = (&src[k * step..], &mut out[k * step..]);
+            let at = |i: usize| src[i * stride] as f64;
+            let mut acc: f64 = (-(r as isize)..=r as isize)
+                .map(|i| at(i.clamp(0, last as isize) as usize))
+                .sum();
+            // The samples entering and leaving the running sum, clamped to the edges as one index each.
+            for i in 0..len {
+                out[i * stride] = (acc / n) as f32;
+                acc += at((i + r + 1).min(last)) - at(i.saturating_sub(r));
             }
         }
         out
@@ -268,6 +274,15 @@ pub fn overlap_ncc(a: &Texture, b: &Texture, dx: isize, dy: isize) -> (f64, f64)
     (ncc, n / (w * h) as f64)
 }
 
+/// The spectrum of a texture image as [`match_pair`] takes it (Hann-windowed, zero-padded to powers of two): a
+/// sequence matched photo by photo computes each photo's once ([`match_spectra`]).
+pub(crate) type Spectrum = (Vec<f64>, Vec<f64>);
+
+/// The [`Spectrum`] of `t`.
+pub(crate) fn texture_spectrum(t: &Texture) -> Spectrum {
+    spectrum(t, t.width.next_power_of_two(), t.height.next_power_of_two())
+}
+
 /// Match texture image `b` against `a` (same size) by phase correlation; see [`Match`].
 pub fn match_pair(a: &Texture, b: &Texture) -> Match {
     assert_eq!(
@@ -275,9 +290,23 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
         (b.width, b.height),
         "texture sizes differ"
     );
+    match_spectra(a, b, &texture_spectrum(a), &texture_spectrum(b))
+}
+
+/// [`match_pair`] of `a` and `b` given their [`texture_spectrum`]s.
+pub(crate) fn match_spectra(
+    a: &Texture,
+    b: &Texture,
+    (ar, ai): &Spectrum,
+    (br, bi): &Spectrum,
+) -> Match {
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "texture sizes differ"
+    );
     let (pw, ph) = (a.width.next_power_of_two(), a.height.next_power_of_two());
-    let (ar, ai) = spectrum(a, pw, ph);
-    let (br, bi) = spectrum(b, pw, ph);
+    assert_eq!(ar.len(), pw * ph, "a spectrum of another size");
     // conj(A)·B / |A·B|: its inverse peaks at the shift of b against a.
     let (mut re, mut im) = (vec![0.0; pw * ph], vec![0.0; pw * ph]);
     for i in 0..pw * ph {
@@ -322,5 +351,97 @@ pub fn match_pair(a: &Texture, b: &Texture) -> Match {
         ncc,
         overlap,
         accepted: overlap >= MIN_OVERLAP && ncc >= MIN_NCC,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A texture image of a smooth random pattern seen at offset `(ox, oy)`.
+    fn shifted(ox: usize, oy: usize) -> Texture {
+        let (w, h) = (70, 50);
+        let v = |x: usize, y: usize| {
+            let (x, y) = ((x + ox) as f32, (y + oy) as f32);
+            (0.37 * x).sin() * (0.23 * y).cos()
+                + (0.11 * x + 0.31 * y).sin()
+                + 0.5 * (0.05 * x * y).sin()
+        };
+        Texture {
+            width: w,
+            height: h,
+            scale: 3,
+            data: (0..w * h).map(|i| v(i % w, i / w)).collect(),
+        }
+    }
+
+    /// The running sums of [`box_blur`] with each index clamped in the sum (the form before the edges were
+    /// clamped once per index): the reference the kernel must equal bit for bit.
+    fn box_blur_clamped(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+        let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| {
+            let mut out = vec![0.0f32; src.len()];
+            for k in 0..count {
+                let at = |i: isize| src[k * step + i.clamp(0, len as isize - 1) as usize * stride];
+                let mut acc: f64 = (-(r as isize)..=r as isize).map(|i| at(i) as f64).sum();
+                for i in 0..len as isize {
+                    out[k * step + i as usize * stride] = (acc / (2 * r + 1) as f64) as f32;
+                    acc += at(i + r as isize + 1) as f64 - at(i - r as isize) as f64;
+                }
+            }
+            out
+        };
+        let rows = pass(v, w, 1, h, w);
+        pass(&rows, h, w, w, 1)
+    }
+
+    #[test]
+    fn box_blur_is_the_clamped_running_sum_and_near_the_square_mean() {
+        for (w, h, r) in [(1, 1, 1), (7, 3, 2), (40, 25, 5), (13, 31, 20), (64, 2, 1)] {
+            let v: Vec<f32> = (0..w * h)
+                .map(|i| ((i * 2654435761usize) % 1000) as f32 / 37.0 - 9.0)
+                .collect();
+            let got = box_blur(&v, w, h, r);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&got),
+                bits(&box_blur_clamped(&v, w, h, r)),
+                "{w}x{h} r {r}"
+            );
+            // Brute force: the mean over the square, samples past an edge taken from the edge.
+            let c = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    let mut sum = 0.0f64;
+                    for dy in -(r as isize)..=r as isize {
+                        for dx in -(r as isize)..=r as isize {
+                            sum += v[c(y + dy, h) * w + c(x + dx, w)] as f64;
+                        }
+                    }
+                    let want = sum / ((2 * r + 1) * (2 * r + 1)) as f64;
+                    let g = got[y as usize * w + x as usize] as f64;
+                    assert!(
+                        (g - want).abs() < 1e-4,
+                        "{w}x{h} r {r} at ({x}, {y}): {g} {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// A sequence matched with each texture's spectrum computed once gives what matching each pair afresh gives,
+    /// bit for bit.
+    #[test]
+    fn spectra_computed_once_match_as_pairs_do() {
+        let textures: Vec<Texture> = [(0, 0), (4, 1), (9, 3), (9, 3), (15, 2)]
+            .iter()
+            .map(|&(x, y)| shifted(x, y))
+            .collect();
+        let spectra: Vec<Spectrum> = textures.iter().map(texture_spectrum).collect();
+        for i in 1..textures.len() {
+            let (a, b) = (&textures[i - 1], &textures[i]);
+            let once = match_spectra(a, b, &spectra[i - 1], &spectra[i]);
+            assert_eq!(once, match_pair(a, b), "pair {i}");
+            assert!(once.accepted, "pair {i}: {once:?}");
+        }
     }
 }

@@ -34,6 +34,7 @@ pub mod params;
 pub mod raster;
 pub mod refine;
 pub(crate) mod ring;
+pub(crate) mod running;
 pub mod scatter;
 pub mod stretch;
 pub mod transfer;

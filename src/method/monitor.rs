@@ -685,6 +685,8 @@ pub struct Monitor {
     sorted_changes: Vec<f32>,
     /// Texture image of the previous photo's block medians, for its motion (see [`Health::motion`]).
     previous_texture: Option<crate::method::matching::Texture>,
+    /// Its spectrum, when it is large enough to be matched.
+    previous_spectrum: Option<crate::method::matching::Spectrum>,
     /// Recent (motion, correlation) of consecutive photos, at most [`STILL_PHOTOS`].
     recent_motion: std::collections::VecDeque<(f32, f32)>,
     /// The window `n` (0: not told; [`STILL_DEFAULT_WINDOW`] is assumed).
@@ -935,12 +937,15 @@ impl Monitor {
         // are matched at full block resolution, as before.
         let scale = crate::method::matching::reduction_to(own.width, own.height, STILL_MATCH_SIDE);
         let texture = crate::method::matching::texture(own, scale);
-        if let Some(prev) = &self.previous_texture {
-            if (prev.width, prev.height) == (texture.width, texture.height)
-                && texture.width >= MIN_ROUGHNESS_SIZE.0
-                && texture.height >= MIN_ROUGHNESS_SIZE.1
-            {
-                let m = crate::method::matching::match_pair(prev, &texture);
+        // Each photo's spectrum once: the next photo is matched against it.
+        let spectrum = (texture.width >= MIN_ROUGHNESS_SIZE.0
+            && texture.height >= MIN_ROUGHNESS_SIZE.1)
+            .then(|| crate::method::matching::texture_spectrum(&texture));
+        let pair = (&self.previous_texture, &self.previous_spectrum, &spectrum);
+        if let (Some(prev), Some(prev_spectrum), Some(spectrum)) = pair {
+            if (prev.width, prev.height) == (texture.width, texture.height) {
+                let m =
+                    crate::method::matching::match_spectra(prev, &texture, prev_spectrum, spectrum);
                 h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
                 h.motion_ncc = Some(m.ncc as f32);
                 if self.recent_motion.len() == STILL_PHOTOS {
@@ -953,6 +958,7 @@ impl Monitor {
         // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
         let short_side = (texture.width.min(texture.height) * scale) as f32;
         self.previous_texture = Some(texture);
+        self.previous_spectrum = spectrum;
         // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
         // benthic, Sparus). Judged on the median of the last few trusted matches.
         if self.recent_motion.len() == STILL_PHOTOS {

@@ -415,14 +415,21 @@ pub fn near_shape(m: &Raster, near: &Raster, s: Option<&Raster>) -> Raster {
     let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
     let mut out = m.clone();
     for ch in 0..c {
-        let ratio = |x: usize, y: usize| {
-            let i = (y * w + x) * c + ch;
-            let (a, b) = (m.data[i] - sv(i), near.data[i] - sv(i));
-            (a > NEAR_MIN_LIT && b > NEAR_MIN_LIT && (b / a).is_finite()).then_some(b / a)
-        };
+        // Each block's ratio once (NaN: no vote; a ratio taken is positive and finite): a block votes in the
+        // squares of up to four nodes.
+        let ratios: Vec<f32> = (0..w * h)
+            .map(|b| {
+                let i = b * c + ch;
+                let (a, b) = (m.data[i] - sv(i), near.data[i] - sv(i));
+                match a > NEAR_MIN_LIT && b > NEAR_MIN_LIT && (b / a).is_finite() {
+                    true => b / a,
+                    false => f32::NAN,
+                }
+            })
+            .collect();
         // The median log ratio around each node (NaN without votes): the log of the median ratio, since the median
         // picks one of the votes and the logarithm keeps their order (one logarithm per node, not per vote).
-        let mut node = node_medians(&gx, &gy, r, (w, h), ratio);
+        let mut node = node_medians_grid(&gx, &gy, r, (w, h), &ratios);
         for v in &mut node {
             *v = v.ln();
         }
@@ -477,6 +484,32 @@ pub(crate) fn node_medians(
     node
 }
 
+/// [`node_medians`] of the values of a `w`×`h` grid, NaN where a block does not vote: the same votes in the same
+/// order, taken a row of the square at a time.
+pub(crate) fn node_medians_grid(
+    gx: &[usize],
+    gy: &[usize],
+    r: usize,
+    (w, h): (usize, usize),
+    grid: &[f32],
+) -> Vec<f32> {
+    assert_eq!(grid.len(), w * h, "grid of another size");
+    let mut node = vec![f32::NAN; gx.len() * gy.len()];
+    let mut votes = Vec::with_capacity((2 * r + 1) * (2 * r + 1));
+    for (j, &ny) in gy.iter().enumerate() {
+        for (k, &nx) in gx.iter().enumerate() {
+            votes.clear();
+            let (x0, x1) = (nx.saturating_sub(r), (nx + r + 1).min(w));
+            for y in ny.saturating_sub(r)..(ny + r + 1).min(h) {
+                let row = &grid[y * w + x0..y * w + x1];
+                votes.extend(row.iter().copied().filter(|v| !v.is_nan()));
+            }
+            node[j * gx.len() + k] = quantile(&mut votes, 0.5);
+        }
+    }
+    node
+}
+
 /// The value at block `(x, y)` interpolated bilinearly between the values `at(j, k)` of the grid nodes
 /// `(gx[k], gy[j])` around it; NaN nodes are left out (their weight with them); `None` when all four are NaN.
 pub(crate) fn between_nodes(
@@ -517,6 +550,29 @@ fn between(nodes: &[usize], p: usize) -> (usize, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The grid's node medians are the closure's, bit for bit: the same votes in the same order (squares cut at
+    /// every edge, blocks without a vote, ties, a node without any vote).
+    #[test]
+    fn node_medians_of_a_grid_are_the_closures() {
+        for (w, h, r) in [(37, 23, 5), (9, 30, 4), (1, 1, 1), (16, 16, 16)] {
+            let grid: Vec<f32> = (0..w * h)
+                .map(|i| match (i * 7919) % 13 {
+                    0 | 1 => f32::NAN,
+                    k => (k % 5) as f32 * 0.25 + (i % 3) as f32,
+                })
+                .collect();
+            let (gx, gy) = (near_nodes(w, r), near_nodes(h, r));
+            let want = node_medians(&gx, &gy, r, (w, h), |x, y| {
+                Some(grid[y * w + x]).filter(|v| !v.is_nan())
+            });
+            let got = node_medians_grid(&gx, &gy, r, (w, h), &grid);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got), bits(&want), "{w}x{h}, r {r}");
+        }
+        let none = node_medians_grid(&[0], &[0], 1, (2, 1), &[f32::NAN, f32::NAN]);
+        assert!(none[0].is_nan());
+    }
 
     /// [`near_shape`] against a direct computation: the median log ratio over each node's square by sorting, then
     /// bilinear interpolation between the nodes.

@@ -21,6 +21,7 @@ use serde::Serialize;
 use crate::method::matching::box_blur;
 use crate::method::raster::Raster;
 use crate::method::refine::quantile;
+use crate::method::running::RunningQuantile;
 use crate::method::window::{near_range, quantile_window, window_range, NEAR_MIN, NEAR_RISK};
 
 /// Photos on each side of a photo whose block images make the reference its dark share is measured against.
@@ -64,6 +65,8 @@ pub struct Surveyor {
     s_low: Option<Raster>,
     /// Grey `M − S`-like levels of the last photos, with their first photo's number.
     greys: VecDeque<Vec<f32>>,
+    /// The levels of `greys`, per block, for their reference ([`REFERENCE_QUANTILE`]).
+    held: Option<RunningQuantile>,
     size: (usize, usize),
     pushed: usize,
     /// The scenes of the last photos measured (at most [`MAX_LAG`] + 1).
@@ -92,6 +95,7 @@ impl Surveyor {
         Surveyor {
             s_low: s_low.cloned(),
             greys: VecDeque::new(),
+            held: None,
             size: (0, 0),
             pushed: 0,
             scenes: VecDeque::new(),
@@ -114,12 +118,16 @@ impl Surveyor {
         } else {
             vec![f32::NAN; self.size.0 * self.size.1]
         };
+        let n = 2 * REFERENCE_HALF + 1;
+        let held = self
+            .held
+            .get_or_insert_with(|| RunningQuantile::new(grey.len(), n));
+        if self.greys.len() == n {
+            held.remove(&self.greys.pop_front().expect("n photos held"));
+        }
+        held.add(&grey);
         self.greys.push_back(grey);
         self.pushed += 1;
-        let n = 2 * REFERENCE_HALF + 1;
-        if self.greys.len() > n {
-            self.greys.pop_front();
-        }
         if self.greys.len() == n {
             // Every photo whose reference is these photos: the first `REFERENCE_HALF + 1` at once, then one each.
             while self.done.len() + REFERENCE_HALF < self.pushed {
@@ -131,7 +139,10 @@ impl Surveyor {
     /// Photo `j`'s dark share against the reference of the photos held (the first of them is photo `first`).
     fn measure(&mut self, j: usize, first: usize) {
         let own = &self.greys[j - first];
-        let reference = reference(&self.greys);
+        let reference = self
+            .held
+            .as_ref()
+            .map_or_else(Vec::new, |h| h.quantile(REFERENCE_QUANTILE));
         let coverage = dark_share(own, &reference);
         let scene = scene(own, &reference, self.size);
         // This photo's scene against the photos before it: their correlation at lag k.
@@ -156,19 +167,6 @@ impl Surveyor {
         }
         self.done
     }
-}
-
-/// Per block, [`REFERENCE_QUANTILE`] of the photos' grey levels (NaN ones left out).
-fn reference(greys: &VecDeque<Vec<f32>>) -> Vec<f32> {
-    let len = greys.front().map_or(0, Vec::len);
-    let mut col = Vec::with_capacity(greys.len());
-    (0..len)
-        .map(|b| {
-            col.clear();
-            col.extend(greys.iter().map(|g| g[b]).filter(|v| v.is_finite()));
-            quantile(&mut col, REFERENCE_QUANTILE)
-        })
-        .collect()
 }
 
 /// `own / reference` per block where the reference is lit (at least 5 % of its 95th percentile: corners the lights

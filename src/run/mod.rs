@@ -51,6 +51,9 @@ pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report
 /// Plan, prepare the engine, stream the survey, report.
 fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let started = Instant::now();
+    // Photos are read more than once (the plan's samples, the survey, the correction): each JPEG's completeness
+    // is checked on its first read only.
+    let _checks = crate::io::jpeg_check::RememberChecks::start();
     let plan = Plan::new(opts, progress)?;
     let (params, transfer_assumed) = resolve(opts, &plan, progress)?;
     // The options with every `auto` resolved, so the report and the lock record what ran.
