@@ -11,6 +11,7 @@ mod cli;
 mod correct_e2e;
 mod defaults;
 mod engine;
+mod exposure;
 mod faults;
 mod field;
 mod first_day;
