@@ -270,6 +270,10 @@ pub fn consistency(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<f64> 
 /// [`consistency`] and the overlap difference: the same RMS difference divided by the mean of all pixels instead
 /// of their standard deviation (a correction flattens the photos, which lowers the standard deviation and so
 /// raises the consistency figure even when the overlaps agree better; the mean is not moved by that).
+///
+/// Public for the dive matrix (examples/dive_matrix.rs), which scores the signal-masked sets with it; not part of
+/// the documented surface.
+#[doc(hidden)]
 pub fn consistency_parts(photos: &[Raster], h: &[[f64; 9]], cell: f64) -> Option<(f64, f64)> {
     assert_eq!(photos.len(), h.len(), "one placement per photo");
     let c = photos.first()?.channels;
@@ -512,14 +516,14 @@ pub struct Evaluation {
     /// Scores per set of photos, in the order given.
     pub sets: Vec<Scores>,
     /// What the user should know about the scores: a set its `correct` run wrote with another curve than
-    /// `transfer` ([`transfer_warnings`]).
+    /// `transfer` (`transfer_warnings`).
     pub warnings: Vec<String>,
 }
 
 /// The curve the `correct` run that wrote `folder` took, from its `<folder>/_abysslight/report.json`
 /// (`options.transfer`, which a run records with `auto` resolved; for an `auto` there, the curve
 /// `transfer_assumed` names). `None` when the folder holds no readable report.
-pub fn run_transfer(folder: &Path) -> Option<Transfer> {
+pub(crate) fn run_transfer(folder: &Path) -> Option<Transfer> {
     let text =
         std::fs::read_to_string(folder.join(crate::io::WORK_DIR).join("report.json")).ok()?;
     let report: serde_json::Value = serde_json::from_str(&text).ok()?;
@@ -537,7 +541,7 @@ pub fn run_transfer(folder: &Path) -> Option<Transfer> {
 /// A warning for each set whose `correct` run ([`run_transfer`]) took another curve than `transfer`, the one the
 /// scores assume: its photos would be read into linear light with another curve than they were written with, and
 /// its scores would not be those of the run.
-pub fn transfer_warnings(sets: &[(String, PathBuf)], transfer: Transfer) -> Vec<String> {
+pub(crate) fn transfer_warnings(sets: &[(String, PathBuf)], transfer: Transfer) -> Vec<String> {
     sets.iter()
         .filter_map(|(label, folder)| {
             let run = run_transfer(folder).filter(|t| *t != transfer)?;

@@ -371,7 +371,7 @@ fn decode_unguarded(path: &Path) -> Result<Photo> {
 /// The most bytes a JPEG of `width × height` pixels is read from: 8 bytes a pixel (a JPEG at the highest quality
 /// of pure noise takes about 3) plus 64 MiB of metadata segments. A file longer than that (a valid JPEG followed
 /// by gigabytes of garbage) is read only that far: the decoder stops at the end marker anyway.
-pub fn jpeg_byte_budget(width: usize, height: usize) -> u64 {
+pub(crate) fn jpeg_byte_budget(width: usize, height: usize) -> u64 {
     (width as u64 * height as u64).saturating_mul(8) + (64 << 20)
 }
 

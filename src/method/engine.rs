@@ -255,7 +255,7 @@ impl<T> Engine<T> {
     }
 
     /// Each photo's window, quantile and near window (by the order photos are pushed), chosen per stretch of the
-    /// mission ([`crate::method::stretch::choose`]), for [`Method::Abyss`] with [`Params::auto_window`]; photos
+    /// mission (`method::stretch::choose`), for [`Method::Abyss`] with [`Params::auto_window`]; photos
     /// past the end take the last choice. The ring then holds the longest window. Refused once photos were pushed.
     pub fn set_stretches(&mut self, choices: Vec<Choice>) -> Result<()> {
         if self.ring.pushed() > 0 {

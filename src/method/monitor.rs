@@ -94,7 +94,7 @@ pub enum Flag {
         /// Ground moved over a window, as a share of the frame's short side.
         span: f32,
     },
-    /// The correction added structure instead of removing the lights' (see [`Thresholds::structure_added`]):
+    /// The correction added structure instead of removing the lights' (see `Thresholds::structure_added`):
     /// bright inverse ghosts of objects the window saw at the same place in most of its photos.
     StructureAdded {
         /// Share of the photo's fine structure after the correction (above 1: added).

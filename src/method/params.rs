@@ -118,7 +118,7 @@ pub struct Params {
     /// Photos in the sliding window, `n` (odd). Default: 7.
     pub window: usize,
     /// With [`Method::Abyss`]: each photo's window, quantile and near window chosen per stretch of the mission from
-    /// a survey of its photos before the correction ([`crate::method::stretch`]; the engine takes it with
+    /// a survey of its photos before the correction (`method::stretch`; the engine takes it with
     /// [`Engine::set_stretches`](crate::method::engine::Engine::set_stretches)); `window` is then the window of a
     /// mission without a survey (photos as they come). Off when `window` or `contamination` is given. Default: true.
     pub auto_window: bool,
@@ -176,7 +176,7 @@ pub struct Steps {
     /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
     /// Bend `F` to the ratios of the window's overlapping photos, registered by phase correlation
-    /// ([`crate::method::overlap`]): nodules, burrows and fauna that held the window's `M` cancel in them.
+    /// (`method::overlap`): nodules, burrows and fauna that held the window's `M` cancel in them.
     /// Default: false.
     pub overlaps: bool,
 }

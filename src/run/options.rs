@@ -195,7 +195,7 @@ pub struct Options {
     #[serde(default)]
     pub bright_spots: bool,
     /// `method = abyss`: bend `F` to the ratios of the window's overlapping photos, where nodules, burrows and
-    /// fauna cancel ([`crate::method::overlap`]). Default: false (docs/overlaps.md).
+    /// fauna cancel (`method::overlap`). Default: false (docs/overlaps.md).
     #[serde(default)]
     pub overlaps: bool,
 }
@@ -348,7 +348,7 @@ impl Options {
     }
 
     /// The longest window a photo of the run can have: with `--window auto` (neither `--window` nor
-    /// `--contamination`, `--method abyss`) [`crate::method::stretch::MAX_AUTO_WINDOW`], else the window.
+    /// `--contamination`, `--method abyss`) the longest the survey chooses, 31 photos; else the window.
     pub fn longest_window(&self) -> Result<usize, Error> {
         Ok(if self.params()?.window_is_auto() {
             crate::method::stretch::MAX_AUTO_WINDOW

@@ -140,7 +140,7 @@ impl FrameReport {
     }
 }
 
-/// What `--window auto` chose for one photo ([`crate::method::stretch::Choice`]), and why in words.
+/// What `--window auto` chose for one photo (`method::stretch::Choice`), and why in words.
 #[derive(Debug, Clone, Serialize)]
 pub struct WindowAuto {
     /// The choice.
