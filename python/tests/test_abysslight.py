@@ -118,6 +118,11 @@ def test_options_by_name_match_the_command_and_change_the_result(srgb_dive, tmp_
     _, b = engine_outputs(root, transfer="srgb", denoise=False)
     assert all(np.array_equal(a[i].image, b[i].image) for i in a)
     assert any(not np.array_equal(a[i].image, default[i].image) for i in a)
+    # The exposure levelling's switch by both names (this dive has no exposure jump: the same pixels either way).
+    _, c = engine_outputs(root, transfer="srgb", no_level_exposures=True)
+    _, d = engine_outputs(root, transfer="srgb", level_exposures=False)
+    assert all(np.array_equal(c[i].image, d[i].image) for i in c)
+    assert all(np.array_equal(c[i].image, default[i].image) for i in c)
 
 
 def test_correct_writes_the_same_bytes_as_the_command(srgb_dive, tmp_path):
