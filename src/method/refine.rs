@@ -31,15 +31,16 @@ pub fn quantile(v: &mut [f32], q: f64) -> f32 {
 
 /// Lit level of each channel of `f`: its [`LIT_PERCENTILE`] over the finite samples.
 pub fn lit_level(f: &Raster) -> Vec<f32> {
-    let c = f.channels;
+    lit_level_every(&f.data, f.channels, 1)
+}
+
+/// [`lit_level`] of interleaved `data` with `c` channels, taken on every `stride`-th block.
+fn lit_level_every(data: &[f32], c: usize, stride: usize) -> Vec<f32> {
     (0..c)
         .map(|ch| {
-            let mut v: Vec<f32> = f
-                .data
-                .iter()
-                .skip(ch)
-                .step_by(c)
-                .copied()
+            let mut v: Vec<f32> = (ch..data.len())
+                .step_by(c * stride)
+                .map(|i| data[i])
                 .filter(|x| x.is_finite())
                 .collect();
             quantile(&mut v, LIT_PERCENTILE)
@@ -97,17 +98,7 @@ impl<'a> Against<'a> {
             .enumerate()
             .map(|(i, &v)| v - s.map_or(0.0, |s| s.data[i]))
             .collect();
-        let c = m.channels;
-        let level = (0..c)
-            .map(|ch| {
-                let mut v: Vec<f32> = (ch..lit.len())
-                    .step_by(c * stride)
-                    .map(|i| lit[i])
-                    .filter(|x| x.is_finite())
-                    .collect();
-                quantile(&mut v, LIT_PERCENTILE)
-            })
-            .collect();
+        let level = lit_level_every(&lit, m.channels, stride);
         Against { m, s, lit, level }
     }
 
