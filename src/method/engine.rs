@@ -739,7 +739,7 @@ impl<T> Engine<T> {
         let noise = self.noise_model(photo, &f);
         let blended = noise
             .as_ref()
-            .and_then(|model| self.blend(model, &f, own, s_k.as_ref()));
+            .and_then(|model| self.blend(model, &f, own, s_k.as_ref(), gain_q > 0.5));
         Estimate {
             use_blend: blended.is_some() || rescaled,
             f,
@@ -822,7 +822,7 @@ impl<T> Engine<T> {
     }
 
     /// The blend of dim regions towards their local level, with its levels evened out by light
-    /// (`level_by_light`); `None` where it changes nothing (no noise measured: most camera JPEGs), so the photo
+    /// (`level_by_light`, by bins' trimmed means where `dense`: the window was chosen for a dense field); `None` where it changes nothing (no noise measured: most camera JPEGs), so the photo
     /// takes the plain path.
     fn blend(
         &self,
@@ -830,6 +830,7 @@ impl<T> Engine<T> {
         f: &Raster,
         own: &Raster,
         s_k: Option<&Raster>,
+        dense: bool,
     ) -> Option<Blended> {
         let keep = self.masked_blocks.as_deref();
         let k = self.params.downsample;
@@ -838,7 +839,7 @@ impl<T> Engine<T> {
             return None;
         }
         if self.params.steps.level_by_light {
-            level_by_light(&mut b.level, f, &self.colour, keep);
+            level_by_light(&mut b.level, f, &self.colour, keep, dense);
         }
         Some(b)
     }

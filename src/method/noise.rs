@@ -467,12 +467,24 @@ pub const MAX_LEVEL_SHIFT: f32 = 2.0;
 /// photo itself. A block keeps its difference from the blocks lit like it (a patch of nodules stays darker);
 /// where the light is good (the blend's weight near 1, where the level hardly counts) the factor is about 1.
 ///
-/// The factor is the median `A_low/C` of the brightest quarter of blocks over that of the block's bin of `F`
-/// ([`LIGHT_BINS`] bins, linear between bin centres, constant beyond them), at most [`MAX_LEVEL_SHIFT`] either
-/// way. Blocks flagged in `keep` (overlays, vehicle parts) neither count nor change. A channel with fewer than
+/// The factor is the typical `A_low/C` of the brightest quarter of blocks over that of the block's bin of `F`
+/// ([`LIGHT_BINS`] bins at the median `F` of each, linear between bin centres, constant beyond them), at most
+/// [`MAX_LEVEL_SHIFT`] either way. Typical is the median, or with `dense` (a field whose window was chosen for
+/// dense clutter) the mean without the lowest and highest [`LEVEL_TRIM`] of the values: where nodules cover
+/// nearly half the ground a bin's median sits at the edge between the nodules' levels and the sediment's and jumps
+/// from one to the other with the share of nodules in the bin, so the factor changed from photo to photo (the red
+/// of a 45 % field by ±13 %) and overlapping photos disagreed; the trimmed mean moves in proportion to the share.
+/// On sparse ground the median stays: the blend pulls a dim block's clutter towards the seafloor's level, which
+/// lifts a dim bin's mean but not its median. Blocks flagged in `keep` (overlays, vehicle parts) neither count nor change. A channel with fewer than
 /// `8·LIGHT_BINS` blocks is left as it is; on large photos the bins are measured on every `k`-th block (at most
 /// [`MAX_LIGHT_SAMPLES`]) and every block is corrected. Measured on the dive matrix: docs/evaluation.md.
-pub fn level_by_light(level: &mut Raster, f: &Raster, colour: &[f32], keep: Option<&[bool]>) {
+pub fn level_by_light(
+    level: &mut Raster,
+    f: &Raster,
+    colour: &[f32],
+    keep: Option<&[bool]>,
+    dense: bool,
+) {
     let c = f.channels;
     let blocks = f.data.len() / c;
     // The bins' medians from at most about MAX_LIGHT_SAMPLES blocks (a 12 MP photo has 187,500).
@@ -489,18 +501,25 @@ pub fn level_by_light(level: &mut Raster, f: &Raster, colour: &[f32], keep: Opti
             continue;
         }
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let median_of = |part: &[(f32, f32)], pick: fn(&(f32, f32)) -> f32| {
-            let mut v: Vec<f32> = part.iter().map(pick).collect();
-            quantile(&mut v, 0.5)
+        let typical_of = |part: &[(f32, f32)]| {
+            let mut v: Vec<f32> = part.iter().map(|p| p.1).collect();
+            if dense {
+                trimmed_mean(&mut v, LEVEL_TRIM)
+            } else {
+                quantile(&mut v, 0.5)
+            }
         };
-        let reference = median_of(&pts[n - n / 4..], |p| p.1);
+        let reference = typical_of(&pts[n - n / 4..]);
         if reference.is_nan() || reference <= 0.0 {
             continue;
         }
         let (centres, typical): (Vec<f32>, Vec<f32>) = (0..LIGHT_BINS)
             .map(|i| {
                 let part = &pts[i * n / LIGHT_BINS..(i + 1) * n / LIGHT_BINS];
-                (median_of(part, |p| p.0), median_of(part, |p| p.1))
+                {
+                    let mut fs: Vec<f32> = part.iter().map(|p| p.0).collect();
+                    (quantile(&mut fs, 0.5), typical_of(part))
+                }
             })
             .unzip();
         let factor = |fv: f32| {
@@ -524,6 +543,17 @@ pub fn level_by_light(level: &mut Raster, f: &Raster, colour: &[f32], keep: Opti
             level.data[i] = (level.data[i] * factor(f.data[i])).max(LEVEL_MIN);
         }
     }
+}
+
+/// Share of a bin's values left out at each end of the trimmed mean of [`level_by_light`].
+pub const LEVEL_TRIM: f32 = 0.1;
+
+/// The mean of `v` without its lowest and highest `trim` share (sorted in place; NaN when `v` is empty).
+fn trimmed_mean(v: &mut [f32], trim: f32) -> f32 {
+    v.sort_unstable_by(|a, b| a.total_cmp(b));
+    let cut = (v.len() as f32 * trim) as usize;
+    let kept = &v[cut..v.len() - cut];
+    (kept.iter().map(|&x| x as f64).sum::<f64>() / kept.len() as f64) as f32
 }
 
 /// Smallest median `F` of a channel's brightest quarter of blocks for its texture `τ²` to be measured (a channel
@@ -967,7 +997,7 @@ mod tests {
 
     fn removes_the_loss((f, before, dev): (Raster, Raster, Vec<f32>)) {
         let mut after = before.clone();
-        level_by_light(&mut after, &f, &[0.4], None);
+        level_by_light(&mut after, &f, &[0.4], None, false);
         // Before: the dimmest blocks' typical level is about 0.7 of the bright ones'; after, within 4 %.
         let bright = typical(&after, &f, 0.5..2.0);
         for range in [0.0..0.01, 0.01..0.03, 0.03..0.08, 0.08..0.2] {
@@ -998,9 +1028,68 @@ mod tests {
     fn level_by_light_leaves_levels_without_a_loss_within_their_spread() {
         let (f, before, _) = levels(|_| 1.0);
         let mut after = before.clone();
-        level_by_light(&mut after, &f, &[0.4], None);
+        level_by_light(&mut after, &f, &[0.4], None, false);
         for (a, b) in after.data.iter().zip(&before.data) {
             assert!((a / b - 1.0).abs() < 0.06, "{b} -> {a}");
+        }
+    }
+
+    #[test]
+    fn level_by_light_does_not_level_a_nodule_field_by_its_share_of_nodules() {
+        // No loss at any light: sediment at 1, nodules at 0.3 (±5 % each), the nodules' share 40 % on the frame's
+        // dim half and 55 % on its bright half. A bin's median is then sediment on one half and nodule on the
+        // other (the clamp's factor of 2); the means without the lowest and highest tenth move with the share
+        // only: (0.3·0.3 + 0.5)/0.8 on the dim half against (0.45·0.3 + 0.35)/0.8 on the bright one.
+        let (w, h) = (96, 72);
+        let mut next = crate::method::xorshift32(0x51ED_270B);
+        let mut unit = move || next() as f32 / u32::MAX as f32;
+        let f = Raster::from_fn(w, h, 1, |x, _, _| 0.002 + x as f32 / w as f32);
+        let before = Raster::from_fn(w, h, 1, |x, _, _| {
+            let share = if x < w / 2 { 0.40 } else { 0.55 };
+            let own = if unit() < share { 0.3 } else { 1.0 };
+            0.4 * own * (0.95 + 0.1 * unit())
+        });
+        let mut after = before.clone();
+        level_by_light(&mut after, &f, &[0.4], None, true);
+        let dim_factor = (0.45 * 0.3 + 0.35) / (0.3 * 0.3 + 0.5);
+        for (i, (a, b)) in after.data.iter().zip(&before.data).enumerate() {
+            // The bins next to the change of share mix both halves.
+            let x = i % w;
+            if x.abs_diff(w / 2) < w / 8 {
+                continue;
+            }
+            // Each bin's share of nodules varies by a few per cent around its half's.
+            let expected = if x < w / 2 { dim_factor } else { 1.0 };
+            assert!(
+                (a / b / expected - 1.0).abs() < 0.08,
+                "block {i}: {b} -> {a}"
+            );
+        }
+        // Levelled by its bins' medians (as on sparse ground), the same field's dim half would move by the clamp.
+        let mut medians = before.clone();
+        level_by_light(&mut medians, &f, &[0.4], None, false);
+        assert!(
+            (0..w * h).any(|i| medians.data[i] / before.data[i] <= 1.0 / MAX_LEVEL_SHIFT + 1e-6)
+        );
+    }
+
+    #[test]
+    fn trimmed_mean_is_the_mean_of_the_sorted_middle() {
+        let mut next = crate::method::xorshift32(0x00DD_BA11);
+        for n in [1usize, 2, 9, 10, 11, 100, 257] {
+            let v: Vec<f32> = (0..n).map(|_| (next() % 50) as f32 * 0.1).collect();
+            let mut sorted = v.clone();
+            sorted.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            for trim in [0.0f32, 0.1, 0.25] {
+                let cut = (n as f32 * trim).floor() as usize;
+                let middle = &sorted[cut..n - cut];
+                let want = middle.iter().map(|&x| x as f64).sum::<f64>() / middle.len() as f64;
+                let got = trimmed_mean(&mut v.clone(), trim);
+                assert!(
+                    (got as f64 - want).abs() < 1e-6,
+                    "n {n} trim {trim}: {got} vs {want}"
+                );
+            }
         }
     }
 
@@ -1010,7 +1099,7 @@ mod tests {
         let (f, before, _) = levels(bias);
         let keep: Vec<bool> = (0..f.data.len()).map(|i| i % 3 == 0).collect();
         let mut after = before.clone();
-        level_by_light(&mut after, &f, &[0.4], Some(&keep));
+        level_by_light(&mut after, &f, &[0.4], Some(&keep), false);
         for (i, &kept) in keep.iter().enumerate() {
             if kept {
                 assert_eq!(after.data[i], before.data[i]);
@@ -1020,7 +1109,7 @@ mod tests {
         let small_f = Raster::from_fn(10, 10, 1, |x, _, _| 0.01 + x as f32 * 0.1);
         let small = Raster::from_fn(10, 10, 1, |x, _, _| 0.4 * bias(0.01 + x as f32 * 0.1));
         let mut got = small.clone();
-        level_by_light(&mut got, &small_f, &[0.4], None);
+        level_by_light(&mut got, &small_f, &[0.4], None, false);
         assert_eq!(got, small);
     }
 
