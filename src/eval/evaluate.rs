@@ -466,6 +466,9 @@ pub struct Scores {
     pub consistency: Option<f64>,
     /// RMS difference over overlaps divided by the mean of all pixels (see `consistency_parts`).
     pub overlap_difference: Option<f64>,
+    /// Share of the samples at black or at the top code. Two overlapping photos clipped at the same place agree
+    /// whatever lies there: a set with many clipped samples scores a better consistency than it earns.
+    pub clipped: f64,
 }
 
 /// How the registration of `--register` went.
@@ -696,16 +699,20 @@ impl ScoreSet<'_> {
             settings.downsample.max(1)
         };
         // Without a truth the photos serve the consistency metric only, and are masked as they load.
-        let photos: Vec<Raster> = names
+        let (photos, clipped): (Vec<Raster>, Vec<(usize, usize)>) = names
             .par_iter()
             .map(|n| {
                 let mut r = load_linear(&folder.join(n), transfer)?;
+                let clipped = clipped_samples(&r);
                 if let (Some((m, path)), None) = (mask, albedo) {
                     leave_out(&mut r, m, path)?;
                 }
-                Ok(reduce(&r, k))
+                Ok((reduce(&r, k), clipped))
             })
-            .collect::<Result<_>>()?;
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .unzip();
+        let (at_limit, samples) = clipped.iter().fold((0, 0), |(a, n), (c, t)| (a + c, n + t));
         if let Some(a) = &albedo {
             for (p, (t, n)) in photos.iter().zip(a.iter().zip(names)) {
                 if p.layout() != t.layout() {
@@ -747,8 +754,16 @@ impl ScoreSet<'_> {
             residual_pattern: albedo.map(|a| residual_pattern(&photos, a, settings.grid)),
             consistency: parts.map(|p| p.0),
             overlap_difference: parts.map(|p| p.1),
+            clipped: at_limit as f64 / samples.max(1) as f64,
         })
     }
+}
+
+/// Samples of a photo in linear light at black or at the top (0 and 1: the codes 0 and the largest), and all its
+/// samples.
+fn clipped_samples(r: &Raster) -> (usize, usize) {
+    let at_limit = r.data.iter().filter(|&&v| v <= 0.0 || v >= 1.0).count();
+    (at_limit, r.data.len())
 }
 
 /// Score each `(label, folder)` of photos. `truth` is a simulated dive folder (or its `truth/dive.json`);
@@ -824,18 +839,19 @@ impl Evaluation {
     pub fn table(&self) -> String {
         let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
         let mut s = String::from(
-            "| method | photos | albedo error | residual pattern | consistency | overlap difference |\n\
-             |---|---:|---:|---:|---:|---:|\n",
+            "| method | photos | albedo error | residual pattern | consistency | overlap difference | clipped |\n\
+             |---|---:|---:|---:|---:|---:|---:|\n",
         );
         for r in &self.sets {
             s.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {:.1} % |\n",
                 r.label,
                 r.photos,
                 f(r.albedo_error),
                 f(r.residual_pattern),
                 f(r.consistency),
-                f(r.overlap_difference)
+                f(r.overlap_difference),
+                100.0 * r.clipped
             ));
         }
         s
@@ -873,6 +889,11 @@ impl Evaluation {
                 .iter()
                 .filter(|(f, _)| has(*f))
                 .map(|(_, m)| m.to_string()),
+        );
+        lines.push(
+            "clipped: samples at black or white; photos clipped at the same place agree whatever \
+            lies there, which flatters the consistency and the overlap difference"
+                .to_string(),
         );
         lines
     }
@@ -943,6 +964,7 @@ mod tests {
             residual_pattern: albedo,
             consistency,
             overlap_difference: consistency,
+            clipped: 0.0,
         };
         let ev = |sets| Evaluation {
             truth: None,
@@ -954,9 +976,10 @@ mod tests {
             warnings: Vec::new(),
         };
         let only_overlaps = ev(vec![scores(Some(0.1), None)]).legend();
-        assert_eq!(only_overlaps.len(), 3, "{only_overlaps:?}");
+        assert_eq!(only_overlaps.len(), 4, "{only_overlaps:?}");
         assert!(only_overlaps[1].starts_with("consistency: "));
         assert!(only_overlaps[2].starts_with("overlap difference: "));
+        assert!(only_overlaps[3].starts_with("clipped: "));
         let all = ev(vec![scores(None, Some(0.1)), scores(Some(0.1), None)]).legend();
         let names: Vec<&str> = all[1..]
             .iter()
@@ -968,9 +991,28 @@ mod tests {
                 "albedo error",
                 "residual pattern",
                 "consistency",
-                "overlap difference"
+                "overlap difference",
+                "clipped"
             ]
         );
+    }
+
+    #[test]
+    fn clipped_samples_are_those_at_black_or_white() {
+        // Codes 0, 1, 254 and 255 of an 8-bit photo in each curve: the first and the last are clipped.
+        for transfer in [Transfer::Linear, Transfer::Srgb] {
+            let photo = crate::method::raster::Photo {
+                layout: crate::method::raster::Layout {
+                    width: 4,
+                    height: 1,
+                    channels: 1,
+                },
+                samples: crate::method::raster::Samples::U8(vec![0, 1, 254, 255]),
+                alpha: None,
+            };
+            let r = Raster::from_photo_linear(&photo, transfer);
+            assert_eq!(clipped_samples(&r), (2, 4), "{transfer:?}: {:?}", r.data);
+        }
     }
 
     #[test]

@@ -153,6 +153,7 @@ fn evaluate_warns_of_another_curve_says_what_scores_mean_and_writes_json_only_wh
         "residual pattern: ",
         "consistency: ",
         "overlap difference: ",
+        "clipped: ",
     ] {
         assert!(err.contains(meaning), "{meaning:?} missing: {err}");
     }
