@@ -52,6 +52,8 @@ with the dive's true albedo (details: docs/evaluation.md in the abysslight repos
   standard deviation of all pixels. 0 means overlapping photos agree exactly.
 - **overlap difference**: the same RMS difference over overlaps, divided by the mean of all pixels instead of their
   standard deviation (so a correction that flattens the photos is not rewarded or punished through the divisor).
+- **clipped**: the share of samples at black or white. Overlapping photos clipped at the same place agree whatever
+  lies there, so a method that clips much of its output scores better overlaps than it earns.
 ";
 
 /// The dive the demo renders: an abyssal dive of the kind abysslight is for (dive a05 of the dive matrix,
