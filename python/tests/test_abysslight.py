@@ -389,3 +389,4 @@ def test_simulate_read_and_evaluate(srgb_dive, tmp_path):
     ev = abysslight.evaluate([("raw", root / "survey"), ("abyss", out)], truth=root)
     sets = {s["label"]: s for s in ev["sets"]}
     assert sets["abyss"]["albedo_error"] < sets["raw"]["albedo_error"]
+    assert all(0.0 <= s["clipped"] < 1.0 for s in ev["sets"])
