@@ -216,9 +216,9 @@ struct BenchArgs {
     /// Worker threads of correct and of the floor.
     #[arg(long, short = 'j', default_value_t = 2)]
     threads: usize,
-    /// Sliding window n.
-    #[arg(long, default_value_t = 7)]
-    window: usize,
+    /// Sliding window n of correct and the peer [default: correct's own, auto; the peer's own].
+    #[arg(long, value_name = "N")]
+    window: Option<usize>,
     /// JPEG output quality [default: each input's, as `correct` does].
     #[arg(long, value_name = "Q")]
     jpeg_quality: Option<u8>,

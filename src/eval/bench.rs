@@ -43,8 +43,9 @@ pub struct BenchOptions {
     pub photos: usize,
     /// How many times more photos the long mission has than the short one (default 10).
     pub long_factor: usize,
-    /// Distinct synthetic photos generated (the mission cycles through them as hard links, so generating does not
-    /// dominate the run).
+    /// Distinct synthetic photos generated: 0 (the default), every survey photo of the mission; fewer, and the
+    /// mission cycles forth and back through them as hard links (quicker to make, but a survey reads the repeats
+    /// as a camera standing still, which changes what the default `--window auto` does).
     pub distinct: usize,
     /// Water-column photos generated for the estimate of `S` (default 9).
     pub water_column: usize,
@@ -60,8 +61,9 @@ pub struct BenchOptions {
     pub peer: Option<PathBuf>,
     /// Worker threads of `correct` and of the codec floor (default 2).
     pub threads: usize,
-    /// Sliding-window length `n` in photos passed to `correct` (default 7).
-    pub window: usize,
+    /// Sliding-window length `n` in photos passed to `correct` (and to the peer); `None` (the default): none,
+    /// so `correct` runs with its default window (`auto`) and the peer with its own.
+    pub window: Option<usize>,
     /// JPEG output quality; `None`: each input's (the default of `correct`).
     pub jpeg_quality: Option<u8>,
     /// JPEG output subsampling; `None`: each input's.
@@ -77,14 +79,14 @@ impl Default for BenchOptions {
             height: 3000,
             photos: 60,
             long_factor: 1,
-            distinct: 12,
+            distinct: 0,
             water_column: 9,
             noise: 3.0,
             quality: 92,
             python: PathBuf::from("python3"),
             peer: None,
             threads: 2,
-            window: 7,
+            window: None,
             jpeg_quality: None,
             jpeg_subsampling: None,
             dir: None,
@@ -360,53 +362,23 @@ pub fn noisy_photo(
     water_column: bool,
     sigma: Option<f32>,
 ) -> Photo {
-    let colour = [0.45f32, 0.40, 0.32];
-    let (cx, cy) = (width as f32 * 0.5, height as f32 * 0.58);
-    let sigma2 = 2.0 * (0.38 * width as f32).powi(2);
-    let shift = (j * width / 9) as f32;
-    let fish = (
-        (hash(j as u32, 1, 7) * width as f32),
-        (hash(j as u32, 2, 7) * height as f32),
-    );
+    let look = Look::new(width, height, j, water_column, sigma);
+    let shift = look.shift as f32;
     let mut data = vec![0u8; width * height * 3];
     data.par_chunks_mut(width * 3)
         .enumerate()
         .for_each(|(y, row)| {
-            let yf = y as f32;
-            for x in 0..width {
-                let xf = x as f32;
-                let r2 = (xf - cx).powi(2) + (yf - cy).powi(2);
-                let f = 0.1 + 0.9 * (-r2 / sigma2).exp();
-                let (sx, sy) = (xf + shift, yf);
-                let tex = if water_column {
-                    0.0
-                } else {
-                    let coarse = value_noise(sx, sy, 180.0, 1);
-                    let mid = value_noise(sx, sy, 23.0, 2);
-                    // With sensor noise, the finest texture a few pixels across (white grain would be read as
-                    // noise by nothing but its scaling with the light).
-                    let grain = match sigma {
-                        None => hash(sx as u32, sy as u32, 3),
-                        Some(_) => value_noise(sx, sy, 3.0, 3),
-                    };
-                    0.45 + 0.5 * coarse + 0.35 * mid + 0.2 * grain
-                };
-                let in_fish = !water_column
-                    && (xf - fish.0).powi(2) + 4.0 * (yf - fish.1).powi(2)
-                        < (0.04 * width as f32).powi(2);
-                for c in 0..3 {
-                    let s = backscatter(y, height, c);
-                    let noise = noise_at(x, y, c, j, sigma);
-                    let a = if in_fish { 0.95 } else { colour[c] * tex };
-                    let v = if water_column {
-                        s + noise
-                    } else {
-                        a * f + s + noise
-                    };
-                    row[x * 3 + c] = (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
-                }
-            }
+            look.row(
+                row,
+                y,
+                |x| light_at(x, y, width, height),
+                |x| texture_at(x as f32 + shift, y as f32, sigma),
+            )
         });
+    rgb8_photo(width, height, data)
+}
+
+fn rgb8_photo(width: usize, height: usize, data: Vec<u8>) -> Photo {
     Photo {
         layout: Layout {
             width,
@@ -415,6 +387,161 @@ pub fn noisy_photo(
         },
         samples: Samples::U8(data),
         alpha: None,
+    }
+}
+
+/// The light cone's factor at pixel (`x`, `y`) of a `width`×`height` photo.
+#[inline]
+fn light_at(x: usize, y: usize, width: usize, height: usize) -> f32 {
+    let (cx, cy) = (width as f32 * 0.5, height as f32 * 0.58);
+    let sigma2 = 2.0 * (0.38 * width as f32).powi(2);
+    let r2 = (x as f32 - cx).powi(2) + (y as f32 - cy).powi(2);
+    0.1 + 0.9 * (-r2 / sigma2).exp()
+}
+
+/// The seafloor's texture at (`sx`, `sy`) of the seafloor (a photo's column plus the photo's shift, its row).
+#[inline]
+fn texture_at(sx: f32, sy: f32, sigma: Option<f32>) -> f32 {
+    let coarse = value_noise(sx, sy, 180.0, 1);
+    let mid = value_noise(sx, sy, 23.0, 2);
+    // With sensor noise, the finest texture a few pixels across (white grain would be read as noise by nothing
+    // but its scaling with the light).
+    let grain = match sigma {
+        None => hash(sx as u32, sy as u32, 3),
+        Some(_) => value_noise(sx, sy, 3.0, 3),
+    };
+    0.45 + 0.5 * coarse + 0.35 * mid + 0.2 * grain
+}
+
+/// What makes photo `j` itself: where the seafloor is (shifted by a ninth of the width a photo), where its fish
+/// swims, its noise.
+struct Look {
+    width: usize,
+    height: usize,
+    j: usize,
+    water_column: bool,
+    sigma: Option<f32>,
+    shift: usize,
+    fish: (f32, f32),
+}
+
+impl Look {
+    fn new(width: usize, height: usize, j: usize, water_column: bool, sigma: Option<f32>) -> Self {
+        Look {
+            width,
+            height,
+            j,
+            water_column,
+            sigma,
+            shift: j * width / 9,
+            fish: (
+                (hash(j as u32, 1, 7) * width as f32),
+                (hash(j as u32, 2, 7) * height as f32),
+            ),
+        }
+    }
+
+    /// Row `y` of the photo into `row` (RGB), given the light cone's factor and the texture at each column.
+    #[inline(always)]
+    fn row(
+        &self,
+        row: &mut [u8],
+        y: usize,
+        light: impl Fn(usize) -> f32,
+        tex: impl Fn(usize) -> f32,
+    ) {
+        let colour = [0.45f32, 0.40, 0.32];
+        let (width, yf) = (self.width, y as f32);
+        for x in 0..width {
+            let xf = x as f32;
+            let f = light(x);
+            let tex = if self.water_column { 0.0 } else { tex(x) };
+            let in_fish = !self.water_column
+                && (xf - self.fish.0).powi(2) + 4.0 * (yf - self.fish.1).powi(2)
+                    < (0.04 * width as f32).powi(2);
+            for c in 0..3 {
+                let s = backscatter(y, self.height, c);
+                let noise = noise_at(x, y, c, self.j, self.sigma);
+                let a = if in_fish { 0.95 } else { colour[c] * tex };
+                let v = if self.water_column {
+                    s + noise
+                } else {
+                    a * f + s + noise
+                };
+                row[x * 3 + c] = (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+            }
+        }
+    }
+}
+
+/// Survey photos of [`noisy_photo`] made one after the other, cheaper than one by one: the light cone's factor
+/// computed once, and the seafloor's texture of each column once (held for the columns of the last photo, so a
+/// photo computes only the columns it has that the one before did not: a ninth). The same photos, bit for bit.
+struct Frames {
+    width: usize,
+    height: usize,
+    sigma: Option<f32>,
+    light: Vec<f32>,
+    /// The texture of seafloor column `X` at `tex[y·width + X mod width]`, for `X` in `held`.
+    tex: Vec<f32>,
+    held: std::ops::Range<usize>,
+}
+
+impl Frames {
+    fn new(width: usize, height: usize, sigma: Option<f32>) -> Self {
+        let mut light = vec![0.0f32; width * height];
+        light
+            .par_chunks_mut(width.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, l) in row.iter_mut().enumerate() {
+                    *l = light_at(x, y, width, height);
+                }
+            });
+        Frames {
+            width,
+            height,
+            sigma,
+            light,
+            tex: vec![0.0; width * height],
+            held: 0..0,
+        }
+    }
+
+    /// Survey photo `j` (`noisy_photo(width, height, j, false, sigma)`).
+    fn photo(&mut self, j: usize) -> Photo {
+        let (w, h) = (self.width, self.height);
+        let look = Look::new(w, h, j, false, self.sigma);
+        let want = look.shift..look.shift + w;
+        if want.end > 1 << 24 {
+            // Columns past f32's integers: the texture's column is rounded as `noisy_photo` rounds it.
+            return noisy_photo(w, h, j, false, self.sigma);
+        }
+        let new = if want.start >= self.held.start && want.start <= self.held.end {
+            self.held.end..want.end
+        } else {
+            want.clone()
+        };
+        let sigma = self.sigma;
+        self.tex.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for sx in new.clone() {
+                row[sx % w] = texture_at(sx as f32, y as f32, sigma);
+            }
+        });
+        self.held = want;
+        let (light, tex) = (&self.light, &self.tex);
+        let mut data = vec![0u8; w * h * 3];
+        data.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
+            let (l, t) = (&light[y * w..(y + 1) * w], &tex[y * w..(y + 1) * w]);
+            let s0 = look.shift % w;
+            look.row(
+                row,
+                y,
+                |x| l[x],
+                |x| t[if s0 + x < w { s0 + x } else { s0 + x - w }],
+            );
+        });
+        rgb8_photo(w, h, data)
     }
 }
 
@@ -448,7 +575,9 @@ struct Mission {
     distinct: Vec<PathBuf>,
 }
 
-fn generate(o: &BenchOptions, root: &Path) -> Result<Mission> {
+/// Generate the water-column frames and `distinct` survey photos (photos `0, 1, …` of [`noisy_photo`], each
+/// the last shifted by a ninth of the width).
+fn generate(o: &BenchOptions, root: &Path, distinct: usize) -> Result<Mission> {
     let wc = root.join("water-column");
     let pool = root.join("distinct");
     for d in [&wc, &pool] {
@@ -460,29 +589,38 @@ fn generate(o: &BenchOptions, root: &Path) -> Result<Mission> {
         let p = noisy_photo(o.width, o.height, 1000 + j, true, sigma);
         save_camera_jpeg(&p, &wc.join(format!("wc{j:03}.jpg")), o.quality)?;
     }
-    let mut distinct = Vec::new();
-    for j in 0..o.distinct.max(1) {
-        let p = noisy_photo(o.width, o.height, j, false, sigma);
-        let path = pool.join(format!("d{j:03}.jpg"));
-        save_camera_jpeg(&p, &path, o.quality)?;
-        distinct.push(path);
+    let mut frames = Frames::new(o.width, o.height, sigma);
+    let mut paths = Vec::new();
+    for j in 0..distinct.max(1) {
+        let path = pool.join(format!("d{j:05}.jpg"));
+        save_camera_jpeg(&frames.photo(j), &path, o.quality)?;
+        paths.push(path);
     }
     Ok(Mission {
         water_column: wc,
-        distinct,
+        distinct: paths,
     })
 }
 
-/// A survey folder of `count` photos cycling through the distinct ones (hard links, copies where links fail).
+/// A survey folder of `count` photos (hard links, copies where links fail): the distinct photos in order, or,
+/// where there are fewer, forth and back through them. Photos of an earlier, longer mission in `dir` go.
 fn survey_folder(m: &Mission, dir: &Path, count: usize) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let name = |i: usize| dir.join(format!("img{i:05}.jpg"));
+    for i in count.. {
+        match std::fs::remove_file(name(i)) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => break,
+            Err(e) => return Err(Error::io(name(i), e)),
+            Ok(()) => {}
+        }
+    }
     for i in 0..count {
         // Forth and back through the distinct photos, so neighbours stay neighbours.
         let period = 2 * m.distinct.len().max(2) - 2;
         let p = i % period.max(1);
         let j = if p < m.distinct.len() { p } else { period - p };
         let src = &m.distinct[j.min(m.distinct.len() - 1)];
-        let dst = dir.join(format!("img{i:05}.jpg"));
+        let dst = name(i);
         // A folder left by an earlier `--dir` run: its entries may be links to `src` itself, and copying a file
         // onto itself empties it. Start from a clean name.
         match std::fs::remove_file(&dst) {
@@ -555,7 +693,7 @@ pub fn child(
     survey: &Path,
     out: &Path,
     threads: usize,
-    window: usize,
+    window: Option<usize>,
     jpeg_quality: Option<u8>,
     jpeg_subsampling: Option<io::Subsampling>,
 ) -> Result<ChildResult> {
@@ -564,7 +702,7 @@ pub fn child(
         survey: Some(survey.to_owned()),
         out: Some(out.to_owned()),
         threads: Some(threads),
-        window: Some(window),
+        window,
         jpeg_quality,
         jpeg_subsampling,
         ..Options::default()
@@ -603,6 +741,9 @@ fn run_child(
     if let Some(s) = o.jpeg_subsampling {
         cmd.arg("--jpeg-subsampling").arg(s.name());
     }
+    if let Some(n) = o.window {
+        cmd.arg("--window").arg(n.to_string());
+    }
     let output = cmd
         .arg("--child")
         .arg("--child-water-column")
@@ -613,8 +754,6 @@ fn run_child(
         .arg(out)
         .arg("--threads")
         .arg(o.threads.to_string())
-        .arg("--window")
-        .arg(o.window.to_string())
         .output()
         .map_err(|e| Error::io(exe, e))?;
     let stdout = String::from_utf8_lossy(&output.stdout);
@@ -650,18 +789,20 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
         }
     };
     let (machine, cores, rustc) = machine();
+    let total = o.photos * o.long_factor.max(1);
+    let distinct = if o.distinct == 0 { total } else { o.distinct };
     say(&format!(
         "generating {} distinct {}x{} photos and {} water-column frames in {}",
-        o.distinct,
+        distinct,
         o.width,
         o.height,
         o.water_column,
         root.display()
     ));
     let t = Instant::now();
-    let mission = generate(o, &root)?;
+    let mission = generate(o, &root, distinct)?;
     let survey = root.join("survey");
-    survey_folder(&mission, &survey, o.photos * o.long_factor.max(1))?;
+    survey_folder(&mission, &survey, total)?;
     let generate_s = t.elapsed().as_secs_f64();
     let wc = &mission.water_column;
     let short = (o.long_factor > 1)
@@ -675,8 +816,9 @@ pub fn run(exe: &Path, o: &BenchOptions, say: &dyn Fn(&str)) -> Result<BenchResu
         })
         .transpose()?;
     say(&format!(
-        "correct ({} photos)",
-        o.photos * o.long_factor.max(1)
+        "correct ({total} photos, {})",
+        o.window
+            .map_or("default options".into(), |n| format!("--window {n}"))
     ));
     let out = root.join("out");
     let long = run_child(exe, o, wc, &survey, &out)?;
@@ -847,7 +989,8 @@ fn opencv_floor(
     }
 }
 
-/// Wall-clock seconds of the peer on the same mission (`PYTHON PEER paper WATER SURVEY OUT --window N`).
+/// Wall-clock seconds of the peer on the same mission (`PYTHON PEER paper WATER SURVEY OUT`, and `--window N`
+/// where the bench was given one).
 fn run_peer(
     o: &BenchOptions,
     peer: &Path,
@@ -859,13 +1002,12 @@ fn run_peer(
     say(&format!("peer: {} paper", peer.display()));
     let out = root.join("out-peer");
     let t = Instant::now();
-    let r = Command::new(&o.python)
-        .arg(peer)
-        .arg("paper")
-        .args([wc, survey, &out])
-        .args(["--window", &o.window.to_string()])
-        .output()
-        .map_err(|e| Error::io(peer, e))?;
+    let mut cmd = Command::new(&o.python);
+    cmd.arg(peer).arg("paper").args([wc, survey, &out]);
+    if let Some(n) = o.window {
+        cmd.args(["--window", &n.to_string()]);
+    }
+    let r = cmd.output().map_err(|e| Error::io(peer, e))?;
     let secs = t.elapsed().as_secs_f64();
     remove(&out);
     if !r.status.success() {
@@ -948,7 +1090,7 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let o = tiny();
         for _ in 0..2 {
-            let m = generate(&o, d.path()).unwrap();
+            let m = generate(&o, d.path(), o.distinct).unwrap();
             survey_folder(&m, &d.path().join("s"), 5).unwrap();
             for e in io::find_photos(&d.path().join("s")).unwrap().photos {
                 io::decode(&e.path).unwrap_or_else(|err| panic!("{err}"));
@@ -959,7 +1101,7 @@ mod tests {
     #[test]
     fn generated_photos_are_camera_like_jpegs() {
         let d = tempfile::tempdir().unwrap();
-        let m = generate(&tiny(), d.path()).unwrap();
+        let m = generate(&tiny(), d.path(), 3).unwrap();
         let c = crate::io::jpeg::parse(&std::fs::read(&m.distinct[0]).unwrap()).unwrap();
         assert_eq!(c.subsampling, Some(io::Subsampling::S420));
         assert_eq!(c.quality, Some(tiny().quality));
@@ -969,7 +1111,7 @@ mod tests {
     fn floor_counts_photos() {
         let d = tempfile::tempdir().unwrap();
         let o = tiny();
-        let m = generate(&o, d.path()).unwrap();
+        let m = generate(&o, d.path(), o.distinct).unwrap();
         survey_folder(&m, &d.path().join("s"), 5).unwrap();
         let (n, s) = floor(
             &d.path().join("s"),
@@ -984,5 +1126,50 @@ mod tests {
             io::find_photos(&d.path().join("o")).unwrap().photos.len(),
             5
         );
+    }
+
+    #[test]
+    fn photos_made_in_order_are_the_noisy_photos() {
+        // The texture held from one photo to the next, a jump back and one forward past what is held: the same
+        // bytes as each photo made alone.
+        for (w, h, sigma) in [
+            (50usize, 20usize, Some(3.0f32)),
+            (16, 9, None),
+            (37, 5, Some(1.0)),
+        ] {
+            let mut frames = Frames::new(w, h, sigma);
+            for j in [0usize, 1, 2, 3, 9, 10, 4, 5, 40, 41, 42] {
+                assert_eq!(
+                    frames.photo(j).samples,
+                    noisy_photo(w, h, j, false, sigma).samples,
+                    "{w}x{h} photo {j}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_mission_is_distinct_photos_by_default() {
+        let d = tempfile::tempdir().unwrap();
+        let o = BenchOptions {
+            distinct: 0,
+            ..tiny()
+        };
+        let m = generate(&o, d.path(), 6).unwrap();
+        let s = d.path().join("s");
+        // A longer mission made there before: its extra photos go.
+        survey_folder(&m, &s, 6).unwrap();
+        survey_folder(&m, &s, 4).unwrap();
+        let photos = io::find_photos(&s).unwrap().photos;
+        assert_eq!(photos.len(), 4);
+        let bytes: Vec<Vec<u8>> = photos
+            .iter()
+            .map(|e| std::fs::read(&e.path).unwrap())
+            .collect();
+        for i in 0..bytes.len() {
+            for j in 0..i {
+                assert_ne!(bytes[i], bytes[j], "photos {j} and {i}");
+            }
+        }
     }
 }

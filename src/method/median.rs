@@ -6,6 +6,8 @@ use rayon::prelude::*;
 
 use crate::method::raster::{Raster, Sample};
 
+mod unrolled;
+
 /// Median of integer samples, reordering `v`. Returns the value in sample units. `v` must not be empty.
 pub fn median_of_samples<T: Sample>(v: &mut [T]) -> f32 {
     let n = v.len();
@@ -204,8 +206,8 @@ const LANES: usize = 128;
 /// Spatial median downsampling: every `k`×`k` block (partial blocks at the right and bottom border included) becomes
 /// one pixel holding the per-channel median of the block, normalised to `[0, 1]`.
 ///
-/// Full blocks go through a pruned sorting network applied to many blocks at once (no per-block sort call);
-/// partial blocks and huge `k` use selection. Both give the same value: the middle sample, or the mean of the two
+/// Full blocks go through a pruned sorting network applied to many blocks at once (no per-block sort call;
+/// unrolled at compile time for blocks of 4×4 to 8×8); partial blocks and huge `k` use selection. Both give the same value: the middle sample, or the mean of the two
 /// middle ones.
 pub fn block_median<T: Sample>(
     samples: &[T],
@@ -223,7 +225,7 @@ pub fn block_median<T: Sample>(
     }
     let (scale, kk) = (1.0 / T::MAX, k * k);
     let row_len = width * channels;
-    let net = if kk <= NETWORK_MAX {
+    let net = if kk <= NETWORK_MAX && !unrolled::handles(kk) {
         prune_network(&sorting_network(kk), &median_positions(kk))
     } else {
         Vec::new()
@@ -270,7 +272,9 @@ pub fn block_median<T: Sample>(
                             _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
                         }
                     }
-                    apply_network(&net, v, lanes);
+                    if !unrolled::middle_values(v, kk, lanes) {
+                        apply_network(&net, v, lanes);
+                    }
                     write_medians(v, kk, lanes, scale, &mut out_row[lane0..lane0 + lanes]);
                     lane0 += lanes;
                 }
