@@ -822,8 +822,8 @@ impl<T> Engine<T> {
     }
 
     /// The blend of dim regions towards their local level, with its levels evened out by light
-    /// (`level_by_light`, by bins' trimmed means where `dense`: the window was chosen for a dense field); `None` where it changes nothing (no noise measured: most camera JPEGs), so the photo
-    /// takes the plain path.
+    /// (`level_by_light`, by bins' trimmed means where `dense`: the window was chosen for a dense field); `None`
+    /// where it changes nothing (no noise measured: most camera JPEGs), so the photo takes the plain path.
     fn blend(
         &self,
         model: &NoiseModel,

@@ -207,8 +207,8 @@ const LANES: usize = 128;
 /// one pixel holding the per-channel median of the block, normalised to `[0, 1]`.
 ///
 /// Full blocks go through a pruned sorting network applied to many blocks at once (no per-block sort call;
-/// unrolled at compile time for blocks of 4×4 to 8×8); partial blocks and huge `k` use selection. Both give the same value: the middle sample, or the mean of the two
-/// middle ones.
+/// unrolled at compile time for blocks of 4×4 to 8×8); partial blocks and huge `k` use selection. Both give the
+/// same value: the middle sample, or the mean of the two middle ones.
 pub fn block_median<T: Sample>(
     samples: &[T],
     width: usize,

@@ -475,8 +475,8 @@ pub const MAX_LEVEL_SHIFT: f32 = 2.0;
 /// from one to the other with the share of nodules in the bin, so the factor changed from photo to photo (the red
 /// of a 45 % field by ±13 %) and overlapping photos disagreed; the trimmed mean moves in proportion to the share.
 /// On sparse ground the median stays: the blend pulls a dim block's clutter towards the seafloor's level, which
-/// lifts a dim bin's mean but not its median. Blocks flagged in `keep` (overlays, vehicle parts) neither count nor change. A channel with fewer than
-/// `8·LIGHT_BINS` blocks is left as it is; on large photos the bins are measured on every `k`-th block (at most
+/// lifts a dim bin's mean but not its median. Blocks flagged in `keep` (overlays, vehicle parts) neither count nor
+/// change. A channel with fewer than `8·LIGHT_BINS` blocks is left as it is; on large photos the bins are measured on every `k`-th block (at most
 /// [`MAX_LIGHT_SAMPLES`]) and every block is corrected. Measured on the dive matrix: docs/evaluation.md.
 pub fn level_by_light(
     level: &mut Raster,
@@ -487,7 +487,7 @@ pub fn level_by_light(
 ) {
     let c = f.channels;
     let blocks = f.data.len() / c;
-    // The bins' medians from at most about MAX_LIGHT_SAMPLES blocks (a 12 MP photo has 187,500).
+    // The bins' typical levels from at most about MAX_LIGHT_SAMPLES blocks (a 12 MP photo has 187,500).
     let step = blocks.div_ceil(MAX_LIGHT_SAMPLES).max(1);
     for (ch, &colour) in colour.iter().enumerate().take(c) {
         let mut pts: Vec<(f32, f32)> = (0..blocks)
@@ -516,10 +516,8 @@ pub fn level_by_light(
         let (centres, typical): (Vec<f32>, Vec<f32>) = (0..LIGHT_BINS)
             .map(|i| {
                 let part = &pts[i * n / LIGHT_BINS..(i + 1) * n / LIGHT_BINS];
-                {
-                    let mut fs: Vec<f32> = part.iter().map(|p| p.0).collect();
-                    (quantile(&mut fs, 0.5), typical_of(part))
-                }
+                let mut fs: Vec<f32> = part.iter().map(|p| p.0).collect();
+                (quantile(&mut fs, 0.5), typical_of(part))
             })
             .unzip();
         let factor = |fv: f32| {
