@@ -129,6 +129,10 @@ impl<'a> Against<'a> {
     }
 }
 
+/// The share of a channel's lit level below which a block of `M − S` does not count in the per-photo gain (nor in
+/// the levelling's gains, which are the same estimator).
+pub const GAIN_MIN_LIT: f32 = 0.3;
+
 /// A photo whose gain departs more than this share from the median of its own and its two neighbours' in every
 /// channel is an exposure jump; a window with one is levelled ([`levelled_stack`]).
 pub const EXPOSURE_JUMP: f32 = 0.1;
@@ -170,14 +174,14 @@ pub fn levelled_stack(
     let glance = blocks.div_ceil(GLANCE_SAMPLES).max(stride);
     let rough: Vec<Vec<f32>> = stack
         .iter()
-        .map(|p| against.gain(p, 0.3, q, glance))
+        .map(|p| against.gain(p, GAIN_MIN_LIT, q, glance))
         .collect();
     if !jumped(&rough, EXPOSURE_JUMP / 2.0) {
         return None;
     }
     let gains: Vec<Vec<f32>> = stack
         .iter()
-        .map(|p| against.gain(p, 0.3, q, stride))
+        .map(|p| against.gain(p, GAIN_MIN_LIT, q, stride))
         .collect();
     if !jumped(&gains, EXPOSURE_JUMP) {
         return None;
@@ -392,7 +396,7 @@ pub fn refine_factor(
     if steps.photo_gain {
         // The engine gives the median unless the window is chosen per stretch: the window's quantile here wins on
         // dense nodule fields but moved the twelve dives of the matrix by up to 8 % either way (docs/nodules.md).
-        let g = photo_gain(own, m, s_low, 0.3, gain_quantile);
+        let g = photo_gain(own, m, s_low, GAIN_MIN_LIT, gain_quantile);
         apply_gain(f, &g);
     }
     soft_floor(f, steps.relative_floor)
