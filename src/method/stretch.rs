@@ -143,8 +143,9 @@ impl Surveyor {
             .held
             .as_ref()
             .map_or_else(Vec::new, |h| h.quantile(REFERENCE_QUANTILE));
-        let coverage = dark_share(own, &reference);
-        let scene = scene(own, &reference, self.size);
+        let ratio = lit_ratios(own, &reference);
+        let coverage = dark_share(&ratio);
+        let scene = scene(&ratio, self.size);
         // This photo's scene against the photos before it: their correlation at lag k.
         for (k, earlier) in self.scenes.iter().rev().enumerate() {
             self.done[j - 1 - k].same_scene[k] = correlation(earlier, &scene);
@@ -190,10 +191,8 @@ fn lit_ratios(own: &[f32], reference: &[f32]) -> Vec<f32> {
         .collect()
 }
 
-/// The dark share of a photo's grey levels `own` against `reference`, and which blocks are dark. Blocks where the
-/// reference is dim (under 5 % of its 95th percentile: corners the lights miss) are not judged.
-fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
-    let ratio = lit_ratios(own, reference);
+/// The dark share of a photo's blocks, from their [`lit_ratios`] against the reference (NaN: not judged).
+fn dark_share(ratio: &[f32]) -> f32 {
     let mut judged: Vec<f32> = ratio.iter().copied().filter(|v| v.is_finite()).collect();
     if judged.is_empty() {
         return 0.0;
@@ -210,12 +209,13 @@ fn dark_share(own: &[f32], reference: &[f32]) -> f32 {
     dark_n as f32 / n as f32
 }
 
-/// A photo's scene at block resolution: `ln(own / reference)` less its box average (a sixteenth of the frame:
-/// the lights' changing shape and the photo's exposure go), 0 where not judged (dim or masked blocks).
-fn scene(own: &[f32], reference: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
-    let log: Vec<f32> = lit_ratios(own, reference)
-        .into_iter()
-        .map(|q| if q > 0.0 { q.ln() } else { f32::NAN })
+/// A photo's scene at block resolution, from its [`lit_ratios`] `own / reference`: their log less its box average
+/// (a sixteenth of the frame: the lights' changing shape and the photo's exposure go), 0 where not judged (dim or
+/// masked blocks).
+fn scene(ratio: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
+    let log: Vec<f32> = ratio
+        .iter()
+        .map(|&q| if q > 0.0 { q.ln() } else { f32::NAN })
         .collect();
     let valid: Vec<f32> = log
         .iter()

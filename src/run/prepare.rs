@@ -120,23 +120,44 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
         "--window auto: surveying {} photos for their dark share and the camera's motion",
         items.len()
     ));
+    // The survey's measures run in mission order on a thread of their own while the workers decode and block-median
+    // the next batch: the decodes are most of the pass, and the measures would otherwise leave a core idle.
+    let batch = (4 * rayon::current_num_threads()).max(4);
     let mut surveyor = engine.surveyor();
-    let mut layout = None;
-    for batch in items.chunks(32) {
-        let lows: Vec<Option<(Layout, Raster)>> = batch
-            .par_iter()
-            .map(|item| {
-                let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
-                Some((p.layout, engine.block_image(&p)?))
-            })
-            .collect();
-        for (l, low) in lows.into_iter().flatten() {
-            if *layout.get_or_insert(l) == l {
-                surveyor.push(&low);
+    let surveyed = std::thread::scope(|scope| {
+        let (send, receive) = std::sync::mpsc::sync_channel::<Vec<Option<(Layout, Raster)>>>(1);
+        let measures = scope.spawn(move || {
+            let mut layout = None;
+            for lows in receive {
+                for (l, low) in lows.into_iter().flatten() {
+                    if *layout.get_or_insert(l) == l {
+                        surveyor.push(&low);
+                    }
+                }
+            }
+            surveyor.finish()
+        });
+        for batch in items.chunks(batch) {
+            let lows = batch
+                .par_iter()
+                .map(|item| {
+                    let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
+                    let (layout, low) = (p.layout, engine.block_image(&p));
+                    crate::io::buffers::recycle(p);
+                    Some((layout, low?))
+                })
+                .collect();
+            if send.send(lows).is_err() {
+                break;
             }
         }
+        drop(send);
+        measures.join()
+    });
+    match surveyed {
+        Ok(photos) => choose(&photos),
+        Err(panic) => std::panic::resume_unwind(panic),
     }
-    choose(&surveyor.finish())
 }
 
 /// The console's line on the windows chosen.
