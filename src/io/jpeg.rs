@@ -423,7 +423,7 @@ pub mod turbo {
             } else {
                 (turbojpeg::PixelFormat::RGB, 3)
             };
-            let mut pixels = vec![0u8; header.width * header.height * channels];
+            let mut pixels = crate::io::buffers::take(header.width * header.height * channels);
             let image = turbojpeg::Image {
                 pixels: pixels.as_mut_slice(),
                 width: header.width,

@@ -1,6 +1,7 @@
 //! Finding, decoding and writing photos. Outputs are written atomically: a temp file in the target folder, synced,
 //! then renamed over the final name, so an interrupted run never leaves a half-written image.
 
+pub(crate) mod buffers;
 #[cfg(test)]
 mod fuzz;
 pub(crate) mod gate;
@@ -410,10 +411,15 @@ fn decode_jpeg_strict(data: &[u8]) -> std::result::Result<Photo, String> {
             alpha: None,
         });
     }
-    decode_jpeg_zune(data)
+    decode_jpeg_zune(data, crate::io::buffers::take)
 }
 
-fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
+/// zune-jpeg's decode of `data` into a buffer from `buffer(len)` (the pool of src/io/buffers.rs: its old contents
+/// are all overwritten).
+fn decode_jpeg_zune(
+    data: &[u8],
+    buffer: impl FnOnce(usize) -> Vec<u8>,
+) -> std::result::Result<Photo, String> {
     use zune_core::bytestream::ZCursor;
     use zune_core::colorspace::ColorSpace;
     use zune_core::options::DecoderOptions;
@@ -451,7 +457,13 @@ fn decode_jpeg_zune(data: &[u8]) -> std::result::Result<Photo, String> {
             .map_err(|e| format!("damaged JPEG: {e}"))?
             .data
     } else {
-        dec.decode().map_err(damaged)?
+        // Into a buffer of an earlier photo of the same size when there is one (src/io/buffers.rs).
+        let size = dec.output_buffer_size().ok_or("JPEG without dimensions")?;
+        let mut pixels = buffer(size);
+        if let Err(e) = dec.decode_into(&mut pixels) {
+            return Err(damaged(e));
+        }
+        pixels
     };
     if pixels.len() != width * height * channels {
         return Err(format!(
@@ -841,6 +853,42 @@ pub(crate) fn load_raster(path: &Path) -> Result<Raster> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_jpeg_decoded_into_a_used_buffer_is_the_one_decoded_into_a_new_one() {
+        use jpeg_encoder::{ColorType, Encoder, SamplingFactor};
+        // Every sample of the pool's buffer is overwritten, for each layout zune-jpeg decodes (src/io/buffers.rs).
+        let cases = [
+            (37, 23, SamplingFactor::R_4_2_0, false, 0, ColorType::Rgb),
+            (64, 48, SamplingFactor::R_4_2_0, false, 3, ColorType::Rgb),
+            (41, 30, SamplingFactor::R_4_2_2, false, 0, ColorType::Rgb),
+            (33, 17, SamplingFactor::R_4_4_4, true, 0, ColorType::Rgb),
+            (50, 21, SamplingFactor::R_4_2_0, true, 2, ColorType::Rgb),
+            (29, 19, SamplingFactor::R_4_4_4, false, 0, ColorType::Luma),
+        ];
+        for (w, h, sampling, progressive, restart, colour) in cases {
+            let channels = if colour == ColorType::Luma { 1 } else { 3 };
+            let px: Vec<u8> = (0..w * h * channels)
+                .map(|i| ((i * 53) % 241) as u8 ^ (i / 71) as u8)
+                .collect();
+            let mut data = Vec::new();
+            let mut enc = Encoder::new(&mut data, 90);
+            enc.set_sampling_factor(sampling);
+            enc.set_progressive(progressive);
+            enc.set_restart_interval(restart);
+            enc.encode(&px, w as u16, h as u16, colour).unwrap();
+            let fresh = decode_jpeg_zune(&data, |n| vec![0; n]).unwrap();
+            for fill in [0xA5, 0xFF] {
+                let used = decode_jpeg_zune(&data, |n| vec![fill; n]).unwrap();
+                assert_eq!(used.layout, fresh.layout);
+                assert!(
+                    used.samples == fresh.samples,
+                    "{w}x{h} {sampling:?} progressive {progressive} restart {restart}: a sample of the used buffer was left"
+                );
+            }
+            assert_eq!(fresh.layout.channels, channels);
+        }
+    }
 
     #[test]
     fn a_decoder_panic_is_that_files_error() {

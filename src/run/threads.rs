@@ -461,7 +461,7 @@ fn write_all(
     settings: EncodeSettings,
     progress: &dyn Progress,
 ) {
-    for mut job in rx {
+    for job in rx {
         let t = Instant::now();
         // The input's EXIF, XMP and ICC go into the output; metadata problems only warn.
         let (input, output) = (&job.frame.input, &job.frame.output);
@@ -470,13 +470,21 @@ fn write_all(
         let r = out
             .map_or(Ok(()), |out| check_no_links_below(out, output))
             .and_then(|()| sink.write(&job.photo, input, output, settings, &warn));
-        job.frame.encode_ms = ms(t);
-        progress.photo_done(&job.frame.input, r.is_ok());
+        let WriteJob {
+            photo,
+            mut frame,
+            _live: live,
+        } = job;
+        // The samples go to the next decode (src/io/buffers.rs), and the photo leaves the live count.
+        crate::io::buffers::recycle(photo);
+        drop(live);
+        frame.encode_ms = ms(t);
+        progress.photo_done(&frame.input, r.is_ok());
         match r {
-            Ok(()) => lock(done).push(job.frame),
+            Ok(()) => lock(done).push(frame),
             Err(e) => {
                 progress.file_error(&e);
-                lock(write_errors).push(FileError::from_error(&job.frame.input, &e));
+                lock(write_errors).push(FileError::from_error(&frame.input, &e));
                 // Nobody reads stdout any more (e.g. the downstream ffmpeg ended): stop the run instead of
                 // failing every remaining frame.
                 if matches!(sink, Sink::Stdout) && matches!(e, Error::Io { .. }) {
