@@ -122,6 +122,14 @@ fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
     (0..c).map(|ch| sv[ch] / wc[ch]).collect()
 }
 
+/// What `--help` prints: the options of the module's docs.
+const USAGE: &str = "usage: cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] \
+[--only NAME[,NAME]] [--columns NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] \
+[--held-out] [--nodules [--told]]
+Scores every method on simulated dives against their truth; DM_KEEP=1 keeps each dive's folder.
+Columns: raw, mean, polynomial, paper, paper-f0.001, default, numpy (the oracle and the window's floor always).
+The whole description: the docs at the top of examples/dive_matrix.rs, and docs/evaluation.md.";
+
 fn main() {
     let mut out =
         PathBuf::from(std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
@@ -186,7 +194,14 @@ fn main() {
                     })
                     .expect("--size WxH")
             }
-            _ => panic!("unknown argument {a:?}; see the example's docs"),
+            "--help" | "-h" => {
+                println!("{USAGE}");
+                return;
+            }
+            _ => {
+                eprintln!("dive_matrix: unknown argument {a:?}\n{USAGE}");
+                std::process::exit(2);
+            }
         }
     }
     let peer_python = PathBuf::from("/work/peer-venv/bin/python");
