@@ -821,8 +821,9 @@ impl<T> Engine<T> {
         NoiseModel::fit(&blocks, f).map(|m| m.with_texture_capped(&self.colour))
     }
 
-    /// The blend of dim regions towards their local level, with its levels evened out by light
-    /// (`level_by_light`, by bins' trimmed means where `dense`: the window was chosen for a dense field); `None`
+    /// The blend of dim regions towards their local level (held more firmly to the channels' shared level where
+    /// `dense`: the window was chosen for a dense field), with its levels evened out by light (`level_by_light`, by
+    /// bins' trimmed means where `dense`); `None`
     /// where it changes nothing (no noise measured: most camera JPEGs), so the photo takes the plain path.
     fn blend(
         &self,
@@ -834,7 +835,7 @@ impl<T> Engine<T> {
     ) -> Option<Blended> {
         let keep = self.masked_blocks.as_deref();
         let k = self.params.downsample;
-        let mut b = model.blend(f, own, s_k, &self.colour, k, keep);
+        let mut b = model.blend(f, own, s_k, &self.colour, k, keep, dense);
         if !b.weight.data.iter().any(|&w| w < 1.0 - NEGLIGIBLE_BLEND) {
             return None;
         }

@@ -254,6 +254,12 @@ impl NoiseModel {
     /// Wiener weight `w = τ²F²/(τ²F² + σ²)`, per channel. Blocks flagged in `keep` (one flag per block: overlays,
     /// vehicle parts) get `w = 1`, no blend. Blending towards block means instead of medians was worse on every
     /// score of the dive matrix.
+    ///
+    /// With `dense` (a field whose window was chosen for dense clutter), a block median's noise variance is counted
+    /// [`DENSE_LEVEL_NOISE`] times, so each channel's block level is held more firmly to the level the channels
+    /// share: on nodule fields a starved channel's own block level disagreed between overlapping photos far more
+    /// than its sensor noise accounts for (docs/nodules.md).
+    #[allow(clippy::too_many_arguments)]
     pub fn blend(
         &self,
         f: &Raster,
@@ -262,11 +268,15 @@ impl NoiseModel {
         colour: &[f32],
         k: usize,
         keep: Option<&[bool]>,
+        dense: bool,
     ) -> Blended {
         let c = f.channels;
         let mut level = f.clone();
         let mut weight = f.clone();
         let median_var = std::f32::consts::FRAC_PI_2 / (k * k) as f32;
+        // The weight of a block's own level against the channels' shared one (more noise counted where dense; the
+        // shared level itself pools the channels by their noise alone).
+        let level_var = median_var * if dense { DENSE_LEVEL_NOISE } else { 1.0 };
         // The same prior holds the block levels' shared relative level λ* below.
         let prior = self.detail_prior(colour, c);
         let (mut own_rel, mut w, mut w_low) = (vec![f32::NAN; c], vec![1.0f32; c], vec![1.0f32; c]);
@@ -282,7 +292,7 @@ impl NoiseModel {
                 let fv = f.data[i];
                 let signal = t2 * fv * fv;
                 w[ch] = wiener(signal, s2);
-                w_low[ch] = wiener(signal, s2 * median_var);
+                w_low[ch] = wiener(signal, s2 * level_var);
                 let lam = (own.data[i] - s.map_or(0.0, |s| s.data[i])) / fv / colour[ch];
                 own_rel[ch] = lam;
                 if lam.is_finite() && t2 > 0.0 {
@@ -545,6 +555,12 @@ pub fn level_by_light(
 
 /// Share of a bin's values left out at each end of the trimmed mean of [`level_by_light`].
 pub const LEVEL_TRIM: f32 = 0.1;
+
+/// How many times its sensor noise a block median's noise is counted in [`NoiseModel::blend`] on a dense field:
+/// each channel's block level is held that much more firmly to the level the channels share. Chosen on the tuning
+/// nodule dives from 1, 4, 8, 16 and 32 (docs/nodules.md): every albedo error, consistency and overlap difference
+/// fell with it up to 32; the residual pattern moved a few per cent either way, least at 8.
+pub const DENSE_LEVEL_NOISE: f32 = 8.0;
 
 /// The mean of `v` without its lowest and highest `trim` share (sorted in place; NaN when `v` is empty).
 fn trimmed_mean(v: &mut [f32], trim: f32) -> f32 {
@@ -904,7 +920,7 @@ mod tests {
         let own = Raster::from_fn(2, 1, 3, |x, _, _| {
             0.5 * 0.4 * if x == 1 { 0.3 } else { 1.0 }
         });
-        let b = m.blend(&f, &own, None, &colour, 8, None);
+        let b = m.blend(&f, &own, None, &colour, 8, None, false);
         for ch in 1..3 {
             assert!(
                 (b.level.get(1, 0, ch) - 0.12).abs() < 1e-3,
@@ -924,12 +940,54 @@ mod tests {
     }
 
     #[test]
+    fn on_a_dense_field_a_block_level_is_held_to_the_shared_level_by_more_noise() {
+        // One block, three channels, each with its own relative level; channel 0 noisy enough that its own level
+        // counts for about half. The shared level λ* pools the channels by their noise alone (the same with and
+        // without `dense`); each channel's level is λ* + w_low·(λ_c − λ*), with w_low the Wiener weight of the
+        // block median's noise σ²·π/(2K²), counted DENSE_LEVEL_NOISE times where dense. Computed here by hand.
+        let (s2, t2, fv, k) = ([0.002f32, 1e-5, 2e-5], 0.01f32, 0.5f32, 4usize);
+        let m = NoiseModel::flat(s2.to_vec(), vec![t2; 3]);
+        let f = Raster::filled(1, 1, 3, fv);
+        let colour = [0.4f32, 0.4, 0.4];
+        let rel = [0.7f32, 1.0, 0.95];
+        let own = Raster::from_fn(1, 1, 3, |_, _, ch| fv * colour[ch] * rel[ch]);
+        let median_var = std::f32::consts::FRAC_PI_2 / (k * k) as f32;
+        let prior = m.detail_prior(&colour, 3);
+        let precision = |ch: usize| ((fv * colour[ch]).powi(2) / (s2[ch] * median_var)).min(1e8);
+        let shared = (prior + (0..3).map(|ch| precision(ch) * rel[ch]).sum::<f32>())
+            / (prior + (0..3).map(precision).sum::<f32>());
+        let mut moved = [0.0f32; 2];
+        for (i, (dense, times)) in [(false, 1.0f32), (true, DENSE_LEVEL_NOISE)]
+            .into_iter()
+            .enumerate()
+        {
+            let b = m.blend(&f, &own, None, &colour, k, None, dense);
+            for ch in 0..3 {
+                let signal = t2 * fv * fv;
+                let w_low = signal / (signal + s2[ch] * median_var * times);
+                let want = colour[ch] * (shared + w_low * (rel[ch] - shared));
+                let got = b.level.get(0, 0, ch);
+                assert!(
+                    (got - want).abs() < 1e-5,
+                    "dense {dense}, ch {ch}: {got} vs {want}"
+                );
+                // The pixels' weight does not change.
+                let w = signal / (signal + s2[ch]);
+                assert!((b.weight.get(0, 0, ch) - w).abs() < 1e-6);
+            }
+            moved[i] = (b.level.get(0, 0, 0) / colour[0] - rel[0]).abs();
+        }
+        // The noisy channel's level moved towards the shared level more on the dense field.
+        assert!(moved[1] > 1.5 * moved[0] && moved[0] > 0.01, "{moved:?}");
+    }
+
+    #[test]
     fn blend_is_the_wiener_weight() {
         let m = NoiseModel::flat(vec![0.01], vec![0.04]);
         let f = Raster::from_fn(4, 1, 1, |x, _, _| [1.0, 0.5, 0.1, 0.0][x]);
         let own = Raster::from_fn(4, 1, 1, |x, _, _| 0.05 + 0.4 * [1.0, 0.5, 0.1, 0.0][x]);
         let s = Raster::filled(4, 1, 1, 0.05);
-        let b = m.blend(&f, &own, Some(&s), &[0.4], 8, None);
+        let b = m.blend(&f, &own, Some(&s), &[0.4], 8, None, false);
         for x in 0..4 {
             let fv = f.data[x];
             let w = 0.04 * fv * fv / (0.04 * fv * fv + 0.01);
@@ -949,6 +1007,7 @@ mod tests {
             &[0.4],
             8,
             Some(&[false, false, true, false]),
+            false,
         );
         assert_eq!(b.weight.data[2], 1.0);
         assert!((b.prior_precision - 0.16 / 0.04).abs() < 1e-3);
