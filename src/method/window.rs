@@ -57,12 +57,16 @@ pub struct WindowChoice {
     pub p_half: f64,
 }
 
+/// What to do instead when `--contamination` asks for more than the median's window rule can give.
+const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
+     default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
+
 /// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`.
 pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Error> {
     if !(0.0..0.5).contains(&contamination) {
         return Err(Error::Usage(format!(
             "--contamination must be in [0, 0.5), got {contamination}: a median breaks down once half its \
-             samples are contaminated, so no window size can help"
+             samples are contaminated, so no window size can help; {DENSE_HINT}"
         )));
     }
     if !(risk > 0.0 && risk < 1.0) {
@@ -79,7 +83,7 @@ pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Erro
         n += 2;
     }
     Err(Error::Usage(format!(
-        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}"
+        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}; {DENSE_HINT}"
     )))
 }
 
@@ -341,6 +345,15 @@ mod tests {
         assert!(choose_window(0.5, 0.01).is_err());
         assert!(choose_window(-0.1, 0.01).is_err());
         assert!(choose_window(0.2, 0.0).is_err());
+        // A nodule field's coverage too dense for the median's rule: the error says what to run instead.
+        for c in [0.48, 0.5] {
+            let e = choose_window(c, 0.01).unwrap_err().to_string();
+            assert!(
+                e.contains("--window auto") && e.contains("no --contamination"),
+                "{e}"
+            );
+        }
+        assert!(choose_window(0.45, 0.01).is_ok());
     }
 
     #[test]
