@@ -573,7 +573,9 @@ struct CorrectArgs {
     /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`). With --method abyss
     /// the contamination is taken to be darker than the seafloor (nodules, shadows, burrows): M is the window's
     /// (1 + C)/2 quantile instead of its median, the seafloor's own median; bright clutter (fauna, shells) above
-    /// (1 - C)/2 of the window then breaks the estimate sooner than with the median.
+    /// (1 - C)/2 of the window then breaks the estimate sooner than with the median. One window for the whole
+    /// mission: on nodule fields (C of 0.3 and more) the default without it, a window per stretch from a survey of
+    /// the photos, does better (docs/guide.md).
     #[arg(long, value_name = "C", help_heading = H_METHOD)]
     contamination: Option<f64>,
 
