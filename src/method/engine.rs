@@ -823,8 +823,8 @@ impl<T> Engine<T> {
 
     /// The blend of dim regions towards their local level (held more firmly to the channels' shared level where
     /// `dense`: the window was chosen for a dense field), with its levels evened out by light (`level_by_light`, by
-    /// bins' trimmed means where `dense`); `None`
-    /// where it changes nothing (no noise measured: most camera JPEGs), so the photo takes the plain path.
+    /// bins' trimmed means where `dense`); `None` where it changes nothing (no noise measured: most camera JPEGs),
+    /// so the photo takes the plain path.
     fn blend(
         &self,
         model: &NoiseModel,
