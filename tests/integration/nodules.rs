@@ -128,37 +128,70 @@ fn the_window_chosen_per_stretch_beats_the_window_7_on_a_dense_field() {
     assert!(mid["why"].as_str().unwrap().contains("% dark"), "{mid}");
 }
 
-#[test]
-fn on_a_dense_field_the_levels_by_light_lower_the_pattern_without_setting_overlaps_apart() {
-    // n05: two lights, 50 % nodules, 16-bit linear, noise-dominated red (matrix at 320×240 when the test was written: overlap difference
-    // 0.160 with the levels by light, 0.159 without them, 0.199 when a bin's median set their factor; residual
-    // pattern 0.032 against 0.051 without them).
-    let (spec, seed) = matrix::dive_and_seed("n05", 0).unwrap();
-    assert!(!spec.told && spec.bits == 16);
-    let sim = spec.simulation(seed, (320, 240));
-    let dive = sim.render_with_lighting().unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("dive");
-    dive.write(&root).unwrap();
-    let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
-    let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
-    let run = |name: &str, level_by_light: bool| {
-        let out = dir.path().join(name);
+/// A nodule field of the matrix rendered at 320×240 into a temporary folder, to be corrected with several options.
+struct Rendered {
+    sim: abysslight::eval::simulate::Simulation,
+    dive: abysslight::eval::simulate::Dive,
+    dir: tempfile::TempDir,
+    names: Vec<String>,
+    hs: Vec<[f64; 9]>,
+}
+
+impl Rendered {
+    fn new(name: &str) -> Rendered {
+        let (spec, seed) = matrix::dive_and_seed(name, 0).unwrap();
+        assert!(!spec.told && spec.bits == 16);
+        let sim = spec.simulation(seed, (320, 240));
+        let dive = sim.render_with_lighting().unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        dive.write(&dir.path().join("dive")).unwrap();
+        let names = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
+        let hs = dive.truth.poses.iter().map(|p| p.homography).collect();
+        Rendered {
+            sim,
+            dive,
+            dir,
+            names,
+            hs,
+        }
+    }
+
+    /// The dive corrected with `opts` into `out`: (consistency, overlap difference, residual pattern).
+    fn correct(&self, out: &str, opts: Options) -> (f64, f64, f64) {
+        let (root, out) = (self.dir.path().join("dive"), self.dir.path().join(out));
         correct_mission(
             &Options {
                 water_column: Some(root.join("water")),
                 survey: Some(root.join("survey")),
                 out: Some(out.clone()),
-                transfer: Some(sim.encode),
-                level_by_light,
-                ..Options::default()
+                transfer: Some(self.sim.encode),
+                ..opts
             },
             &Silent,
         )
         .unwrap();
-        let photos = matrix::load_set(&out, &names, sim.encode);
-        let (_, overlap) = consistency_parts(&photos, &hs, 8.0).unwrap();
-        (overlap, residual_pattern(&photos, &dive.albedo, (8, 6)))
+        let photos = matrix::load_set(&out, &self.names, self.sim.encode);
+        let (consistency, overlap) = consistency_parts(&photos, &self.hs, 8.0).unwrap();
+        let pattern = residual_pattern(&photos, &self.dive.albedo, (8, 6));
+        (consistency, overlap, pattern)
+    }
+}
+
+#[test]
+fn on_a_dense_field_the_levels_by_light_lower_the_pattern_without_setting_overlaps_apart() {
+    // n05: two lights, 50 % nodules, 16-bit linear, noise-dominated red (matrix at 320×240 when the test was
+    // written: overlap difference 0.160 with the levels by light, 0.159 without them, 0.199 when a bin's median set
+    // their factor; residual pattern 0.032 against 0.051 without them).
+    let n05 = Rendered::new("n05");
+    let run = |name: &str, level_by_light: bool| {
+        let (_, overlap, pattern) = n05.correct(
+            name,
+            Options {
+                level_by_light,
+                ..Options::default()
+            },
+        );
+        (overlap, pattern)
     };
     let (with, without) = (run("with", true), run("without", false));
     assert!(
@@ -177,33 +210,9 @@ fn on_a_dense_field_overlapping_photos_agree_better_than_after_the_paper() {
     // median, F floored only against zero) against the default: consistency 0.174 against 0.216, overlap
     // difference 0.144 against 0.192 (0.88x and 0.83x of them, 0.191 and 0.160, before the block levels were held
     // to the channels' shared level on dense fields).
-    let (spec, seed) = matrix::dive_and_seed("n05", 0).unwrap();
-    assert!(!spec.told && spec.bits == 16);
-    let sim = spec.simulation(seed, (320, 240));
-    let dive = sim.render_with_lighting().unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("dive");
-    dive.write(&root).unwrap();
-    let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
-    let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
-    let run = |name: &str, opts: Options| {
-        let out = dir.path().join(name);
-        correct_mission(
-            &Options {
-                water_column: Some(root.join("water")),
-                survey: Some(root.join("survey")),
-                out: Some(out.clone()),
-                transfer: Some(sim.encode),
-                ..opts
-            },
-            &Silent,
-        )
-        .unwrap();
-        let photos = matrix::load_set(&out, &names, sim.encode);
-        consistency_parts(&photos, &hs, 8.0).unwrap()
-    };
-    let default = run("default", Options::default());
-    let paper = run(
+    let n05 = Rendered::new("n05");
+    let default = n05.correct("default", Options::default());
+    let paper = n05.correct(
         "paper",
         Options {
             method: Method::Paper,
