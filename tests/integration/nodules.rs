@@ -8,6 +8,29 @@ use abysslight::eval::matrix;
 use abysslight::Method;
 use abysslight::{correct_mission, Options, Silent};
 
+/// The simulated dive written under `root` corrected with `opts` into `out`, its photos `names` read back in
+/// linear light.
+fn corrected(
+    root: &std::path::Path,
+    out: &std::path::Path,
+    names: &[String],
+    encode: abysslight::Transfer,
+    opts: Options,
+) -> Vec<abysslight::Raster> {
+    correct_mission(
+        &Options {
+            water_column: Some(root.join("water")),
+            survey: Some(root.join("survey")),
+            out: Some(out.to_path_buf()),
+            transfer: Some(encode),
+            ..opts
+        },
+        &Silent,
+    )
+    .unwrap();
+    matrix::load_set(out, names, encode)
+}
+
 /// (albedo error, residual pattern) on the samples with signal of `dive` corrected with `opts` into `out`.
 fn scores(
     dive: &abysslight::eval::simulate::Dive,
@@ -17,19 +40,8 @@ fn scores(
     sim: &abysslight::eval::simulate::Simulation,
     opts: Options,
 ) -> (f64, f64) {
-    correct_mission(
-        &Options {
-            water_column: Some(root.join("water")),
-            survey: Some(root.join("survey")),
-            out: Some(out.to_path_buf()),
-            transfer: Some(sim.encode),
-            ..opts
-        },
-        &Silent,
-    )
-    .unwrap();
     let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
-    let photos = matrix::load_set(out, &names, sim.encode);
+    let photos = corrected(root, out, &names, sim.encode, opts);
     (
         albedo_error_where(&photos, &dive.albedo, Some(signal)),
         residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(signal)),
@@ -159,18 +171,7 @@ impl Rendered {
     /// The dive corrected with `opts` into `out`: (consistency, overlap difference, residual pattern).
     fn correct(&self, out: &str, opts: Options) -> (f64, f64, f64) {
         let (root, out) = (self.dir.path().join("dive"), self.dir.path().join(out));
-        correct_mission(
-            &Options {
-                water_column: Some(root.join("water")),
-                survey: Some(root.join("survey")),
-                out: Some(out.clone()),
-                transfer: Some(self.sim.encode),
-                ..opts
-            },
-            &Silent,
-        )
-        .unwrap();
-        let photos = matrix::load_set(&out, &self.names, self.sim.encode);
+        let photos = corrected(&root, &out, &self.names, self.sim.encode, opts);
         let (consistency, overlap) = consistency_parts(&photos, &self.hs, 8.0).unwrap();
         let pattern = residual_pattern(&photos, &self.dive.albedo, (8, 6));
         (consistency, overlap, pattern)
