@@ -34,7 +34,8 @@ use abysslight::eval::evaluate::{
     albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
 };
 use abysslight::eval::matrix::{
-    self, load_set, signal_mask, window_floor, DIVES, HELD_OUT, NODULES, NODULES_HELD_OUT,
+    self, lit_mask, load_set, only_lit, signal_mask, window_floor, DIVES, HELD_OUT, NODULES,
+    NODULES_HELD_OUT,
 };
 use abysslight::eval::simulate::Dive;
 use abysslight::kernels::auto_block;
@@ -62,12 +63,18 @@ struct Score {
     pattern_all: f64,
     consistency: f64,
     overlap: f64,
+    /// Consistency on the pixels the lights reach ([`lit_mask`]).
+    consistency_lit: f64,
+    /// Overlap difference on the pixels the lights reach.
+    overlap_lit: f64,
 }
 
-fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
+fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>], lit: &[Vec<bool>]) -> Score {
     let hs: Vec<[f64; 9]> = dive.truth.poses.iter().map(|p| p.homography).collect();
     let (consistency, overlap) =
         consistency_parts(photos, &hs, 8.0).unwrap_or((f64::NAN, f64::NAN));
+    let (consistency_lit, overlap_lit) =
+        consistency_parts(&only_lit(photos, lit), &hs, 8.0).unwrap_or((f64::NAN, f64::NAN));
     Score {
         albedo: albedo_error_where(photos, &dive.albedo, Some(signal)),
         albedo_all: albedo_error(photos, &dive.albedo),
@@ -75,6 +82,8 @@ fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>]) -> Score {
         pattern_all: residual_pattern(photos, &dive.albedo, (8, 6)),
         consistency,
         overlap,
+        consistency_lit,
+        overlap_lit,
     }
 }
 
@@ -322,8 +331,9 @@ fn main() {
             .collect();
         let t_enc = sim.encode;
         let signal = signal_mask(&dive, t_enc, spec.bits);
+        let lit = lit_mask(&dive);
         let raw = load_set(&survey, &names, t_enc);
-        let mut scores = vec![("raw".to_string(), score(&raw, &dive, &signal))];
+        let mut scores = vec![("raw".to_string(), score(&raw, &dive, &signal, &lit))];
         for (label, make) in &methods {
             let o = make(Options {
                 water_column: Some(water.clone()),
@@ -363,13 +373,21 @@ fn main() {
             }
             scores.push((
                 label.clone(),
-                score(&load_set(&dir.join(label), &names, t_enc), &dive, &signal),
+                score(
+                    &load_set(&dir.join(label), &names, t_enc),
+                    &dive,
+                    &signal,
+                    &lit,
+                ),
             ));
             if std::env::var_os("DM_KEEP").is_none() {
                 let _ = std::fs::remove_dir_all(dir.join(label));
             }
         }
-        scores.push(("oracle".into(), score(&oracle(&raw, &dive), &dive, &signal)));
+        scores.push((
+            "oracle".into(),
+            score(&oracle(&raw, &dive), &dive, &signal, &lit),
+        ));
         // The default's window and quantile (the paper's column and the numpy peer take the same window).
         let default = Options {
             contamination: told(spec),
@@ -382,7 +400,7 @@ fn main() {
             default.window_quantile(),
             auto_block(sim.width, sim.height),
         );
-        scores.push(("window-floor".into(), score(&floor, &dive, &signal)));
+        scores.push(("window-floor".into(), score(&floor, &dive, &signal, &lit)));
         if let Some(script) = &peer {
             let o = dir.join("numpy");
             let ok = Command::new(&peer_python)
@@ -397,7 +415,7 @@ fn main() {
             if ok {
                 scores.push((
                     "numpy".into(),
-                    score(&load_set(&o, &names, t_enc), &dive, &signal),
+                    score(&load_set(&o, &names, t_enc), &dive, &signal, &lit),
                 ));
             }
         }
@@ -487,6 +505,8 @@ fn table(rows: &[(String, Vec<(String, Score)>)]) -> String {
         ("residual pattern", |x: &Score| x.pattern),
         ("consistency", |x: &Score| x.consistency),
         ("overlap difference", |x: &Score| x.overlap),
+        ("consistency where lit", |x: &Score| x.consistency_lit),
+        ("overlap difference where lit", |x: &Score| x.overlap_lit),
         ("albedo error, every sample", |x: &Score| x.albedo_all),
         ("residual pattern, every sample", |x: &Score| x.pattern_all),
     ] {

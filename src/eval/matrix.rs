@@ -305,6 +305,51 @@ pub fn signal_mask(dive: &Dive, t: Transfer, bits: u32) -> Vec<Vec<bool>> {
         .collect()
 }
 
+/// Share of a photo's brightest light (the true `F`, mean over the channels) below which a pixel is unlit for
+/// [`lit_mask`].
+pub const LIT_SHARE: f32 = 0.02;
+
+/// Where each survey photo is lit at all: its true `F`, the mean over the channels, at least [`LIT_SHARE`] of that
+/// photo's largest. Outside it (the corners a narrow beam misses, the side an aft rig's backscatter fills) the
+/// photos hold noise and backscatter only: every method fills or clips them, and overlapping photos disagree
+/// there whatever the method did where the lights reach. The dive matrix scores the overlaps on these pixels too
+/// (`where lit`), beside every pixel.
+pub fn lit_mask(dive: &Dive) -> Vec<Vec<bool>> {
+    dive.factor
+        .iter()
+        .map(|f| {
+            let c = f.channels;
+            let light: Vec<f32> = f
+                .data
+                .chunks_exact(c)
+                .map(|px| px.iter().sum::<f32>() / c as f32)
+                .collect();
+            let top = light.iter().copied().fold(0.0f32, f32::max);
+            light.iter().map(|&l| l >= LIT_SHARE * top).collect()
+        })
+        .collect()
+}
+
+/// `photos` with the pixels `lit` leaves out set to NaN in every channel (one mask per photo, one flag per
+/// pixel): the consistency metric leaves out every cell observation that touches one.
+pub fn only_lit(photos: &[Raster], lit: &[Vec<bool>]) -> Vec<Raster> {
+    assert_eq!(photos.len(), lit.len(), "one lit mask per photo");
+    photos
+        .iter()
+        .zip(lit)
+        .map(|(p, m)| {
+            let mut p = p.clone();
+            let c = p.channels;
+            for (px, &on) in p.data.chunks_exact_mut(c).zip(m) {
+                if !on {
+                    px.fill(f32::NAN);
+                }
+            }
+            p
+        })
+        .collect()
+}
+
 /// The window method's floor on a dive (the `window-floor` column of `examples/dive_matrix.rs`): its `M` made from
 /// the photos' true albedo alone (no lights, water or noise) — the
 /// per-block medians of each photo's albedo, the `(1 + c)/2` quantile over the photos of its window, upsampled
@@ -470,6 +515,42 @@ mod tests {
         for o in 0..10 {
             for i in 0..HELD_OUT.len() {
                 assert!(!tuned.contains(&held_out_seed(i, o)));
+            }
+        }
+    }
+
+    /// A narrow cone lights the centre of a simulated dive and not its corners: the lit mask holds the centre and
+    /// leaves the corners out, and the pixels it leaves out are NaN after `only_lit`, the others untouched.
+    #[test]
+    fn the_lit_mask_follows_the_true_light() {
+        let (spec, seed) = dive_and_seed("g02", 0).unwrap();
+        let sim = spec.simulation(seed, (160, 120));
+        let dive = sim.render_with_lighting().unwrap();
+        let lit = lit_mask(&dive);
+        let f = &dive.factor[0];
+        let light = |x: usize, y: usize| (0..3).map(|ch| f.get(x, y, ch)).sum::<f32>() / 3.0;
+        let top = (0..120)
+            .flat_map(|y| (0..160).map(move |x| (x, y)))
+            .map(|(x, y)| light(x, y))
+            .fold(0.0f32, f32::max);
+        for (x, y) in [(80, 60), (0, 0), (159, 119), (40, 100), (150, 10)] {
+            assert_eq!(
+                lit[0][y * 160 + x],
+                light(x, y) >= LIT_SHARE * top,
+                "({x}, {y})"
+            );
+        }
+        assert!(lit[0][60 * 160 + 80], "the centre is lit");
+        let share = lit[0].iter().filter(|&&b| b).count() as f64 / lit[0].len() as f64;
+        assert!(share > 0.5 && share < 0.98, "lit share {share}");
+        let masked = only_lit(&dive.albedo, &lit);
+        for (i, &on) in lit[0].iter().enumerate() {
+            for ch in 0..3 {
+                let v = masked[0].data[i * 3 + ch];
+                assert_eq!(v.is_nan(), !on);
+                if on {
+                    assert_eq!(v, dive.albedo[0].data[i * 3 + ch]);
+                }
             }
         }
     }
