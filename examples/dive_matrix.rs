@@ -22,7 +22,8 @@
 //! instead of the twelve.
 //!
 //! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
-//! difference over overlapping photos (placements from the simulator's poses). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
+//! difference over overlapping photos (placements from the simulator's poses), on every pixel and where the lights
+//! reach (`matrix::lit_mask`). Written to `DIR/matrix.md` (default `target/dive-matrix/`) and
 //! printed. With `DM_KEEP=1` in the environment each dive's folder (the dive with its truth, every method's output)
 //! is kept under `DIR/NAME/` for a closer look, e.g. `abysslight correct` with other options on the same photos.
 
@@ -135,7 +136,8 @@ fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
 const USAGE: &str = "usage: cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] \
 [--only NAME[,NAME]] [--columns NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] \
 [--held-out] [--nodules [--told]]
-Scores every method on simulated dives against their truth; DM_KEEP=1 keeps each dive's folder.
+Scores every method on simulated dives against their truth (the overlaps on every pixel and where the lights
+reach); DM_KEEP=1 keeps each dive's folder.
 Columns: raw, mean, polynomial, paper, paper-f0.001, default, numpy (the oracle and the window's floor always).
 The whole description: the docs at the top of examples/dive_matrix.rs, and docs/evaluation.md.";
 
