@@ -4,10 +4,11 @@
 
 use std::path::Path;
 
-use crate::eval::evaluate::load_linear;
+use crate::eval::evaluate::{leave_out, load_linear};
 use crate::eval::simulate::{Dive, Exposure, Rig, Simulation, Water};
 use crate::io::{decode, find_photos, write_atomic, EncodeSettings};
 use crate::method::factor::upsample;
+use crate::method::mask::Mask;
 use crate::method::median::{median_of_f32, stack_quantile};
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
@@ -331,20 +332,22 @@ pub fn lit_mask(dive: &Dive) -> Vec<Vec<bool>> {
 }
 
 /// `photos` with the pixels `lit` leaves out set to NaN in every channel (one mask per photo, one flag per
-/// pixel): the consistency metric leaves out every cell observation that touches one.
+/// pixel), as `evaluate --mask` leaves a mask's pixels out: the consistency metric leaves out every cell
+/// observation that touches one.
 pub fn only_lit(photos: &[Raster], lit: &[Vec<bool>]) -> Vec<Raster> {
     assert_eq!(photos.len(), lit.len(), "one lit mask per photo");
     photos
         .iter()
         .zip(lit)
-        .map(|(p, m)| {
+        .map(|(p, on)| {
+            let mask = Mask {
+                width: p.width,
+                height: p.height,
+                ignore: on.iter().map(|&b| !b).collect(),
+            };
             let mut p = p.clone();
-            let c = p.channels;
-            for (px, &on) in p.data.chunks_exact_mut(c).zip(m) {
-                if !on {
-                    px.fill(f32::NAN);
-                }
-            }
+            leave_out(&mut p, &mask, Path::new("the lit mask"))
+                .expect("a lit mask of the photo's size");
             p
         })
         .collect()
