@@ -141,7 +141,26 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
             let lows = batch
                 .par_iter()
                 .map(|item| {
-                    let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
+                    // A baseline JPEG by its DC coefficients, without decoding it (block means instead of block
+                    // medians: docs/method.md); any other photo decoded.
+                    let path = &item.entry.path;
+                    let means = match engine.takes_block_means() {
+                        true => crate::io::survey_block_means(path, plan.photo_size).ok()?,
+                        false => None,
+                    };
+                    if let Some(b) = means {
+                        let layout = Layout {
+                            width: b.width,
+                            height: b.height,
+                            channels: b.channels,
+                        };
+                        if let Some(low) =
+                            engine.block_image_from_means(&b.means, b.blocks, b.channels)
+                        {
+                            return Some((layout, low));
+                        }
+                    }
+                    let p = decode_expecting(path, plan.photo_size).ok()?;
                     let (layout, low) = (p.layout, engine.block_image(&p));
                     crate::io::buffers::recycle(p);
                     Some((layout, low?))
