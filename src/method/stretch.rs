@@ -16,6 +16,7 @@
 
 use std::collections::VecDeque;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::matching::box_blur;
@@ -71,8 +72,14 @@ pub struct Surveyor {
     pushed: usize,
     /// The scenes of the last photos measured (at most [`MAX_LAG`] + 1).
     scenes: VecDeque<Vec<f32>>,
+    /// Photos whose reference is known, waiting to be measured together: their grey levels and reference.
+    pending: Vec<(Vec<f32>, Vec<f32>)>,
     done: Vec<PhotoSurvey>,
 }
+
+/// Photos measured at once, on all workers: the reference is kept in mission order, each photo's measures against it
+/// are its own.
+const MEASURED_TOGETHER: usize = 8;
 
 /// The grey level above `S` of each block (mean over channels; NaN where masked).
 fn grey_above(low: &Raster, s: Option<&Raster>) -> Vec<f32> {
@@ -99,6 +106,7 @@ impl Surveyor {
             size: (0, 0),
             pushed: 0,
             scenes: VecDeque::new(),
+            pending: Vec::new(),
             done: Vec::new(),
         }
     }
@@ -130,42 +138,69 @@ impl Surveyor {
         self.pushed += 1;
         if self.greys.len() == n {
             // Every photo whose reference is these photos: the first `REFERENCE_HALF + 1` at once, then one each.
-            while self.done.len() + REFERENCE_HALF < self.pushed {
-                self.measure(self.done.len(), self.pushed - n);
+            while self.queued() + REFERENCE_HALF < self.pushed {
+                self.queue(self.queued(), self.pushed - n);
+            }
+            if self.pending.len() >= MEASURED_TOGETHER {
+                self.measure_pending();
             }
         }
     }
 
-    /// Photo `j`'s dark share against the reference of the photos held (the first of them is photo `first`).
-    fn measure(&mut self, j: usize, first: usize) {
-        let own = &self.greys[j - first];
+    /// Photos measured or waiting to be.
+    fn queued(&self) -> usize {
+        self.done.len() + self.pending.len()
+    }
+
+    /// Photo `j` to be measured against the reference of the photos held (the first of them is photo `first`).
+    fn queue(&mut self, j: usize, first: usize) {
         let reference = self
             .held
             .as_ref()
             .map_or_else(Vec::new, |h| h.quantile(REFERENCE_QUANTILE));
-        let ratio = lit_ratios(own, &reference);
-        let coverage = dark_share(&ratio);
-        let scene = scene(&ratio, self.size);
-        // This photo's scene against the photos before it: their correlation at lag k.
-        for (k, earlier) in self.scenes.iter().rev().enumerate() {
-            self.done[j - 1 - k].same_scene[k] = correlation(earlier, &scene);
+        self.pending
+            .push((self.greys[j - first].clone(), reference));
+    }
+
+    /// The photos waiting: each one's dark share and scene against its reference (on all workers), then in mission
+    /// order its scene's correlation with the scenes of the photos before it.
+    fn measure_pending(&mut self) {
+        let size = self.size;
+        let measured: Vec<(f32, Vec<f32>)> = self
+            .pending
+            .par_iter()
+            .map(|(own, reference)| {
+                let ratio = lit_ratios(own, reference);
+                (dark_share(&ratio), scene(&ratio, size))
+            })
+            .collect();
+        self.pending.clear();
+        for (coverage, scene) in measured {
+            let j = self.done.len();
+            // This photo's scene against the photos before it: their correlation at lag k.
+            let earlier: Vec<&Vec<f32>> = self.scenes.iter().rev().collect();
+            let lags: Vec<f32> = earlier.par_iter().map(|e| correlation(e, &scene)).collect();
+            for (k, c) in lags.into_iter().enumerate() {
+                self.done[j - 1 - k].same_scene[k] = c;
+            }
+            self.scenes.push_back(scene);
+            if self.scenes.len() > MAX_LAG {
+                self.scenes.pop_front();
+            }
+            self.done.push(PhotoSurvey {
+                coverage,
+                same_scene: [f32::NAN; MAX_LAG],
+            });
         }
-        self.scenes.push_back(scene);
-        if self.scenes.len() > MAX_LAG {
-            self.scenes.pop_front();
-        }
-        self.done.push(PhotoSurvey {
-            coverage,
-            same_scene: [f32::NAN; MAX_LAG],
-        });
     }
 
     /// The survey of every photo pushed (shorter missions than the reference: against all their photos).
     pub fn finish(mut self) -> Vec<PhotoSurvey> {
         let first = self.pushed - self.greys.len();
-        while self.done.len() < self.pushed {
-            self.measure(self.done.len(), first);
+        while self.queued() < self.pushed {
+            self.queue(self.queued(), first);
         }
+        self.measure_pending();
         self.done
     }
 }
@@ -447,6 +482,64 @@ mod tests {
             s.push(f);
         }
         s.finish()
+    }
+
+    /// The streaming survey (a running reference, photos measured in batches on all workers) gives bit for bit what
+    /// each photo gives measured on its own: its reference the 0.8 quantile of the finite levels of the 21 photos
+    /// around it (the mission's first or last 21 at its ends; all of a shorter mission) selected afresh, its scene correlated with
+    /// the scene of each of the 16 photos after it; for missions shorter and longer than the reference and than a
+    /// batch, with masked (NaN) blocks.
+    #[test]
+    fn the_streaming_survey_is_each_photo_measured_on_its_own() {
+        for frames in [1usize, 5, 21, 22, 40, 57] {
+            let mut mission = mission(frames, 0.3, 4, 3);
+            for (i, m) in mission.iter_mut().enumerate() {
+                let at = (i * 7) % m.data.len();
+                m.data[at] = f32::NAN;
+            }
+            let got = survey(&mission);
+            let greys: Vec<Vec<f32>> = mission.iter().map(|m| grey_above(m, None)).collect();
+            let n = 2 * REFERENCE_HALF + 1;
+            let size = (mission[0].width, mission[0].height);
+            let scenes: Vec<(f32, Vec<f32>)> = (0..frames)
+                .map(|j| {
+                    let first = j
+                        .saturating_sub(REFERENCE_HALF)
+                        .min(frames.saturating_sub(n));
+                    let around = &greys[first..(first + n).min(frames)];
+                    let reference: Vec<f32> = (0..greys[j].len())
+                        .map(|b| {
+                            let mut v: Vec<f32> = around
+                                .iter()
+                                .map(|g| g[b])
+                                .filter(|v| v.is_finite())
+                                .collect();
+                            quantile(&mut v, REFERENCE_QUANTILE)
+                        })
+                        .collect();
+                    let ratio = lit_ratios(&greys[j], &reference);
+                    (dark_share(&ratio), scene(&ratio, size))
+                })
+                .collect();
+            assert_eq!(got.len(), frames);
+            for j in 0..frames {
+                assert_eq!(
+                    got[j].coverage.to_bits(),
+                    scenes[j].0.to_bits(),
+                    "{frames} photos: photo {j}"
+                );
+                for k in 0..MAX_LAG {
+                    let want = scenes
+                        .get(j + 1 + k)
+                        .map_or(f32::NAN, |later| correlation(&scenes[j].1, &later.1));
+                    let g = got[j].same_scene[k];
+                    assert!(
+                        g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
+                        "{frames} photos: photo {j} lag {k}: {g} vs {want}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
