@@ -376,6 +376,18 @@ pub fn block_means(data: &[u8]) -> Result<Option<BlockMeans>, Why> {
     }
     let blocks = (width.div_ceil(8), height.div_ceil(8));
     let channels = comps.len();
+    // Every component's plane covers the luma blocks it is read at (a scan that named one component twice leaves
+    // another without one).
+    for (ci, c) in comps.iter().enumerate() {
+        let (x, y) = ((blocks.0 - 1) * c.h / hmax, (blocks.1 - 1) * c.v / vmax);
+        if cap
+            .planes
+            .get(ci)
+            .is_none_or(|p| p.len() <= y * cap.strides[ci] + x)
+        {
+            return Ok(None);
+        }
+    }
     let mut means = Vec::with_capacity(blocks.0 * blocks.1 * channels);
     // Component `ci`'s mean level at luma block (bx, by).
     let level = |ci: usize, bx: usize, by: usize| {
