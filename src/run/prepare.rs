@@ -107,10 +107,13 @@ pub fn prepare<T: Sync>(
 /// reference around it.
 const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
 
-/// `--window auto`: the survey of the mission's block images before the correction (one more decode of each
-/// photo the run reads; memory: a few dozen block images) and each photo's window, quantile and near window
-/// ([`crate::method::stretch`]). Photos that do not decode, or differ in size from the first, are passed over as
-/// the correction's stream passes them over, so the choices follow the engine's numbering.
+/// `--window auto`: the survey of the mission's block images before the correction (one more read of each photo
+/// the run reads: a decode, or for a baseline JPEG with blocks of 8 or a multiple its DC coefficients, the blocks'
+/// means, from the completeness check whose verdict the correction's decode then takes; memory: a few dozen block
+/// images) and each photo's window, quantile and near window ([`crate::method::stretch`]). Photos that do not
+/// decode, or differ in size from the first, are passed over as the correction's stream passes them over, so the
+/// choices follow the engine's numbering (a JPEG whose coefficients read but whose pixels the decoder then refuses
+/// would shift the choices after it by one photo: the checks are the same, so only a decoder's own failure does).
 fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> Vec<Choice> {
     let end = (plan.chunk.end + SURVEY_AFTER)
         .saturating_sub(plan.first)
