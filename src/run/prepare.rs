@@ -107,13 +107,10 @@ pub fn prepare<T: Sync>(
 /// reference around it.
 const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
 
-/// `--window auto`: the survey of the mission's block images before the correction (one more read of each photo
-/// the run reads: a decode, or for a baseline JPEG with blocks of 8 or a multiple its DC coefficients, the blocks'
-/// means, from the completeness check whose verdict the correction's decode then takes; memory: a few dozen block
-/// images) and each photo's window, quantile and near window ([`crate::method::stretch`]). Photos that do not
-/// decode, or differ in size from the first, are passed over as the correction's stream passes them over, so the
-/// choices follow the engine's numbering (a JPEG whose coefficients read but whose pixels the decoder then refuses
-/// would shift the choices after it by one photo: the checks are the same, so only a decoder's own failure does).
+/// `--window auto`: the survey of the mission's block images before the correction (one more decode of each
+/// photo the run reads; memory: a few dozen block images) and each photo's window, quantile and near window
+/// ([`crate::method::stretch`]). Photos that do not decode, or differ in size from the first, are passed over as
+/// the correction's stream passes them over, so the choices follow the engine's numbering.
 fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> Vec<Choice> {
     let end = (plan.chunk.end + SURVEY_AFTER)
         .saturating_sub(plan.first)
@@ -144,26 +141,7 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
             let lows = batch
                 .par_iter()
                 .map(|item| {
-                    // A baseline JPEG by its DC coefficients, without decoding it (block means instead of block
-                    // medians: docs/method.md); any other photo decoded.
-                    let path = &item.entry.path;
-                    let means = match engine.takes_block_means() {
-                        true => crate::io::survey_block_means(path, plan.photo_size).ok()?,
-                        false => None,
-                    };
-                    if let Some(b) = means {
-                        let layout = Layout {
-                            width: b.width,
-                            height: b.height,
-                            channels: b.channels,
-                        };
-                        if let Some(low) =
-                            engine.block_image_from_means(&b.means, b.blocks, b.channels)
-                        {
-                            return Some((layout, low));
-                        }
-                    }
-                    let p = decode_expecting(path, plan.photo_size).ok()?;
+                    let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
                     let (layout, low) = (p.layout, engine.block_image(&p));
                     crate::io::buffers::recycle(p);
                     Some((layout, low?))
