@@ -93,7 +93,8 @@ fn mutate(seed: &[u8], edits: &[(u8, usize, u8)]) -> Vec<u8> {
     v
 }
 
-/// Every reader of a photo file on `bytes`: the decoder, the header reader, the JPEG check, the metadata reader.
+/// Every reader of a photo file on `bytes`: the decoder, the header reader, the JPEG check and the survey's block
+/// means, the metadata reader.
 fn read_file(bytes: &[u8]) -> Result<(), TestCaseError> {
     let d = tempfile::tempdir().unwrap();
     for ext in ["jpg", "png", "tif"] {
@@ -111,6 +112,14 @@ fn read_file(bytes: &[u8]) -> Result<(), TestCaseError> {
         let _ = Metadata::read(&p);
     }
     let _ = jpeg_check::check(bytes);
+    // The survey's block means: never a panic, and what they read the check accepts.
+    if let Ok(Some(b)) = jpeg_check::block_means(bytes) {
+        prop_assert!(
+            jpeg_check::check(bytes).is_ok(),
+            "block means of a JPEG the check refuses"
+        );
+        prop_assert_eq!(b.means.len(), b.blocks.0 * b.blocks.1 * b.channels);
+    }
     let _ = Metadata::from_bytes(bytes);
     Ok(())
 }

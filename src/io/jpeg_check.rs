@@ -14,6 +14,8 @@ struct Component {
     id: u8,
     h: usize,
     v: usize,
+    /// Its quantisation table's slot.
+    tq: usize,
 }
 
 /// A Huffman table in canonical form (JPEG Annex C), with a lookup table for codes of up to `FAST` bits.
@@ -238,6 +240,188 @@ fn be16(d: &[u8], at: usize) -> Result<usize, Why> {
     }
 }
 
+/// The DC coefficients of a single-scan baseline JPEG, kept while [`walk`] checks it ([`block_means`]).
+#[derive(Default)]
+struct Capture {
+    /// The DC quantiser of each quantisation table slot.
+    quant: [Option<u16>; 4],
+    /// Each frame component's DC coefficients (quantised) on its grid of blocks, the MCUs' padding blocks included.
+    planes: Vec<Vec<i32>>,
+    /// Blocks across each plane.
+    strides: Vec<usize>,
+    /// For each component of the scan: (frame component, blocks per MCU across and down).
+    layout: Vec<(usize, usize, usize)>,
+    /// MCUs across the frame (blocks across, for a single-component scan).
+    mcus_across: usize,
+    /// The running DC predictor of each component of the scan (reset at each restart marker).
+    predictors: Vec<i32>,
+    /// The frame's size and components.
+    frame: Option<(usize, usize, Vec<Component>)>,
+    /// A scan was seen.
+    scanned: bool,
+    /// Something these coefficients cannot be turned into block means for (progressive or 12-bit coding, several
+    /// scans, RGB or CMYK components).
+    unusable: bool,
+}
+
+impl Capture {
+    /// The DC quantisers of a define-quantisation-table segment.
+    fn quantisers(&mut self, seg: &[u8]) {
+        let mut p = 0;
+        while let Some(&b) = seg.get(p) {
+            let (pq, tq) = ((b >> 4) as usize, (b & 15) as usize);
+            let dc = match pq {
+                0 => seg.get(p + 1).map(|&v| v as u16),
+                _ => seg
+                    .get(p + 1..p + 3)
+                    .map(|v| u16::from_be_bytes([v[0], v[1]])),
+            };
+            match (dc, tq < 4) {
+                (Some(q), true) => self.quant[tq] = Some(q),
+                _ => {
+                    self.unusable = true;
+                    return;
+                }
+            }
+            p += 1 + 64 * (pq + 1);
+        }
+    }
+
+    /// Set up for the scan whose components are `parts`.
+    fn start_scan(&mut self, parts: &[ScanPart], width: usize, height: usize, comps: &[Component]) {
+        let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
+        let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
+        self.planes = vec![Vec::new(); comps.len()];
+        self.strides = vec![0; comps.len()];
+        self.layout.clear();
+        if let [(_, _, _, ci)] = parts {
+            // One component: its own blocks in raster order.
+            let across = width.div_ceil(8);
+            self.mcus_across = across;
+            self.strides[*ci] = across;
+            self.planes[*ci] = vec![0; across * height.div_ceil(8)];
+            self.layout.push((*ci, 1, 1));
+        } else {
+            let (mx, my) = (width.div_ceil(8 * hmax), height.div_ceil(8 * vmax));
+            self.mcus_across = mx;
+            for &(_, _, _, ci) in parts {
+                let c = comps[ci];
+                self.strides[ci] = mx * c.h;
+                self.planes[ci] = vec![0; mx * c.h * my * c.v];
+                self.layout.push((ci, c.h, c.v));
+            }
+        }
+        self.predictors = vec![0; parts.len()];
+    }
+
+    /// Block `b` of the scan's component `p` in MCU `m`: its DC difference `diff`.
+    #[inline]
+    fn put(&mut self, m: usize, p: usize, b: usize, diff: i32) {
+        let (ci, h, v) = self.layout[p];
+        let pred = self.predictors[p].wrapping_add(diff);
+        self.predictors[p] = pred;
+        let (mx, my) = (m % self.mcus_across, m / self.mcus_across);
+        let (bx, by) = (mx * h + b % h, my * v + b / h);
+        if let Some(slot) = self.planes[ci].get_mut(by * self.strides[ci] + bx) {
+            *slot = pred;
+        }
+    }
+}
+
+/// The mean levels of a JPEG's 8×8 blocks, from their DC coefficients: what the survey of `--window auto` measures
+/// a photo by, without decoding it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlockMeans {
+    /// The photo's width in pixels.
+    pub width: usize,
+    /// The photo's height in pixels.
+    pub height: usize,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    /// Blocks across and down: `width.div_ceil(8)`, `height.div_ceil(8)`.
+    pub blocks: (usize, usize),
+    /// Each block's mean level per channel, as a share of 255, interleaved, row by row of blocks (the blocks at
+    /// the right and bottom border include the encoder's padding).
+    pub means: Vec<f32>,
+}
+
+/// [`check`] and, for a complete single-scan baseline JPEG of 8-bit grey or YCbCr samples, its [`BlockMeans`]:
+/// `Ok(None)` for any other JPEG (progressive, 12-bit, several scans, RGB or CMYK, luma not the largest
+/// sampling), which has to be decoded.
+///
+/// A block's mean sample is its DC coefficient × its quantiser ÷ 8 + 128 (JPEG A.3.3); YCbCr goes to RGB by JFIF's
+/// equations at each luma block, with the chroma block that covers it (a 16×16 mean with 4:2:0 chroma). Equal to
+/// the mean of the decoded block's samples but for the decoder's rounding and clamping, and its smoothing of
+/// subsampled chroma.
+pub fn block_means(data: &[u8]) -> Result<Option<BlockMeans>, Why> {
+    let mut cap = Capture::default();
+    let (sequential, scans) = walk(data, Some(&mut cap))?;
+    if cap.unusable || !sequential || scans != 1 {
+        return Ok(None);
+    }
+    let Some((width, height, comps)) = cap.frame.take() else {
+        return Ok(None);
+    };
+    let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
+    let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
+    if comps[0].h != hmax || comps[0].v != vmax {
+        return Ok(None);
+    }
+    let mut quant = Vec::with_capacity(comps.len());
+    for c in &comps {
+        match cap.quant.get(c.tq).copied().flatten() {
+            Some(q) => quant.push(q as f32),
+            None => return Ok(None),
+        }
+    }
+    let blocks = (width.div_ceil(8), height.div_ceil(8));
+    let channels = comps.len();
+    // Every component's plane covers the luma blocks it is read at (a scan that named one component twice leaves
+    // another without one).
+    for (ci, c) in comps.iter().enumerate() {
+        let (x, y) = ((blocks.0 - 1) * c.h / hmax, (blocks.1 - 1) * c.v / vmax);
+        if cap
+            .planes
+            .get(ci)
+            .is_none_or(|p| p.len() <= y * cap.strides[ci] + x)
+        {
+            return Ok(None);
+        }
+    }
+    let mut means = Vec::with_capacity(blocks.0 * blocks.1 * channels);
+    // Component `ci`'s mean level at luma block (bx, by).
+    let level = |ci: usize, bx: usize, by: usize| {
+        let c = comps[ci];
+        let (x, y) = (bx * c.h / hmax, by * c.v / vmax);
+        let dc = cap.planes[ci][y * cap.strides[ci] + x];
+        dc as f32 * quant[ci] / 8.0 + 128.0
+    };
+    for by in 0..blocks.1 {
+        for bx in 0..blocks.0 {
+            let y = level(0, bx, by);
+            if channels == 1 {
+                means.push(y.clamp(0.0, 255.0) / 255.0);
+                continue;
+            }
+            let (cb, cr) = (level(1, bx, by) - 128.0, level(2, bx, by) - 128.0);
+            for v in [
+                y + 1.402 * cr,
+                y - 0.344_136 * cb - 0.714_136 * cr,
+                y + 1.772 * cb,
+            ] {
+                means.push(v.clamp(0.0, 255.0) / 255.0);
+            }
+        }
+    }
+    Ok(Some(BlockMeans {
+        width,
+        height,
+        channels,
+        blocks,
+        means,
+    }))
+}
+
 /// Position of the next marker (its `0xFF`) at or after `pos` that ends an entropy-coded segment (not a stuffed
 /// byte, not a restart marker), if any.
 fn next_marker(d: &[u8], mut pos: usize) -> Option<usize> {
@@ -271,6 +455,7 @@ fn frame_header(seg: &[u8]) -> Result<(usize, usize, Vec<Component>), Why> {
             id: seg[6 + 3 * i],
             h: (seg[7 + 3 * i] >> 4) as usize,
             v: (seg[7 + 3 * i] & 15) as usize,
+            tq: (seg[8 + 3 * i] & 15) as usize,
         })
         .collect();
     if comps
@@ -318,7 +503,7 @@ fn huffman_tables(
 /// `Ok` when the JPEG in `data` holds all its compressed data and ends with an end-of-image marker; `Err` says
 /// what is missing. See the module documentation.
 pub fn check(data: &[u8]) -> Result<(), Why> {
-    walk(data).map(|_| ())
+    walk(data, None).map(|_| ())
 }
 
 /// [`check`] for every JPEG, and whether it is a sequential one of more than one scan (a non-interleaved JPEG,
@@ -326,7 +511,7 @@ pub fn check(data: &[u8]) -> Result<(), Why> {
 /// Rust) in its strict mode, which refuses a scan whose data ends before its last block: the marker walk alone
 /// accepts a progressive JPEG cut inside a scan and closed with an end marker.
 pub fn check_all(data: &[u8]) -> Result<bool, Why> {
-    let (sequential, scans) = walk(data)?;
+    let (sequential, scans) = walk(data, None)?;
     if !sequential {
         libjpeg_turbo_rs::read_coefficients(data).map_err(|e| {
             format!("a scan of this progressive JPEG is incomplete or damaged ({e})")
@@ -335,8 +520,9 @@ pub fn check_all(data: &[u8]) -> Result<bool, Why> {
     Ok(sequential && scans > 1)
 }
 
-/// The walk of [`check`]: whether the frame is sequential, and how many scans it has.
-fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
+/// The walk of [`check`]: whether the frame is sequential, and how many scans it has. With a `capture`, the DC
+/// coefficients of a single-scan baseline JPEG are kept as it goes ([`block_means`]).
+fn walk(data: &[u8], mut capture: Option<&mut Capture>) -> Result<(bool, usize), Why> {
     if data.get(..2) != Some(&[0xFF, 0xD8]) {
         return Err("not a JPEG (no start-of-image marker)".into());
     }
@@ -386,6 +572,22 @@ fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
             0xC0..=0xCF if m != 0xC4 && m != 0xC8 && m != 0xCC => {
                 baseline = m == 0xC0 || m == 0xC1;
                 frame = Some(frame_header(seg)?);
+                if let Some(cap) = capture.as_deref_mut() {
+                    // 8-bit samples only: the block means are taken as 8-bit levels.
+                    cap.unusable |= !baseline || seg.first() != Some(&8);
+                    cap.frame = frame.clone();
+                }
+            }
+            0xDB => {
+                if let Some(cap) = capture.as_deref_mut() {
+                    cap.quantisers(seg);
+                }
+            }
+            0xEE => {
+                if let Some(cap) = capture.as_deref_mut() {
+                    // Adobe's colour transform flag: 0 is RGB (or CMYK) as stored, not YCbCr.
+                    cap.unusable |= seg.starts_with(b"Adobe") && seg.get(11) == Some(&0);
+                }
             }
             0xC4 => huffman_tables(seg, &mut dc, &mut ac)?,
             0xDD => restart = be16(data, pos + 2)?,
@@ -394,7 +596,17 @@ fn walk(data: &[u8]) -> Result<(bool, usize), Why> {
                 let start = pos + len;
                 let end = if baseline {
                     let (w, h, comps) = frame.as_ref().ok_or("scan before the frame header")?;
-                    scan_baseline(data, start, seg, *w, *h, comps, &dc, &ac, restart)?
+                    if let Some(c) = capture.as_deref_mut() {
+                        // One scan holding every component, grey or YCbCr (not RGB by its component names).
+                        let n = comps.len();
+                        c.unusable |= c.scanned
+                            || seg.first() != Some(&(n as u8))
+                            || !(n == 1 || n == 3)
+                            || (n == 3 && comps.iter().map(|c| c.id).eq(*b"RGB"));
+                        c.scanned = true;
+                    }
+                    let cap = capture.as_deref_mut().filter(|c| !c.unusable);
+                    scan_baseline(data, start, seg, *w, *h, comps, &dc, &ac, restart, cap)?
                 } else {
                     start
                 };
@@ -455,8 +667,8 @@ pub fn dimensions(mut r: impl std::io::Read + std::io::Seek) -> Result<(usize, u
     }
 }
 
-/// One scan component: (blocks per MCU, DC table, AC table).
-type ScanPart<'t> = (usize, &'t Huffman, &'t Huffman);
+/// One scan component: (blocks per MCU, DC table, AC table, the component's index in the frame).
+type ScanPart<'t> = (usize, &'t Huffman, &'t Huffman, usize);
 
 /// The components of a scan from its header `seg`, and the number of MCUs (or blocks, for one component) it holds.
 fn scan_parts<'t>(
@@ -479,10 +691,11 @@ fn scan_parts<'t>(
     for i in 0..ns {
         let id = seg[1 + 2 * i];
         let t = seg[2 + 2 * i];
-        let c = comps
+        let ci = comps
             .iter()
-            .find(|c| c.id == id)
+            .position(|c| c.id == id)
             .ok_or("scan names a component the frame does not have")?;
+        let c = &comps[ci];
         let (td, ta) = ((t >> 4) as usize, (t & 15) as usize);
         let d = dc
             .get(td)
@@ -496,9 +709,9 @@ fn scan_parts<'t>(
             let cw = (width * c.h).div_ceil(hmax);
             let ch = (height * c.v).div_ceil(vmax);
             single = Some(cw.div_ceil(8) * ch.div_ceil(8));
-            parts.push((1usize, d, a));
+            parts.push((1usize, d, a, ci));
         } else {
-            parts.push((c.h * c.v, d, a));
+            parts.push((c.h * c.v, d, a, ci));
         }
     }
     let mcus = match single {
@@ -508,12 +721,26 @@ fn scan_parts<'t>(
     Ok((parts, mcus))
 }
 
-/// Huffman-decode one block's DC and AC coefficients, checking only that they are well formed.
-fn skip_block(bits: &mut Bits, d: &Huffman, a: &Huffman) -> Result<(), Why> {
+/// Huffman-decode one block's DC and AC coefficients, checking only that they are well formed; returns the DC
+/// coefficient's difference to the previous block's of its component (JPEG F.2.2.1).
+fn skip_block(bits: &mut Bits, d: &Huffman, a: &Huffman) -> Result<i32, Why> {
     let s = bits.decode(d)? as u32;
     if s > 16 {
         return Err("corrupt compressed data (bad DC size)".into());
     }
+    let diff = if s == 0 {
+        0
+    } else {
+        if bits.n < s {
+            bits.fill();
+        }
+        let v = (bits.acc >> (64 - s)) as i32;
+        if v < 1 << (s - 1) {
+            v - (1 << s) + 1
+        } else {
+            v
+        }
+    };
     bits.skip(s);
     let mut k = 1;
     while k < 64 {
@@ -531,7 +758,7 @@ fn skip_block(bits: &mut Bits, d: &Huffman, a: &Huffman) -> Result<(), Why> {
     if k > 64 {
         return Err("corrupt compressed data (more than 64 coefficients in a block)".into());
     }
-    Ok(())
+    Ok(diff)
 }
 
 /// Huffman-decode one baseline scan starting at `start`; returns the position where its data ends.
@@ -546,8 +773,12 @@ fn scan_baseline(
     dc: &[Option<Huffman>; 4],
     ac: &[Option<Huffman>; 4],
     restart: usize,
+    mut capture: Option<&mut Capture>,
 ) -> Result<usize, Why> {
     let (parts, mcus) = scan_parts(seg, width, height, comps, dc, ac)?;
+    if let Some(cap) = capture.as_deref_mut() {
+        cap.start_scan(&parts, width, height, comps);
+    }
     let mut bits = Bits::new(data, start);
     let short = |done: usize| {
         format!(
@@ -567,13 +798,28 @@ fn scan_baseline(
             match data.get(p + 1) {
                 Some(&r) if (0xD0..=0xD7).contains(&r) && p - bits.pos <= 3 => {
                     bits = Bits::new(data, p + 2);
+                    if let Some(cap) = capture.as_deref_mut() {
+                        cap.predictors.fill(0);
+                    }
                 }
                 _ => return Err(short(m)),
             }
         }
-        for &(blocks, d, a) in &parts {
-            for _ in 0..blocks {
-                skip_block(&mut bits, d, a)?;
+        match capture.as_deref_mut() {
+            None => {
+                for &(blocks, d, a, _) in &parts {
+                    for _ in 0..blocks {
+                        skip_block(&mut bits, d, a)?;
+                    }
+                }
+            }
+            Some(cap) => {
+                for (p, &(blocks, d, a, _)) in parts.iter().enumerate() {
+                    for b in 0..blocks {
+                        let diff = skip_block(&mut bits, d, a)?;
+                        cap.put(m, p, b, diff);
+                    }
+                }
             }
         }
         if bits.ended && !bits.within_data() {
@@ -646,27 +892,49 @@ impl Drop for RememberChecks {
     }
 }
 
-/// [`check_all`], or its verdict on the same bytes earlier while a [`RememberChecks`] is held.
-pub(crate) fn check_all_remembered(data: &[u8]) -> Result<bool, Why> {
+/// The key a verdict on `data` is kept under, while a [`RememberChecks`] is held.
+fn remembered_key(data: &[u8]) -> Option<(usize, u64, u64)> {
     use std::hash::BuildHasher;
-    let Some(hashers) = remembered().as_ref().map(|r| r.hashers.clone()) else {
-        return check_all(data);
-    };
-    let key = (
+    let hashers = remembered().as_ref().map(|r| r.hashers.clone())?;
+    Some((
         data.len(),
         hashers[0].hash_one(data),
         hashers[1].hash_one(data),
-    );
-    if let Some(&v) = remembered().as_ref().and_then(|r| r.verdicts.get(&key)) {
-        return Ok(v);
-    }
-    let v = check_all(data)?;
+    ))
+}
+
+/// Keep the verdict `v` of [`check_all`] under `key`.
+fn remember(key: (usize, u64, u64), v: bool) {
     if let Some(r) = remembered().as_mut() {
         if r.verdicts.len() < MAX_REMEMBERED {
             r.verdicts.insert(key, v);
         }
     }
+}
+
+/// [`check_all`], or its verdict on the same bytes earlier while a [`RememberChecks`] is held.
+pub(crate) fn check_all_remembered(data: &[u8]) -> Result<bool, Why> {
+    let Some(key) = remembered_key(data) else {
+        return check_all(data);
+    };
+    if let Some(&v) = remembered().as_ref().and_then(|r| r.verdicts.get(&key)) {
+        return Ok(v);
+    }
+    let v = check_all(data)?;
+    remember(key, v);
     Ok(v)
+}
+
+/// [`block_means`], keeping the check's verdict on the JPEGs it reads whole (a single-scan sequential JPEG:
+/// [`check_all`] gives `Ok(false)`), so that the decode of the same bytes later in the run takes it.
+pub(crate) fn block_means_remembered(data: &[u8]) -> Result<Option<BlockMeans>, Why> {
+    let means = block_means(data)?;
+    if means.is_some() {
+        if let Some(key) = remembered_key(data) {
+            remember(key, false);
+        }
+    }
+    Ok(means)
 }
 
 #[cfg(test)]
@@ -745,6 +1013,184 @@ mod tests {
                 assert_eq!(bits.marker, Some(0xD9), "case {case}");
             }
         }
+    }
+
+    /// A test photo: a texture of up to 50 levels (the same in every channel) on colour gradients of a fraction
+    /// of a level per pixel, within 30..225 (no clamping in the decoder); `channels` 1 or 3.
+    fn texture(w: usize, h: usize, channels: usize, seed: u64) -> Vec<u8> {
+        let mut state = seed | 1;
+        let mut px = Vec::with_capacity(w * h * channels);
+        for y in 0..h {
+            for x in 0..w {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let texture = (state % 41) as f64 - 20.0 + 10.0 * ((x / 5 + y / 7) % 3) as f64;
+                let (xf, yf) = (x as f64, y as f64);
+                for ramp in [60.0 + 0.3 * xf, 70.0 + 0.25 * yf, 90.0 + 0.2 * (xf + yf)]
+                    .into_iter()
+                    .take(channels)
+                {
+                    px.push((ramp + texture).clamp(30.0, 225.0) as u8);
+                }
+            }
+        }
+        px
+    }
+
+    /// Mean of the decoded samples of each complete 8×8 block, against [`block_means`]: (largest, mean) absolute
+    /// difference in levels over the blocks and channels.
+    fn against_decoded(jpeg: &[u8], w: usize, h: usize, channels: usize) -> (f32, f32) {
+        // zune-jpeg, the decoder the correction reads the same photos with.
+        let photo =
+            super::super::decode_jpeg_zune(jpeg, |n| vec![0; n]).expect("the decoder reads it");
+        let l = photo.layout;
+        assert_eq!((l.width, l.height, l.channels), (w, h, channels));
+        let crate::method::raster::Samples::U8(px) = photo.samples else {
+            panic!("8-bit samples")
+        };
+        let b = block_means(jpeg)
+            .unwrap()
+            .expect("a baseline single-scan JPEG");
+        assert_eq!((b.width, b.height, b.channels), (w, h, channels));
+        assert_eq!(b.blocks, (w.div_ceil(8), h.div_ceil(8)));
+        assert_eq!(b.means.len(), b.blocks.0 * b.blocks.1 * channels);
+        let (mut worst, mut sum, mut n) = (0f32, 0f32, 0f32);
+        for by in 0..h / 8 {
+            for bx in 0..w / 8 {
+                for c in 0..channels {
+                    let mut total = 0u32;
+                    for y in by * 8..by * 8 + 8 {
+                        for x in bx * 8..bx * 8 + 8 {
+                            total += px[(y * w + x) * channels + c] as u32;
+                        }
+                    }
+                    let want = total as f32 / 64.0;
+                    let got = 255.0 * b.means[(by * b.blocks.0 + bx) * channels + c];
+                    worst = worst.max((got - want).abs());
+                    sum += (got - want).abs();
+                    n += 1.0;
+                }
+            }
+        }
+        (worst, sum / n)
+    }
+
+    /// The block means from the DC coefficients are the decoded blocks' means, within the quantisation of the DC
+    /// coefficients (grey: a tenth of a level; RGB: the chroma's quantiser scaled by the colour conversion, about a
+    /// level) and, with subsampled chroma, its 16-pixel means where the decoder's upsampled chroma varies within
+    /// them; for odd sizes (partial MCUs), restart intervals and two encoders.
+    #[test]
+    fn block_means_are_the_decoded_blocks_means() {
+        use libjpeg_turbo_rs::{compress, PixelFormat, Subsampling};
+        for (w, h) in [(64, 48), (203, 141), (17, 9)] {
+            let rgb = texture(w, h, 3, (w * h) as u64);
+            for (s, tolerance) in [
+                (Subsampling::S444, (1.5, 0.3)),
+                (Subsampling::S422, (2.5, 1.0)),
+                (Subsampling::S420, (2.5, 1.0)),
+            ] {
+                let jpeg = compress(&rgb, w, h, PixelFormat::Rgb, 92, s).unwrap();
+                let (worst, mean) = against_decoded(&jpeg, w, h, 3);
+                assert!(
+                    worst <= tolerance.0 && mean <= tolerance.1,
+                    "{w}x{h} {s:?}: worst {worst}, mean {mean}"
+                );
+            }
+            let grey = texture(w, h, 1, 7);
+            let jpeg =
+                compress(&grey, w, h, PixelFormat::Grayscale, 85, Subsampling::S444).unwrap();
+            let (worst, mean) = against_decoded(&jpeg, w, h, 1);
+            assert!(
+                worst <= 0.25 && mean <= 0.05,
+                "{w}x{h} grey: worst {worst}, mean {mean}"
+            );
+            // Another encoder, with restart markers every 3 MCUs (the predictors start again at each).
+            for restart in [1, 3] {
+                let mut jpeg = Vec::new();
+                let mut enc = jpeg_encoder::Encoder::new(&mut jpeg, 90);
+                enc.set_restart_interval(restart);
+                enc.encode(&rgb, w as u16, h as u16, jpeg_encoder::ColorType::Rgb)
+                    .unwrap();
+                let (worst, mean) = against_decoded(&jpeg, w, h, 3);
+                assert!(
+                    worst <= 1.5 && mean <= 0.4,
+                    "{w}x{h} restart {restart}: worst {worst}, mean {mean}"
+                );
+            }
+        }
+    }
+
+    /// The DC coefficients kept during the check are those of an independent coefficient reader (libjpeg-turbo's,
+    /// ported to Rust), block by block, every component, for every sampling, odd sizes and restart intervals.
+    #[test]
+    fn the_dc_coefficients_are_the_reference_readers() {
+        use libjpeg_turbo_rs::{compress, PixelFormat, Subsampling};
+        for (w, h) in [(64, 48), (203, 141), (17, 9), (33, 40)] {
+            let rgb = texture(w, h, 3, 11);
+            let mut files = Vec::new();
+            for s in [Subsampling::S444, Subsampling::S422, Subsampling::S420] {
+                files.push(compress(&rgb, w, h, PixelFormat::Rgb, 90, s).unwrap());
+            }
+            for restart in [1, 2, 5] {
+                let mut jpeg = Vec::new();
+                let mut enc = jpeg_encoder::Encoder::new(&mut jpeg, 80);
+                enc.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
+                enc.set_restart_interval(restart);
+                enc.encode(&rgb, w as u16, h as u16, jpeg_encoder::ColorType::Rgb)
+                    .unwrap();
+                files.push(jpeg);
+            }
+            for (f, jpeg) in files.iter().enumerate() {
+                let mut cap = Capture::default();
+                walk(jpeg, Some(&mut cap)).unwrap();
+                assert!(!cap.unusable, "{w}x{h} file {f}");
+                let reference = libjpeg_turbo_rs::read_coefficients(jpeg).unwrap();
+                assert_eq!(reference.components.len(), 3);
+                for (ci, rc) in reference.components.iter().enumerate() {
+                    let mut compared = 0;
+                    for by in 0..rc.blocks_y {
+                        for bx in 0..rc.blocks_x {
+                            let Some(&got) = cap.planes[ci].get(by * cap.strides[ci] + bx) else {
+                                continue;
+                            };
+                            if bx >= cap.strides[ci] {
+                                continue;
+                            }
+                            let want = rc.blocks[by * rc.blocks_x + bx][0] as i32;
+                            assert_eq!(
+                                got, want,
+                                "{w}x{h} file {f} component {ci} block ({bx}, {by})"
+                            );
+                            compared += 1;
+                        }
+                    }
+                    assert!(compared > 0, "{w}x{h} file {f} component {ci}");
+                }
+            }
+        }
+    }
+
+    /// What the DC coefficients do not give is refused (`Ok(None)`: decode it) and what the check refuses stays
+    /// refused: a progressive JPEG, a JPEG cut short; the verdict kept for the complete one is the check's.
+    #[test]
+    fn block_means_refuse_what_they_cannot_read() {
+        use libjpeg_turbo_rs::{compress, PixelFormat, Subsampling};
+        let rgb = texture(96, 64, 3, 5);
+        let mut progressive = Vec::new();
+        let mut enc = jpeg_encoder::Encoder::new(&mut progressive, 90);
+        enc.set_progressive(true);
+        enc.encode(&rgb, 96, 64, jpeg_encoder::ColorType::Rgb)
+            .unwrap();
+        assert_eq!(block_means(&progressive), Ok(None));
+        let jpeg = compress(&rgb, 96, 64, PixelFormat::Rgb, 92, Subsampling::S420).unwrap();
+        let cut = [&jpeg[..jpeg.len() / 2], &[0xFF, 0xD9][..]].concat();
+        assert_eq!(block_means(&cut).err(), check_all(&cut).err());
+        assert!(block_means(&cut).is_err());
+        let keep = RememberChecks::start();
+        assert!(block_means_remembered(&jpeg).unwrap().is_some());
+        assert_eq!(check_all_remembered(&jpeg), check_all(&jpeg));
+        drop(keep);
     }
 
     /// A verdict is taken again for the same bytes only: a copy cut short and closed with an end marker is

@@ -23,6 +23,7 @@ use image::{DynamicImage, ImageFormat};
 use crate::error::{Error, Result};
 pub use crate::io::jpeg::{parse as jpeg_coding, JpegCoding, Subsampling};
 pub use crate::io::jpeg_check::check as check_jpeg;
+pub use crate::io::jpeg_check::BlockMeans;
 pub use crate::io::pnm::{decode_frame, FrameSplitter};
 use crate::method::raster::{Layout, Photo, Raster, Samples};
 
@@ -275,6 +276,42 @@ pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result
         }
     }
     decode(path)
+}
+
+/// The survey's look at a photo without decoding it: a baseline JPEG's 8×8 block means from its DC coefficients
+/// ([`crate::io::jpeg_check::block_means`]), after the same header checks as [`decode_expecting`] and the same
+/// completeness check as the decoder (whose verdict the decode of these bytes later in the run takes). `Ok(None)`:
+/// not a JPEG, or one whose block means are not read this way (progressive, 12-bit, several scans, RGB or CMYK
+/// components): decode it. `Err`: the photo the decode would refuse (too big, cut short, another size).
+pub fn survey_block_means(
+    path: &Path,
+    expected: Option<(usize, usize)>,
+) -> Result<Option<crate::io::jpeg_check::BlockMeans>> {
+    guarded(path, || {
+        let mut head = [0u8; 3];
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if read_full(&mut file, &mut head).map_err(|e| Error::io(path, e))? < 3
+            || head != [0xFF, 0xD8, 0xFF]
+        {
+            return Ok(None);
+        }
+        let decode_error = |reason: String| Error::Decode {
+            path: path.to_owned(),
+            reason,
+        };
+        let (w, h) = jpeg_header_size(path)?;
+        check_size(w, h).map_err(decode_error)?;
+        if let Some((ew, eh)) = expected.filter(|&e| e != (w, h)) {
+            return Err(Error::Mismatch {
+                path: path.to_owned(),
+                reason: format!("size {w}x{h} differs from the mission's {ew}x{eh}; skipped"),
+            });
+        }
+        let data = read_within_budget(path, len, jpeg_byte_budget(w, h))?;
+        crate::io::jpeg_check::block_means_remembered(&data)
+            .map_err(|why| decode_error(format!("incomplete JPEG: {why}")))
+    })
 }
 
 /// Read into `buf` until it is full or the reader ends (retrying interrupted reads); returns the bytes read.

@@ -295,6 +295,54 @@ impl<T> Engine<T> {
         (self.params.downsample > 0 && fits).then(|| self.block_medians(photo))
     }
 
+    /// The survey's block image from a JPEG's 8×8 block means (sRGB levels as shares of 255, `blocks` across and
+    /// down, `channels` interleaved; [`crate::io::survey_block_means`]) instead of [`Engine::block_image`]'s block
+    /// medians of the decoded photo: each `K`×`K` block the mean of the 8×8 means it covers, in linear light.
+    /// `None` where the means cannot stand for the blocks: `K` not a multiple of 8, or a mask (its pixels are left
+    /// out of the blocks).
+    pub fn block_image_from_means(
+        &self,
+        means: &[f32],
+        blocks: (usize, usize),
+        channels: usize,
+    ) -> Option<Raster> {
+        if !self.takes_block_means() || means.len() != blocks.0 * blocks.1 * channels {
+            return None;
+        }
+        let k = self.params.downsample;
+        let m = k / 8;
+        let (bw, bh) = (blocks.0.div_ceil(m), blocks.1.div_ceil(m));
+        let curve = self.params.curve();
+        let mut out = Raster::filled(bw, bh, channels, 0.0);
+        for by in 0..bh {
+            for bx in 0..bw {
+                for c in 0..channels {
+                    let (mut sum, mut n) = (0.0f32, 0.0f32);
+                    for y in by * m..((by + 1) * m).min(blocks.1) {
+                        for x in bx * m..((bx + 1) * m).min(blocks.0) {
+                            sum += means[(y * blocks.0 + x) * channels + c];
+                            n += 1.0;
+                        }
+                    }
+                    out.data[(by * bw + bx) * channels + c] = curve.to_linear(sum / n);
+                }
+            }
+        }
+        Some(out)
+    }
+
+    /// Whether a photo's block image from block means sees the dark blocks its block image from block medians sees
+    /// ([`crate::method::stretch::means_stand_for_medians`], against this engine's `S`).
+    pub fn means_stand_for_medians(&self, means: &Raster, medians: &Raster) -> bool {
+        crate::method::stretch::means_stand_for_medians(means, medians, self.scatter_low.as_ref())
+    }
+
+    /// Whether [`Engine::block_image_from_means`] takes 8×8 block means: `K` a multiple of 8, no mask.
+    pub fn takes_block_means(&self) -> bool {
+        let k = self.params.downsample;
+        k > 0 && k.is_multiple_of(8) && self.mask.is_none()
+    }
+
     /// Photo `i`'s choice, when the window is chosen per stretch.
     fn choice(&self, i: usize) -> Option<&Choice> {
         let s = self.stretches.as_ref()?;
@@ -977,5 +1025,56 @@ mod tests {
             assert!(median_to_linear(&table, t, f32::NAN).is_nan());
         }
         assert!(median_linear_table(Transfer::Linear).is_empty());
+    }
+
+    /// The survey's block image from 8×8 block means: each `K`×`K` block the mean of the 8×8 means it covers (fewer
+    /// at the right and bottom border), in linear light, against a brute-force sum; none for `K` not a multiple
+    /// of 8 or means of another size.
+    #[test]
+    fn block_image_from_means_averages_the_means_it_covers() {
+        let (bw, bh) = (5usize, 3usize);
+        let means: Vec<f32> = (0..bw * bh * 3)
+            .map(|i| 0.1 + ((i * 37) % 200) as f32 / 255.0)
+            .collect();
+        for k in [8usize, 16, 24, 4, 12] {
+            let params = Params {
+                downsample: k,
+                transfer: Some(Transfer::Srgb),
+                ..Params::default()
+            };
+            let engine = Engine::<usize>::new(params, None, None).unwrap();
+            let got = engine.block_image_from_means(&means, (bw, bh), 3);
+            assert_eq!(engine.takes_block_means(), k % 8 == 0, "K = {k}");
+            let Some(got) = got else {
+                assert!(k % 8 != 0, "K = {k}");
+                continue;
+            };
+            let m = k / 8;
+            assert_eq!(
+                (got.width, got.height, got.channels),
+                (bw.div_ceil(m), bh.div_ceil(m), 3)
+            );
+            for y in 0..got.height {
+                for x in 0..got.width {
+                    for c in 0..3 {
+                        let covered: Vec<f32> = (0..bh)
+                            .flat_map(|by| (0..bw).map(move |bx| (bx, by)))
+                            .filter(|&(bx, by)| bx / m == x && by / m == y)
+                            .map(|(bx, by)| means[(by * bw + bx) * 3 + c])
+                            .collect();
+                        let want = Transfer::Srgb
+                            .to_linear(covered.iter().sum::<f32>() / covered.len() as f32);
+                        let v = got.data[(y * got.width + x) * 3 + c];
+                        assert!(
+                            (v - want).abs() < 1e-6,
+                            "K = {k} ({x}, {y}) {c}: {v} vs {want}"
+                        );
+                    }
+                }
+            }
+            assert!(engine
+                .block_image_from_means(&means[1..], (bw, bh), 3)
+                .is_none());
+        }
     }
 }

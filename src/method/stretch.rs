@@ -205,6 +205,44 @@ impl Surveyor {
     }
 }
 
+/// Photos of a mission whose JPEGs the survey reads by their DC coefficients (block means) that it also decodes
+/// (block medians) to check that the two see the same dark blocks: one in this many.
+pub const MEANS_CHECKED_EVERY: usize = 8;
+/// Largest difference of dark shares ([`dark_share`]) between a photo's block means and its block medians at which
+/// the means stand for the medians. Where clutter is as fine as the blocks, a block half covered has a mean halfway
+/// to the clutter's level and a median at one of the two: the means' dark share falls far below the medians'.
+pub const MEANS_AGREE: f32 = 0.05;
+
+/// Whether block means `means` of a photo see the dark blocks its block medians `medians` see (same size and
+/// channels; linear light; `s`: the backscatter at block resolution): their dark shares against one smooth
+/// reference, the medians' grey levels above `S` box-averaged over an eighth of the frame, differ by at most
+/// [`MEANS_AGREE`].
+pub fn means_stand_for_medians(means: &Raster, medians: &Raster, s: Option<&Raster>) -> bool {
+    if means.layout() != medians.layout() {
+        return false;
+    }
+    let (w, h) = (medians.width, medians.height);
+    let (a, b) = (grey_above(means, s), grey_above(medians, s));
+    let finite = |v: &[f32]| -> Vec<f32> {
+        v.iter()
+            .map(|&x| if x.is_finite() { x } else { 0.0 })
+            .collect()
+    };
+    let valid: Vec<f32> = b
+        .iter()
+        .map(|v| f32::from(u8::from(v.is_finite())))
+        .collect();
+    let r = (w.max(h) / 8).max(2);
+    let (num, den) = (box_blur(&finite(&b), w, h, r), box_blur(&valid, w, h, r));
+    let reference: Vec<f32> = num
+        .iter()
+        .zip(&den)
+        .map(|(&n, &d)| if d > 1e-3 { n / d } else { f32::NAN })
+        .collect();
+    let share = |g: &[f32]| dark_share(&lit_ratios(g, &reference));
+    (share(&a) - share(&b)).abs() <= MEANS_AGREE
+}
+
 /// `own / reference` per block where the reference is lit (at least 5 % of its 95th percentile: corners the lights
 /// miss are not judged), `NaN` elsewhere and where either is not finite (masked).
 fn lit_ratios(own: &[f32], reference: &[f32]) -> Vec<f32> {
@@ -540,6 +578,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A photo of `w`×`h` pixels (grey, linear) under a smooth light: sediment of level 1 and dark nodules (0.1)
+    /// of radius `r` on a jittered grid covering about 40 % of it, reduced to 8×8 blocks by their means and by their
+    /// medians (brute force).
+    fn means_and_medians(w: usize, h: usize, r: f32) -> (Raster, Raster) {
+        let cell = 2.6 * r;
+        let dark = |x: f32, y: f32| {
+            let (cx, cy) = ((x / cell).floor(), (y / cell).floor());
+            let jitter = |a: f32, b: f32| {
+                ((a * 12.9898 + b * 78.233).sin() * 43_758.547)
+                    .fract()
+                    .abs()
+            };
+            let (ox, oy) = (
+                (cx + 0.3 + 0.4 * jitter(cx, cy)) * cell,
+                (cy + 0.3 + 0.4 * jitter(cy, cx)) * cell,
+            );
+            (x - ox).powi(2) + (y - oy).powi(2) < r * r
+        };
+        let light = |x: f32, y: f32| {
+            0.2 + 0.8 * (-((x / w as f32 - 0.5).powi(2) + (y / h as f32 - 0.5).powi(2)) * 4.0).exp()
+        };
+        let (bw, bh) = (w / 8, h / 8);
+        let mut means = Raster::filled(bw, bh, 1, 0.0);
+        let mut medians = Raster::filled(bw, bh, 1, 0.0);
+        for by in 0..bh {
+            for bx in 0..bw {
+                let mut v: Vec<f32> = (0..64)
+                    .map(|i| {
+                        let (x, y) = ((bx * 8 + i % 8) as f32, (by * 8 + i / 8) as f32);
+                        light(x, y) * if dark(x, y) { 0.1 } else { 1.0 }
+                    })
+                    .collect();
+                means.data[by * bw + bx] = v.iter().sum::<f32>() / 64.0;
+                v.sort_by(f32::total_cmp);
+                medians.data[by * bw + bx] = 0.5 * (v[31] + v[32]);
+            }
+        }
+        (means, medians)
+    }
+
+    /// Block means stand for block medians where the nodules are many blocks wide, and are refused where they are
+    /// as fine as the blocks (the means' dark share far below the medians').
+    #[test]
+    fn block_means_stand_for_medians_only_where_clutter_is_coarse() {
+        let (means, medians) = means_and_medians(640, 480, 24.0);
+        assert!(means_stand_for_medians(&means, &medians, None));
+        let (means, medians) = means_and_medians(640, 480, 4.0);
+        assert!(!means_stand_for_medians(&means, &medians, None));
+        // Itself, always; another size, never.
+        assert!(means_stand_for_medians(&medians, &medians, None));
+        let small = Raster::filled(3, 2, 1, 0.5);
+        assert!(!means_stand_for_medians(&small, &medians, None));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Everything the [`Engine`] needs before the survey stream: `S` (from the water column or a saved image), the
 //! mask of static pixels (`--mask`, `--mask-auto`) and, for `--method mean`, the mission's mean image.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
@@ -13,11 +13,15 @@ use crate::method::mask::{detect_static, DetectSettings, Mask};
 use crate::method::outliers::SpotPath;
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
-use crate::method::stretch::{choose, Choice, Rule, MAX_AUTO_WINDOW, REFERENCE_HALF, STRETCH_HALF};
+use crate::method::stretch::{
+    choose, Choice, PhotoSurvey, Rule, MAX_AUTO_WINDOW, MEANS_CHECKED_EVERY, REFERENCE_HALF,
+    STRETCH_HALF,
+};
 use crate::method::transfer::Transfer;
 use crate::run::options::Options;
 use crate::run::plan::Plan;
 use crate::run::report::{FileError, Progress, ScatterInfo};
+use crate::run::source::Item;
 
 /// The engine of a run and what setting it up found.
 pub struct Setup<T> {
@@ -107,10 +111,15 @@ pub fn prepare<T: Sync>(
 /// reference around it.
 const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
 
-/// `--window auto`: the survey of the mission's block images before the correction (one more decode of each
-/// photo the run reads; memory: a few dozen block images) and each photo's window, quantile and near window
+/// `--window auto`: the survey of the mission's block images before the correction (one more read of each photo
+/// the run reads; memory: a few dozen block images) and each photo's window, quantile and near window
 /// ([`crate::method::stretch`]). Photos that do not decode, or differ in size from the first, are passed over as
 /// the correction's stream passes them over, so the choices follow the engine's numbering.
+///
+/// Baseline JPEGs with blocks of 8 (or a multiple) are read by their DC coefficients, the blocks' means, from the
+/// completeness check whose verdict the correction's decode then takes, instead of being decoded for block
+/// medians; one in [`MEANS_CHECKED_EVERY`] is decoded as well, and where its means do not see the dark blocks its
+/// medians see (clutter as fine as the blocks) the survey starts again, decoding every photo.
 fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> Vec<Choice> {
     let end = (plan.chunk.end + SURVEY_AFTER)
         .saturating_sub(plan.first)
@@ -120,10 +129,33 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
         "--window auto: surveying {} photos for their dark share and the camera's motion",
         items.len()
     ));
-    // The survey's measures run in mission order on a thread of their own while the workers decode and block-median
-    // the next batch: the decodes are most of the pass, and the measures would otherwise leave a core idle.
+    let photos = match survey_pass(engine, plan, items, engine.takes_block_means()) {
+        Ok(photos) => photos,
+        Err(photo) => {
+            progress.stage(&format!(
+                "--window auto: the block means of {} (its JPEG's DC coefficients) do not see the dark blocks its \
+                 block medians see (clutter as fine as the blocks); surveying again, decoding every photo",
+                photo.display()
+            ));
+            survey_pass(engine, plan, items, false).unwrap_or_default()
+        }
+    };
+    choose(&photos)
+}
+
+/// One pass of [`survey`] over `items`, baseline JPEGs read by their block means when `by_means`; `Err` names the
+/// photo whose means and medians disagreed (the pass stops there).
+fn survey_pass<T: Sync>(
+    engine: &Engine<T>,
+    plan: &Plan,
+    items: &[Item],
+    by_means: bool,
+) -> std::result::Result<Vec<PhotoSurvey>, PathBuf> {
+    // The survey's measures run in mission order on a thread of their own while the workers read and block-median
+    // the next batch: the reads are most of the pass, and the measures would otherwise leave a core idle.
     let batch = (4 * rayon::current_num_threads()).max(4);
     let mut surveyor = engine.surveyor();
+    let mut disagreed = None;
     let surveyed = std::thread::scope(|scope| {
         let (send, receive) = std::sync::mpsc::sync_channel::<Vec<Option<(Layout, Raster)>>>(1);
         let measures = scope.spawn(move || {
@@ -137,27 +169,89 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
             }
             surveyor.finish()
         });
-        for batch in items.chunks(batch) {
-            let lows = batch
+        for (b, chunk) in items.chunks(batch).enumerate() {
+            let read: Vec<(Option<(Layout, Raster)>, bool)> = chunk
                 .par_iter()
-                .map(|item| {
-                    let p = decode_expecting(&item.entry.path, plan.photo_size).ok()?;
-                    let (layout, low) = (p.layout, engine.block_image(&p));
-                    crate::io::buffers::recycle(p);
-                    Some((layout, low?))
+                .enumerate()
+                .map(|(k, item)| {
+                    survey_read(
+                        engine,
+                        plan,
+                        item,
+                        by_means,
+                        (b * batch + k).is_multiple_of(MEANS_CHECKED_EVERY),
+                    )
                 })
                 .collect();
-            if send.send(lows).is_err() {
+            if let Some(k) = read.iter().position(|(_, agreed)| !agreed) {
+                disagreed = Some(chunk[k].entry.path.clone());
+                break;
+            }
+            if send
+                .send(read.into_iter().map(|(low, _)| low).collect())
+                .is_err()
+            {
                 break;
             }
         }
         drop(send);
         measures.join()
     });
-    match surveyed {
-        Ok(photos) => choose(&photos),
+    let photos = match surveyed {
+        Ok(photos) => photos,
         Err(panic) => std::panic::resume_unwind(panic),
+    };
+    match disagreed {
+        Some(path) => Err(path),
+        None => Ok(photos),
     }
+}
+
+/// One photo's block image for the survey (`None`: it does not decode) and whether it is not a disagreement: a
+/// baseline JPEG by its block means when `by_means` (decoded as well when `check`, its block medians then taken
+/// and compared with the means), any other photo decoded.
+fn survey_read<T: Sync>(
+    engine: &Engine<T>,
+    plan: &Plan,
+    item: &Item,
+    by_means: bool,
+    check: bool,
+) -> (Option<(Layout, Raster)>, bool) {
+    let path = &item.entry.path;
+    let means = match by_means {
+        true => match crate::io::survey_block_means(path, plan.photo_size) {
+            Ok(means) => means,
+            Err(_) => return (None, true),
+        },
+        false => None,
+    };
+    let means = means.and_then(|b| {
+        let layout = Layout {
+            width: b.width,
+            height: b.height,
+            channels: b.channels,
+        };
+        Some((
+            layout,
+            engine.block_image_from_means(&b.means, b.blocks, b.channels)?,
+        ))
+    });
+    let means = match (means, check) {
+        (Some(low), false) => return (Some(low), true),
+        (means, _) => means,
+    };
+    let Ok(p) = decode_expecting(path, plan.photo_size) else {
+        return (None, true);
+    };
+    let (layout, medians) = (p.layout, engine.block_image(&p));
+    crate::io::buffers::recycle(p);
+    let Some(medians) = medians else {
+        return (None, true);
+    };
+    let agreed = means
+        .as_ref()
+        .is_none_or(|(_, m)| engine.means_stand_for_medians(m, &medians));
+    (Some((layout, medians)), agreed)
 }
 
 /// The console's line on the windows chosen.

@@ -231,3 +231,84 @@ fn on_a_dense_field_overlapping_photos_agree_better_than_after_the_paper() {
         "overlap difference {default:?} vs {paper:?}"
     );
 }
+
+/// The survey of `--window auto` reads a JPEG mission with blocks of 8 by its DC coefficients (the blocks' means)
+/// and PNGs of the same pixels by decoding them (the blocks' medians). On n03 (50 % nodules, JPEG) at 320×240 with
+/// blocks of 8 the nodules are as fine as the blocks: the means alone read a coverage of about 0.2 where the medians
+/// read 0.5, so the photos it decodes as a check refuse the means, and the survey decodes every photo: the same
+/// choices as from the PNGs, photo for photo.
+#[test]
+fn the_survey_chooses_the_same_windows_from_dc_coefficients_as_from_decoded_blocks() {
+    let (spec, seed) = matrix::dive_and_seed("n03", 0).unwrap();
+    assert!(spec.jpeg);
+    let sim = spec.simulation(seed, (320, 240));
+    let dive = sim.render_with_lighting().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("dive");
+    dive.write(&root).unwrap();
+    for sub in ["survey", "water"] {
+        matrix::save_as_jpeg(&root.join(sub), &dir.path().join(format!("{sub}-jpeg"))).unwrap();
+    }
+    // The JPEGs' pixels as PNGs.
+    let png = dir.path().join("survey-png");
+    std::fs::create_dir(&png).unwrap();
+    for e in abysslight::io::find_photos(&dir.path().join("survey-jpeg"))
+        .unwrap()
+        .photos
+    {
+        let p = abysslight::io::decode(&e.path).unwrap();
+        let abysslight::Samples::U8(px) = p.samples else {
+            panic!("8-bit")
+        };
+        let name = e.path.with_extension("png");
+        let to = png.join(name.file_name().unwrap());
+        image::save_buffer(
+            &to,
+            &px,
+            p.layout.width as u32,
+            p.layout.height as u32,
+            image::ColorType::Rgb8,
+        )
+        .unwrap();
+    }
+    let choices = |survey: &str| -> Vec<(u64, f64)> {
+        let out = dir.path().join(format!("out-{survey}"));
+        correct_mission(
+            &Options {
+                water_column: Some(dir.path().join("water-jpeg")),
+                survey: Some(dir.path().join(survey)),
+                out: Some(out.clone()),
+                transfer: Some(abysslight::Transfer::Srgb),
+                downsample: Some(8),
+                ..Options::default()
+            },
+            &Silent,
+        )
+        .unwrap();
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap(),
+        )
+        .unwrap();
+        report["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| {
+                let w = &f["window_auto"];
+                (
+                    w["window"].as_u64().unwrap(),
+                    w["coverage"].as_f64().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let (dc, decoded) = (choices("survey-jpeg"), choices("survey-png"));
+    assert_eq!(dc.len(), sim.frames);
+    assert_eq!(dc.len(), decoded.len());
+    assert_eq!(dc, decoded);
+    assert!(
+        decoded[20].0 > 7 && decoded[20].1 > 0.4,
+        "{:?}",
+        decoded[20]
+    );
+}
