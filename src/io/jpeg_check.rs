@@ -287,8 +287,19 @@ impl Capture {
         }
     }
 
-    /// Set up for the scan whose components are `parts`.
-    fn start_scan(&mut self, parts: &[ScanPart], width: usize, height: usize, comps: &[Component]) {
+    /// Set up for the scan whose components are `parts`; `false` (and unusable) for a frame larger than the decoder
+    /// takes ([`crate::io::MAX_PIXELS`]), whose planes are not allocated.
+    fn start_scan(
+        &mut self,
+        parts: &[ScanPart],
+        width: usize,
+        height: usize,
+        comps: &[Component],
+    ) -> bool {
+        if (width as u64).saturating_mul(height as u64) > crate::io::MAX_PIXELS {
+            self.unusable = true;
+            return false;
+        }
         let hmax = comps.iter().map(|c| c.h).max().unwrap_or(1);
         let vmax = comps.iter().map(|c| c.v).max().unwrap_or(1);
         self.planes = vec![Vec::new(); comps.len()];
@@ -312,6 +323,7 @@ impl Capture {
             }
         }
         self.predictors = vec![0; parts.len()];
+        true
     }
 
     /// Block `b` of the scan's component `p` in MCU `m`: its DC difference `diff`.
@@ -773,12 +785,11 @@ fn scan_baseline(
     dc: &[Option<Huffman>; 4],
     ac: &[Option<Huffman>; 4],
     restart: usize,
-    mut capture: Option<&mut Capture>,
+    capture: Option<&mut Capture>,
 ) -> Result<usize, Why> {
     let (parts, mcus) = scan_parts(seg, width, height, comps, dc, ac)?;
-    if let Some(cap) = capture.as_deref_mut() {
-        cap.start_scan(&parts, width, height, comps);
-    }
+    let mut capture =
+        capture.and_then(|cap| cap.start_scan(&parts, width, height, comps).then_some(cap));
     let mut bits = Bits::new(data, start);
     let short = |done: usize| {
         format!(
@@ -1169,6 +1180,27 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A frame larger than the decoder takes gets no planes (a header may claim 65535×65535 pixels before data of a
+    /// few bytes): the capture is given up, the check goes on.
+    #[test]
+    fn no_planes_for_a_frame_larger_than_the_decoder_takes() {
+        let comps = [Component {
+            id: 1,
+            h: 1,
+            v: 1,
+            tq: 0,
+        }];
+        let table =
+            Huffman::new(&[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], vec![0]).unwrap();
+        let parts: Vec<ScanPart> = vec![(1, &table, &table, 0)];
+        let mut cap = Capture::default();
+        assert!(!cap.start_scan(&parts, 65535, 65535, &comps));
+        assert!(cap.unusable && cap.planes.iter().all(|p| p.is_empty()));
+        let mut cap = Capture::default();
+        assert!(cap.start_scan(&parts, 640, 480, &comps));
+        assert_eq!(cap.planes[0].len(), 80 * 60);
     }
 
     /// What the DC coefficients do not give is refused (`Ok(None)`: decode it) and what the check refuses stays
