@@ -223,22 +223,7 @@ pub fn means_stand_for_medians(means: &Raster, medians: &Raster, s: Option<&Rast
     }
     let (w, h) = (medians.width, medians.height);
     let (a, b) = (grey_above(means, s), grey_above(medians, s));
-    let finite = |v: &[f32]| -> Vec<f32> {
-        v.iter()
-            .map(|&x| if x.is_finite() { x } else { 0.0 })
-            .collect()
-    };
-    let valid: Vec<f32> = b
-        .iter()
-        .map(|v| f32::from(u8::from(v.is_finite())))
-        .collect();
-    let r = (w.max(h) / 8).max(2);
-    let (num, den) = (box_blur(&finite(&b), w, h, r), box_blur(&valid, w, h, r));
-    let reference: Vec<f32> = num
-        .iter()
-        .zip(&den)
-        .map(|(&n, &d)| if d > 1e-3 { n / d } else { f32::NAN })
-        .collect();
+    let reference = box_average_finite(&b, (w, h), (w.max(h) / 8).max(2), f32::NAN);
     let share = |g: &[f32]| dark_share(&lit_ratios(g, &reference));
     (share(&a) - share(&b)).abs() <= MEANS_AGREE
 }
@@ -290,27 +275,31 @@ fn scene(ratio: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
         .iter()
         .map(|&q| if q > 0.0 { q.ln() } else { f32::NAN })
         .collect();
-    let valid: Vec<f32> = log
-        .iter()
-        .map(|v| f32::from(u8::from(v.is_finite())))
-        .collect();
-    let zeroed: Vec<f32> = log
-        .iter()
-        .map(|&v| if v.is_finite() { v } else { 0.0 })
-        .collect();
     // A band: objects of a few blocks to an eighth of the frame (a burrow, a nodule patch), not the sediment's
     // fine texture (which a small shift decorrelates) nor the lights' shape.
-    let band = |r: usize| {
-        let (num, den) = (box_blur(&zeroed, w, h, r), box_blur(&valid, w, h, r));
-        num.iter()
-            .zip(&den)
-            .map(|(&n, &d)| if d > 1e-3 { n / d } else { 0.0 })
-            .collect::<Vec<f32>>()
-    };
+    let band = |r: usize| box_average_finite(&log, (w, h), r, 0.0);
     let (fine, coarse) = (band((w.max(h) / 60).max(1)), band((w.max(h) / 8).max(2)));
     log.iter()
         .zip(fine.iter().zip(&coarse))
         .map(|(&v, (&f, &c))| if v.is_finite() { f - c } else { 0.0 })
+        .collect()
+}
+
+/// The box average of radius `r` of the finite values of `v` (`w`×`h`, row by row), `empty` where a box holds
+/// almost none.
+fn box_average_finite(v: &[f32], (w, h): (usize, usize), r: usize, empty: f32) -> Vec<f32> {
+    let zeroed: Vec<f32> = v
+        .iter()
+        .map(|&x| if x.is_finite() { x } else { 0.0 })
+        .collect();
+    let valid: Vec<f32> = v
+        .iter()
+        .map(|x| f32::from(u8::from(x.is_finite())))
+        .collect();
+    let (num, den) = (box_blur(&zeroed, w, h, r), box_blur(&valid, w, h, r));
+    num.iter()
+        .zip(&den)
+        .map(|(&n, &d)| if d > 1e-3 { n / d } else { empty })
         .collect()
 }
 
