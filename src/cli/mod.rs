@@ -576,8 +576,10 @@ struct CorrectArgs {
     /// (1 - C)/2 of the window then breaks the estimate sooner than with the median. One window for the whole
     /// mission: on nodule fields (C of 0.3 and more) the default without it, a window per stretch from a survey of
     /// the photos, does better (docs/guide.md).
-    #[arg(long, value_name = "C", help_heading = H_METHOD)]
-    contamination: Option<f64>,
+    /// auto: as without --window and --contamination, measured per stretch of the mission (also undoes a config
+    /// file's window or contamination).
+    #[arg(long, value_name = "C|auto", value_parser = parse_contamination, help_heading = H_METHOD)]
+    contamination: Option<ContaminationArg>,
 
     /// Accepted breakdown probability of the median, for --contamination [default: 0.01].
     #[arg(long, value_name = "R", help_heading = H_METHOD)]
@@ -812,8 +814,9 @@ fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
         o.window = n;
         o.contamination = None;
     }
-    if let Some(c) = args.contamination {
-        o.contamination = Some(c);
+    if let Some(ContaminationArg(c)) = args.contamination {
+        // `auto` also undoes a config file's contamination and window.
+        o.contamination = c;
         o.window = None;
     }
 }
@@ -1324,6 +1327,15 @@ struct WindowArg(Option<usize>);
 /// `--window`: `auto` or a whole (odd) number of photos.
 fn parse_window(s: &str) -> Result<WindowArg, String> {
     auto_or(s, "an odd number of photos such as 15").map(WindowArg)
+}
+
+/// `--contamination`: a share of the pixels, or `None` for `auto`.
+#[derive(Debug, Clone, Copy)]
+struct ContaminationArg(Option<f64>);
+
+/// `--contamination`: `auto` or a number (the range is checked with the other options).
+fn parse_contamination(s: &str) -> Result<ContaminationArg, String> {
+    auto_or(s, "a share of the pixels such as 0.3").map(ContaminationArg)
 }
 
 /// `--downsample`: a block size, or `None` for `auto`.

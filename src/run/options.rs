@@ -77,10 +77,15 @@ pub struct Options {
     pub survey: Option<PathBuf>,
     /// Output folder; mirrors the survey tree. Required.
     pub out: Option<PathBuf>,
-    /// Temporal window `n` (odd). Default: 7, or computed from `contamination`.
+    /// Temporal window `n` (odd). Default: `None` (auto): with neither this nor `contamination`, `method = abyss`
+    /// chooses it per stretch of the mission from a survey of its photos; 7 otherwise. In a TOML file a number or
+    /// `"auto"`.
+    #[serde(default, deserialize_with = "number_or_auto")]
     pub window: Option<usize>,
     /// Contamination rate `c`: expected share of non-seafloor pixels. Sets `window` to the smallest odd `n` with
-    /// `P_half ≤ risk`. Default: none.
+    /// `P_half ≤ risk`. Default: `None` (auto: measured per stretch of the mission, as without `window`). In a TOML
+    /// file a number or `"auto"`.
+    #[serde(default, deserialize_with = "number_or_auto")]
     pub contamination: Option<f64>,
     /// Accepted breakdown probability `P_half` when choosing `n` from `contamination`. Default: 0.01.
     pub risk: f64,
@@ -208,19 +213,30 @@ fn default_true() -> bool {
     true
 }
 
-/// A TOML value that is a number, or the string `"auto"` (`None`).
-fn number_or_auto<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<usize>, D::Error> {
+/// A TOML value that is a number (a whole one for a whole-number option), or the string `"auto"` (`None`).
+fn number_or_auto<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
     #[derive(Deserialize)]
     #[serde(untagged)]
-    enum Value {
-        Number(usize),
+    enum Value<T> {
+        Number(T),
         Text(String),
     }
-    match Value::deserialize(d)? {
-        Value::Number(n) => Ok(Some(n)),
-        Value::Text(t) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
-        Value::Text(t) => Err(serde::de::Error::custom(format!(
-            "expected a whole number or \"auto\", got {t:?}"
+    match Value::<T>::deserialize(d) {
+        Ok(Value::Number(n)) => Ok(Some(n)),
+        Ok(Value::Text(t)) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
+        Ok(Value::Text(t)) => Err(serde::de::Error::custom(format!(
+            "expected a number or \"auto\", got {t:?}"
+        ))),
+        Err(_) => Err(serde::de::Error::custom(format!(
+            "expected {} or \"auto\"",
+            match std::any::type_name::<T>() {
+                "f32" | "f64" => "a number",
+                _ => "a whole number",
+            }
         ))),
     }
 }
@@ -723,6 +739,25 @@ mod tests {
                 want,
                 "{text}"
             );
+        }
+        for (text, window, contamination) in [
+            ("window = \"auto\"", None, None),
+            ("window = 15", Some(15), None),
+            ("contamination = \"auto\"", None, None),
+            ("contamination = 0.3", None, Some(0.3)),
+        ] {
+            std::fs::write(&cfg, format!("{text}\n")).unwrap();
+            let o = Options::from_toml_file(&cfg).unwrap();
+            assert_eq!(
+                (o.window, o.contamination),
+                (window, contamination),
+                "{text}"
+            );
+        }
+        for bad in ["window = 7.5", "window = -3", "contamination = \"high\""] {
+            std::fs::write(&cfg, format!("{bad}\n")).unwrap();
+            let err = Options::from_toml_file(&cfg).unwrap_err().to_string();
+            assert!(err.contains("auto"), "{bad}: {err}");
         }
         std::fs::write(&cfg, "downsample = \"big\"\n").unwrap();
         let err = Options::from_toml_file(&cfg).unwrap_err().to_string();

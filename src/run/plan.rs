@@ -279,7 +279,15 @@ impl Plan {
         if !self.streaming {
             line(self.describe_disk(opts, params.downsample));
         }
-        let window = if self.window.p_half.is_nan() {
+        let window = if params.window_is_auto() && !self.streaming {
+            format!(
+                "window: auto, chosen per stretch of the mission by a survey of its photos before the correction \
+                 ({} and the median on sparse ground under a moving camera, up to {} photos and a higher quantile \
+                 on dense fields or under a slow camera)",
+                self.window.n,
+                crate::method::stretch::MAX_AUTO_WINDOW
+            )
+        } else if self.window.p_half.is_nan() {
             format!("window: n = {}", self.window.n)
         } else {
             format!(

@@ -154,6 +154,53 @@ fn config_file_with_flag_override() {
     let o = abysslight_in(&["correct", "--config", "m/missing.toml"], d.path());
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("missing.toml"));
+    // A file's contamination, and `auto` asked for by name on the command line or in the file: the window chosen
+    // per stretch of the mission, as with neither given.
+    std::fs::write(
+        d.path().join("m/dense.toml"),
+        "survey = \"survey\"\nout = \"dense\"\ncontamination = 0.3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.path().join("m/auto.toml"),
+        "survey = \"survey\"\nout = \"auto\"\ncontamination = \"auto\"\nwindow = \"auto\"\n",
+    )
+    .unwrap();
+    let dry = |args: &[&str]| {
+        let o = abysslight_in(&[&["correct", "--dry-run"], args].concat(), d.path());
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        stdout(&o)
+    };
+    let per_stretch = "window: auto, chosen per stretch of the mission";
+    let file = dry(&["--config", "m/dense.toml"]);
+    assert!(
+        file.contains("at contamination 0.3") && !file.contains(per_stretch),
+        "{file}"
+    );
+    for args in [
+        &["--config", "m/dense.toml", "--contamination", "auto"][..],
+        &["--config", "m/auto.toml"],
+        &["--survey", "m/survey", "--out", "x"],
+    ] {
+        let plan = dry(args);
+        assert!(plan.contains(per_stretch), "{args:?}: {plan}");
+    }
+    let o = abysslight_in(
+        &[
+            "correct",
+            "--config",
+            "m/dense.toml",
+            "--contamination",
+            "high",
+        ],
+        d.path(),
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--contamination") && stderr(&o).contains("auto"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
