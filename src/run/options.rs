@@ -213,7 +213,8 @@ fn default_true() -> bool {
     true
 }
 
-/// A TOML value that is a number (a whole one for a whole-number option), or the string `"auto"` (`None`).
+/// A TOML value that is a number (a whole one for a whole-number option), or the string `"auto"` (`None`); in
+/// JSON (a report's options) also `null` (`None`).
 fn number_or_auto<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
 where
     D: serde::Deserializer<'de>,
@@ -225,10 +226,12 @@ where
         Number(T),
         Text(String),
     }
-    match Value::<T>::deserialize(d) {
-        Ok(Value::Number(n)) => Ok(Some(n)),
-        Ok(Value::Text(t)) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
-        Ok(Value::Text(t)) => Err(serde::de::Error::custom(format!(
+    // `null` (a report's options, JSON) is `None` as well.
+    match Option::<Value<T>>::deserialize(d) {
+        Ok(None) => Ok(None),
+        Ok(Some(Value::Number(n))) => Ok(Some(n)),
+        Ok(Some(Value::Text(t))) if t.trim().eq_ignore_ascii_case("auto") => Ok(None),
+        Ok(Some(Value::Text(t))) => Err(serde::de::Error::custom(format!(
             "expected a number or \"auto\", got {t:?}"
         ))),
         Err(_) => Err(serde::de::Error::custom(format!(
@@ -768,6 +771,29 @@ mod tests {
             err.contains("mission.toml") && err.contains("windw"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn options_read_back_from_a_report_s_json() {
+        // A report keeps the options as JSON, where an option left to auto is `null`.
+        for (window, contamination) in [(None, None), (Some(9), None), (None, Some(0.3))] {
+            let o = Options {
+                window,
+                contamination,
+                ..Options::default()
+            };
+            let json = serde_json::to_string(&o).unwrap();
+            let back: Options = serde_json::from_str(&json).unwrap();
+            assert_eq!(
+                (back.window, back.contamination),
+                (window, contamination),
+                "{json}"
+            );
+            assert_eq!(
+                (back.downsample, back.near_window),
+                (o.downsample, o.near_window)
+            );
+        }
     }
 
     #[test]
