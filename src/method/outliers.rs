@@ -210,17 +210,30 @@ impl SpotPath {
     /// Count the laser-coloured bright spots of one photo's block medians (linear light). A raster of another size
     /// than the first one counted is passed over (returns `false`).
     pub fn add(&mut self, low: &Raster) -> bool {
+        self.add_spots((low.width, low.height), &laser_spots(low))
+    }
+
+    /// Count one photo's [`laser_spots`], found beforehand on its `width`×`height` block image (empty: none). A
+    /// photo of another size than the first one counted is passed over (returns `false`).
+    pub fn add_spots(&mut self, (width, height): (usize, usize), spots: &[bool]) -> bool {
         if self.photos == 0 {
-            (self.width, self.height) = (low.width, low.height);
-            self.count = vec![0; low.width * low.height];
-        } else if (low.width, low.height) != (self.width, self.height) {
+            (self.width, self.height) = (width, height);
+            self.count = vec![0; width * height];
+        } else if (width, height) != (self.width, self.height) {
             return false;
         }
         self.photos += 1;
-        for (n, spot) in self.count.iter_mut().zip(laser_spots(low)) {
+        for (n, &spot) in self.count.iter_mut().zip(spots) {
             *n += u32::from(spot);
         }
         true
+    }
+
+    /// The blocks on a spot path ([`SpotPath::blocks`]), and their share of the frame's (0 before any photo was
+    /// counted).
+    pub fn on_path(&self) -> (usize, f64) {
+        let on = self.blocks().iter().filter(|&&b| b).count();
+        (on, on as f64 / self.count.len().max(1) as f64)
     }
 
     /// The counts of `self` and `other` together (counted from photos of one size; an empty one takes the other's).
@@ -243,7 +256,6 @@ impl SpotPath {
     }
 
     /// Photos counted.
-    #[cfg(test)]
     pub fn photos(&self) -> usize {
         self.photos
     }

@@ -10,7 +10,7 @@ use crate::io::{decode_expecting, Entry};
 use crate::method::baseline::{block_mean, Method};
 use crate::method::engine::{linear_block_medians, median_linear_table, Engine, Params};
 use crate::method::mask::{detect_static, DetectSettings, Mask};
-use crate::method::outliers::SpotPath;
+use crate::method::outliers::{laser_spots, SpotPath, SPOT_GROW};
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
 use crate::method::stretch::{
@@ -84,9 +84,14 @@ pub fn prepare<T: Sync>(
                     .into(),
             ),
             false => {
-                let choices = survey(&engine, plan, progress);
+                // Without a mask, the survey also looks for laser dots' paths (a warning that names the fix).
+                let lasers = opts.mask.is_none() && !opts.mask_auto;
+                let (choices, path) = survey(&engine, plan, progress, lasers);
                 progress.stage(&stretches_line(&choices));
                 engine.set_stretches(choices)?;
+                if let Some(w) = lasers_warning(&path) {
+                    warnings.warn(w);
+                }
             }
         }
     }
@@ -120,7 +125,16 @@ const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
 /// completeness check whose verdict the correction's decode then takes, instead of being decoded for block
 /// medians; one in [`MEANS_CHECKED_EVERY`] is decoded as well, and where its means do not see the dark blocks its
 /// medians see (clutter as fine as the blocks) the survey starts again, decoding every photo.
-fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> Vec<Choice> {
+///
+/// With `lasers`, it also counts the laser-coloured bright spots of up to [`PATH_PHOTOS`] of the block medians it
+/// takes (of every photo it decodes, one in [`MEANS_CHECKED_EVERY`] of those it reads by their means), spread over
+/// the mission ([`SpotPath`], as `--mask-auto` does on photos it decodes for the purpose).
+fn survey<T: Sync>(
+    engine: &Engine<T>,
+    plan: &Plan,
+    progress: &dyn Progress,
+    lasers: bool,
+) -> (Vec<Choice>, SpotPath) {
     let end = (plan.chunk.end + SURVEY_AFTER)
         .saturating_sub(plan.first)
         .min(plan.items.len());
@@ -129,58 +143,100 @@ fn survey<T: Sync>(engine: &Engine<T>, plan: &Plan, progress: &dyn Progress) -> 
         "--window auto: surveying {} photos for their dark share and the camera's motion",
         items.len()
     ));
-    let photos = match survey_pass(engine, plan, items, engine.takes_block_means()) {
-        Ok(photos) => photos,
+    let spots_every = lasers.then(|| items.len().div_ceil(PATH_PHOTOS).max(1));
+    let (photos, path) = match survey_pass(
+        engine,
+        plan,
+        items,
+        engine.takes_block_means(),
+        spots_every,
+    ) {
+        Ok(surveyed) => surveyed,
         Err(photo) => {
             progress.stage(&format!(
                 "--window auto: the block means of {} (its JPEG's DC coefficients) do not see the dark blocks its \
                  block medians see (clutter as fine as the blocks); surveying again, decoding every photo",
                 photo.display()
             ));
-            survey_pass(engine, plan, items, false).unwrap_or_default()
+            survey_pass(engine, plan, items, false, spots_every).unwrap_or_default()
         }
     };
-    choose(&photos)
+    (choose(&photos), path)
 }
 
-/// One pass of [`survey`] over `items`, baseline JPEGs read by their block means when `by_means`; `Err` names the
-/// photo whose means and medians disagreed (the pass stops there).
+/// The warning for laser dots' paths the survey found ([`SpotPath`]), if it found one at least as large as a spot
+/// with its glare ((2·[`SPOT_GROW`] + 1)² blocks): fewer blocks held more often than chance are a coincidence of
+/// neighbouring spots (a simulated nodule field without lasers: 1–2 blocks of 4800).
+fn lasers_warning(path: &SpotPath) -> Option<String> {
+    let (on, share) = path.on_path();
+    (on >= (2 * SPOT_GROW + 1).pow(2)).then(|| {
+        format!(
+            "laser dots: red or green bright spots came back to the same blocks ({:.1} % of the frame) in the {} \
+             photos looked at, the paths of laser dots (or of something coloured that stays in view); where most \
+             photos of a window had a dot, F takes it, and photos whose own dot is elsewhere get a stain there \
+             (teal beside a red laser): --mask-auto leaves those paths out of F (docs/guide.md)",
+            100.0 * share,
+            path.photos()
+        )
+    })
+}
+
+/// One pass of [`survey`] over `items`, baseline JPEGs read by their block means when `by_means`, the laser spots
+/// of every `spots_every`-th block image counted; `Err` names the photo whose means and medians disagreed (the pass
+/// stops there).
 fn survey_pass<T: Sync>(
     engine: &Engine<T>,
     plan: &Plan,
     items: &[Item],
     by_means: bool,
-) -> std::result::Result<Vec<PhotoSurvey>, PathBuf> {
+    spots_every: Option<usize>,
+) -> std::result::Result<(Vec<PhotoSurvey>, SpotPath), PathBuf> {
     // The survey's measures run in mission order on a thread of their own while the workers read and block-median
     // the next batch: the reads are most of the pass, and the measures would otherwise leave a core idle.
     let batch = (4 * rayon::current_num_threads()).max(4);
     let mut surveyor = engine.surveyor();
     let mut disagreed = None;
     let surveyed = std::thread::scope(|scope| {
-        let (send, receive) = std::sync::mpsc::sync_channel::<Vec<Option<(Layout, Raster)>>>(1);
+        let (send, receive) = std::sync::mpsc::sync_channel::<Vec<SurveyRead>>(1);
         let measures = scope.spawn(move || {
             let mut layout = None;
-            for lows in receive {
-                for (l, low) in lows.into_iter().flatten() {
-                    if *layout.get_or_insert(l) == l {
-                        surveyor.push(&low);
+            let mut path = SpotPath::new();
+            for reads in receive {
+                for (low, spots) in reads {
+                    if let Some((size, spots)) = spots {
+                        path.add_spots(size, &spots);
+                    }
+                    if let Some((l, low)) = low {
+                        if *layout.get_or_insert(l) == l {
+                            surveyor.push(&low);
+                        }
                     }
                 }
             }
-            surveyor.finish()
+            (surveyor.finish(), path)
         });
         for (b, chunk) in items.chunks(batch).enumerate() {
-            let read: Vec<(Option<(Layout, Raster)>, bool)> = chunk
+            let read: Vec<(SurveyRead, bool)> = chunk
                 .par_iter()
                 .enumerate()
                 .map(|(k, item)| {
-                    survey_read(
+                    let i = b * batch + k;
+                    let (low, agreed, decoded) = survey_read(
                         engine,
                         plan,
                         item,
                         by_means,
-                        (b * batch + k).is_multiple_of(MEANS_CHECKED_EVERY),
-                    )
+                        i.is_multiple_of(MEANS_CHECKED_EVERY),
+                    );
+                    // On block medians only, as `--mask-auto` looks for them: a block's mean shows a dot too
+                    // small to move its median (nor `F`).
+                    let spots = match (&low, spots_every) {
+                        (Some((_, r)), Some(every)) if decoded && i.is_multiple_of(every) => {
+                            Some(((r.width, r.height), laser_spots(r)))
+                        }
+                        _ => None,
+                    };
+                    ((low, spots), agreed)
                 })
                 .collect();
             if let Some(k) = read.iter().position(|(_, agreed)| !agreed) {
@@ -188,7 +244,7 @@ fn survey_pass<T: Sync>(
                 break;
             }
             if send
-                .send(read.into_iter().map(|(low, _)| low).collect())
+                .send(read.into_iter().map(|(r, _)| r).collect())
                 .is_err()
             {
                 break;
@@ -207,21 +263,29 @@ fn survey_pass<T: Sync>(
     }
 }
 
-/// One photo's block image for the survey (`None`: it does not decode) and whether it is not a disagreement: a
-/// baseline JPEG by its block means when `by_means` (decoded as well when `check`, its block medians then taken
-/// and compared with the means), any other photo decoded.
+/// What the survey read of one photo: its block image (`None`: it does not decode) and, where they were looked for,
+/// the laser spots of that image (its size in blocks and [`laser_spots`]).
+type SurveyRead = (
+    Option<(Layout, Raster)>,
+    Option<((usize, usize), Vec<bool>)>,
+);
+
+/// One photo's block image for the survey (`None`: it does not decode), whether it is not a disagreement, and
+/// whether the image is the decoded photo's block medians: a baseline JPEG by its block means when `by_means`
+/// (decoded as well when `check`, its block medians then taken and compared with the means), any other photo
+/// decoded.
 fn survey_read<T: Sync>(
     engine: &Engine<T>,
     plan: &Plan,
     item: &Item,
     by_means: bool,
     check: bool,
-) -> (Option<(Layout, Raster)>, bool) {
+) -> (Option<(Layout, Raster)>, bool, bool) {
     let path = &item.entry.path;
     let means = match by_means {
         true => match crate::io::survey_block_means(path, plan.photo_size) {
             Ok(means) => means,
-            Err(_) => return (None, true),
+            Err(_) => return (None, true, false),
         },
         false => None,
     };
@@ -237,21 +301,21 @@ fn survey_read<T: Sync>(
         ))
     });
     let means = match (means, check) {
-        (Some(low), false) => return (Some(low), true),
+        (Some(low), false) => return (Some(low), true, false),
         (means, _) => means,
     };
     let Ok(p) = decode_expecting(path, plan.photo_size) else {
-        return (None, true);
+        return (None, true, false);
     };
     let (layout, medians) = (p.layout, engine.block_image(&p));
     crate::io::buffers::recycle(p);
     let Some(medians) = medians else {
-        return (None, true);
+        return (None, true, false);
     };
     let agreed = means
         .as_ref()
         .is_none_or(|(_, m)| engine.means_stand_for_medians(m, &medians));
-    (Some((layout, medians)), agreed)
+    (Some((layout, medians)), agreed, true)
 }
 
 /// The console's line on the windows chosen.

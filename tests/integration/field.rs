@@ -195,6 +195,53 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
     assert!(red_none < 0.3, "{red_none}");
 }
 
+/// Without a mask, the survey of `--window auto` warns of a laser dot's path and names `--mask-auto`: a red dot 6
+/// pixels across (as small against the frame as the Nephrops runs' are against theirs, within a few blocks) at A in
+/// three photos of every five and 20 pixels to the right in the others. The same dive without the dot gets no
+/// such warning (bright spots that pass through the frame are not a path).
+#[test]
+fn the_survey_warns_of_a_laser_dot_s_path_and_names_the_fix() {
+    let frames = 25;
+    let (a, b, y0) = (40i32, 60i32, 56i32);
+    for laser in [true, false] {
+        let d = tempfile::tempdir().unwrap();
+        let mut dive = dive(W, H, frames, 7, 0.2, false, 29);
+        if laser {
+            for (f, p) in dive.photos.iter_mut().enumerate() {
+                let Samples::U8(v) = &mut p.samples else {
+                    unreachable!()
+                };
+                let x0 = if f % 5 < 3 { a } else { b };
+                for y in 0..H {
+                    for x in 0..W {
+                        if (x as i32 - x0).pow(2) + (y as i32 - y0).pow(2) <= 9 {
+                            v[(y * W + x) * 3..(y * W + x) * 3 + 3].copy_from_slice(&[255, 40, 30]);
+                        }
+                    }
+                }
+            }
+        }
+        write_dive(&dive, d.path(), "png");
+        let out = d.path().join("out");
+        correct_mission(
+            &Options {
+                water_column: Some(d.path().join("water")),
+                survey: Some(d.path().join("survey")),
+                out: Some(out.clone()),
+                ..Options::default()
+            },
+            &Silent,
+        )
+        .unwrap();
+        let report = std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap();
+        assert_eq!(
+            report.contains("laser dots:") && report.contains("--mask-auto leaves those paths out"),
+            laser,
+            "laser {laser}: {report}"
+        );
+    }
+}
+
 /// A laser dot that wanders with the altitude (the real Nephrops runs), 12 pixels across: at A in three photos of
 /// every five and at B, 32 pixels to the right, in the other two. A holds most of every window and B fewer than
 /// half of it, so without a mask the window's median takes the dot into `F` at A (a dark stain there in the photos
@@ -258,6 +305,11 @@ fn mask_auto_finds_where_a_wandering_laser_dot_goes_and_leaves_no_stain() {
         )
         .unwrap();
         assert_eq!(r.corrected, frames);
+        if auto {
+            // Masked, the dot's path needs no warning.
+            let report = std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap();
+            assert!(!report.contains("laser dots"), "{report}");
+        }
         // Each place in the photos whose dot is elsewhere; the median over them (a nodule may sit under one disc).
         let photos: Vec<Vec<f32>> = (1..=frames)
             .map(|i| normalised(&decode(&out.join(format!("img{i}.png"))).unwrap()))
