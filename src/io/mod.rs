@@ -264,18 +264,23 @@ pub fn majority_size(photos: &[Entry], sample: usize) -> Option<(usize, usize)> 
 /// a photo of another size is a mismatch error before it is decoded.
 pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result<Photo> {
     // A header that cannot be read: `decode` names what is wrong with the file.
-    if let (Some((w, h)), Ok(got)) = (expected, header_size(path)) {
-        if got != (w, h) {
-            return Err(Error::Mismatch {
-                path: path.to_owned(),
-                reason: format!(
-                    "size {}x{} differs from the mission's {w}x{h}; skipped",
-                    got.0, got.1
-                ),
-            });
+    if let (Some(expected), Ok(got)) = (expected, header_size(path)) {
+        if got != expected {
+            return Err(size_mismatch(path, got, expected));
         }
     }
     decode(path)
+}
+
+/// The error for a photo whose header says `got` where the mission's photos are `expected` (width, height).
+fn size_mismatch(path: &Path, got: (usize, usize), expected: (usize, usize)) -> Error {
+    Error::Mismatch {
+        path: path.to_owned(),
+        reason: format!(
+            "size {}x{} differs from the mission's {}x{}; skipped",
+            got.0, got.1, expected.0, expected.1
+        ),
+    }
 }
 
 /// The survey's look at a photo without decoding it: a baseline JPEG's 8×8 block means from its DC coefficients
@@ -302,11 +307,8 @@ pub fn survey_block_means(
         };
         let (w, h) = jpeg_header_size(path)?;
         check_size(w, h).map_err(decode_error)?;
-        if let Some((ew, eh)) = expected.filter(|&e| e != (w, h)) {
-            return Err(Error::Mismatch {
-                path: path.to_owned(),
-                reason: format!("size {w}x{h} differs from the mission's {ew}x{eh}; skipped"),
-            });
+        if let Some(e) = expected.filter(|&e| e != (w, h)) {
+            return Err(size_mismatch(path, (w, h), e));
         }
         let data = read_within_budget(path, len, jpeg_byte_budget(w, h))?;
         crate::io::jpeg_check::block_means_remembered(&data)
