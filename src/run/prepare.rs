@@ -203,8 +203,8 @@ fn survey_pass<T: Sync>(
             let mut path = SpotPath::new();
             for reads in receive {
                 for (low, spots) in reads {
-                    if let Some((size, spots)) = spots {
-                        path.add_spots(size, &spots);
+                    if let (Some((_, r)), Some(spots)) = (&low, spots) {
+                        path.add_spots((r.width, r.height), &spots);
                     }
                     if let Some((l, low)) = low {
                         if *layout.get_or_insert(l) == l {
@@ -232,7 +232,7 @@ fn survey_pass<T: Sync>(
                     // small to move its median (nor `F`).
                     let spots = match (&low, spots_every) {
                         (Some((_, r)), Some(every)) if decoded && i.is_multiple_of(every) => {
-                            Some(((r.width, r.height), laser_spots(r)))
+                            Some(laser_spots(r))
                         }
                         _ => None,
                     };
@@ -264,11 +264,8 @@ fn survey_pass<T: Sync>(
 }
 
 /// What the survey read of one photo: its block image (`None`: it does not decode) and, where they were looked for,
-/// the laser spots of that image (its size in blocks and [`laser_spots`]).
-type SurveyRead = (
-    Option<(Layout, Raster)>,
-    Option<((usize, usize), Vec<bool>)>,
-);
+/// that image's [`laser_spots`].
+type SurveyRead = (Option<(Layout, Raster)>, Option<Vec<bool>>);
 
 /// One photo's block image for the survey (`None`: it does not decode), whether it is not a disagreement, and
 /// whether the image is the decoded photo's block medians: a baseline JPEG by its block means when `by_means`
