@@ -130,8 +130,9 @@ pub const NODULES: &[DiveSpec] = &[
 ];
 
 #[rustfmt::skip]
-/// Held-out nodule fields: other coverages (33–48 %, another patchy profile), seeds and rig/track pairings than
-/// [`NODULES`], never used to choose anything (`dive_matrix --nodules --held-out`).
+/// Held-out nodule fields: other coverages (33–48 %, another patchy profile; 50 % under the rigs the tuning fields
+/// have at 30–45 % only), seeds and rig/track pairings than [`NODULES`], never used to choose anything
+/// (`dive_matrix --nodules --held-out`).
 pub const NODULES_HELD_OUT: &[DiveSpec] = &[
     //  name     rig        beam  water          alt  swing  c     along   bits srgb   jpeg   overlap
     n("g01", Rig::Three, 36.0, "oceanic-i",   5.0, 0.3, 0.35, None,   8,  true,  false, 0.9),
@@ -140,6 +141,8 @@ pub const NODULES_HELD_OUT: &[DiveSpec] = &[
     n("g04", Rig::Four,  32.0, "oceanic-iii", 5.0, 0.2, 0.45, None,   8,  true,  true,  0.9),
     n("g05", Rig::Two,   36.0, "oceanic-i",   6.0, 0.5, 0.33, None,   8,  true,  false, 0.6),
     n("g06", Rig::Aft,   36.0, "oceanic-i",   4.5, 0.3, 0.38, None,   16, true,  false, 0.9),
+    n("g07", Rig::Aft,   34.0, "oceanic-iii", 5.0, 0.4, 0.50, None,   8,  true,  true,  0.9),
+    n("g08", Rig::Three, 32.0, "oceanic-i",   5.5, 0.3, 0.50, None,   16, false, false, 0.6),
 ];
 
 #[rustfmt::skip]
