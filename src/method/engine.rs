@@ -36,7 +36,9 @@ use crate::method::overlap::{chained_pairs, overlap_correction};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
-use crate::method::refine::{backscatter_scale, levelled_stack, near_shape, refine_factor, scaled};
+use crate::method::refine::{
+    backscatter_scale, levelled_stack, near_shape, refine_factor, scaled, LEVEL_MIN_WINDOW,
+};
 use crate::method::ring::Ring;
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::stretch::Choice;
@@ -504,7 +506,9 @@ impl<T> Engine<T> {
     }
 
     /// `M` of the photo whose block medians are `own`, from its window's `stack` (the mission's mean for
-    /// [`Method::Mean`], the photo's own polynomial fit for [`Method::Polynomial`]).
+    /// [`Method::Mean`], the photo's own polynomial fit for [`Method::Polynomial`]), and whether its photos were
+    /// levelled to one exposure first: with [`Method::Abyss`], where `may_level` and its exposure jumps
+    /// ([`levelled_stack`]).
     fn window_m(
         &self,
         own: &Raster,
@@ -512,21 +516,25 @@ impl<T> Engine<T> {
         s_low: Option<&Raster>,
         mission_mean: Option<&Raster>,
         q: f32,
-    ) -> Raster {
+        may_level: bool,
+    ) -> (Raster, bool) {
         match (self.params.method, mission_mean) {
-            (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
-            (Method::Polynomial, _) => polynomial_m(own, s_low, self.params.degree),
+            (Method::Mean, Some(mean)) if mean.layout() == own.layout() => (mean.clone(), false),
+            (Method::Polynomial, _) => (polynomial_m(own, s_low, self.params.degree), false),
             (Method::Abyss, _) => {
                 let m = quantile_or_median(stack, q);
-                if !self.params.steps.level_exposures {
-                    return m;
+                if !(self.params.steps.level_exposures && may_level) {
+                    return (m, false);
                 }
                 match levelled_stack(stack, &m, s_low, q as f64) {
-                    Some(levelled) => quantile_or_median(&levelled.iter().collect::<Vec<_>>(), q),
-                    None => m,
+                    Some(levelled) => (
+                        quantile_or_median(&levelled.iter().collect::<Vec<_>>(), q),
+                        true,
+                    ),
+                    None => (m, false),
                 }
             }
-            _ => stack_median(stack),
+            _ => (stack_median(stack), false),
         }
     }
 
@@ -618,7 +626,12 @@ impl<T> Engine<T> {
         eof: bool,
     ) -> Corrected<T> {
         let t = Instant::now();
-        let WindowEstimate { m, f, lit } = self.window_estimate(i, &range);
+        let WindowEstimate {
+            m,
+            f,
+            lit,
+            levelled,
+        } = self.window_estimate(i, &range);
         let pooled = self.pooled_estimate(i, &range);
         let mut monitor = std::mem::take(&mut self.monitor);
         monitor.set_window(self.window_of(i), self.quantile_of(i));
@@ -631,7 +644,7 @@ impl<T> Engine<T> {
                 *health = monitor.observe_photo(judged.0, judged.1, judged.2, judged.3)
             });
             let estimate = match self.params.method {
-                Method::Abyss => self.abyss_steps(i, &range, m, photo.as_ref()),
+                Method::Abyss => self.abyss_steps(i, &range, m, levelled, photo.as_ref()),
                 _ => Estimate::of_window(f.clone(), self.params.factor_floor),
             };
             let estimate_ms = w.downsample_ms + ms(t);
@@ -692,17 +705,23 @@ impl<T> Engine<T> {
         let stack = self.stack(range);
         let s_low = self.scatter_low.as_ref();
         let q = self.quantile_of(i);
-        let mut m = self.window_m(
+        let (mut m, levelled) = self.window_m(
             &self.own(i).low,
             &stack,
             s_low,
             self.mission_mean.as_ref(),
             q,
+            stack.len() >= LEVEL_MIN_WINDOW,
         );
         self.without_spots(&mut m, range);
         let f = self.factor_of(&m, s_low);
         let lit = lit_seafloor(&f, &self.colour);
-        WindowEstimate { m, f, lit }
+        WindowEstimate {
+            m,
+            f,
+            lit,
+            levelled,
+        }
     }
 
     /// Step 2's `F` and `F·C` of photo `i` when the monitor judges pooled blocks (`None` when it judges the
@@ -727,12 +746,13 @@ impl<T> Engine<T> {
             .judged_fixed
             .as_ref()
             .expect("made above when the ring holds pooled images");
-        let m_j = self.window_m(
+        let (m_j, _) = self.window_m(
             own_j,
             &stack_j,
             s_j.as_ref(),
             mean_j.as_ref(),
             self.quantile_of(i),
+            stack_j.len() >= LEVEL_MIN_WINDOW,
         );
         let f_j = self.factor_of(&m_j, s_j.as_ref());
         let lit_j = lit_seafloor(&f_j, &self.colour);
@@ -757,20 +777,21 @@ impl<T> Engine<T> {
         }
     }
 
-    /// Step 3, what [`Method::Abyss`] adds to the paper, in order, on the window's `M` of photo `i`: the near
-    /// window's shape, the scale of `S`, `F` of both, the per-photo gain and the soft floor, then the noise model
-    /// and its blend.
+    /// Step 3, what [`Method::Abyss`] adds to the paper, in order, on the window's `M` of photo `i` (`levelled`:
+    /// its photos were levelled to one exposure): the near window's shape, the scale of `S`, `F` of both, the
+    /// per-photo gain and the soft floor, then the noise model and its blend.
     fn abyss_steps(
         &self,
         i: usize,
         range: &Range<usize>,
         m: Raster,
+        levelled: bool,
         photo: Option<&Photo>,
     ) -> Estimate {
         let stack = self.stack(range);
         let own = &self.own(i).low;
         let s_low = self.scatter_low.as_ref();
-        let m = self.near_window_shape(i, range, own, m, stack.len());
+        let m = self.near_window_shape(i, range, own, m, levelled);
         let m = self.overlap_shape(range, m);
         let scale = match (self.params.steps.backscatter_scale, s_low) {
             (Some(v), Some(_)) => vec![v; m.channels],
@@ -800,21 +821,32 @@ impl<T> Engine<T> {
     }
 
     /// The window's `M` bent to the smooth shape of the near window's around the same photo
-    /// ([`near_shape`]), when the near window is on and shorter than this photo's window.
+    /// ([`near_shape`]), when the near window is on and shorter than this photo's window. The near window is
+    /// levelled where its own exposure jumps only when the window was (`levelled`): the ghosts levelling keeps
+    /// out are a photo's scene, which the window's `M` gives and the smooth shape leaves out, while a window whose
+    /// near window alone sees a jump is one where the light's swing turns, which the shape is there to follow
+    /// (docs/method.md, step 8).
     fn near_window_shape(
         &self,
         i: usize,
         range: &Range<usize>,
         own: &Raster,
         m: Raster,
-        window_len: usize,
+        levelled: bool,
     ) -> Raster {
-        let Some(near) = self.near_of(i).filter(|&k| k < window_len) else {
+        let Some(near) = self.near_of(i).filter(|&k| k < range.len()) else {
             return m;
         };
         let s_low = self.scatter_low.as_ref();
         let near_r = near_range(i, near, range);
-        let mut m_near = self.window_m(own, &self.stack(&near_r), s_low, None, self.quantile_of(i));
+        let (mut m_near, _) = self.window_m(
+            own,
+            &self.stack(&near_r),
+            s_low,
+            None,
+            self.quantile_of(i),
+            levelled,
+        );
         self.without_spots(&mut m_near, &near_r);
         near_shape(&m, &m_near, s_low)
     }
@@ -918,6 +950,8 @@ struct WindowEstimate {
     f: Raster,
     /// `F·C = M − S`.
     lit: Raster,
+    /// The window's photos were levelled to one exposure before its `M` ([`levelled_stack`]).
+    levelled: bool,
 }
 
 /// What corrects one photo: `F` and how it is applied.

@@ -55,8 +55,8 @@ fn jumpy_mission(frames: usize, exposures: &[f32]) -> (Vec<Photo>, Vec<Vec<f32>>
     (photos, albedo)
 }
 
-/// Albedo error of the mission corrected with `params`.
-fn corrected_error(photos: &[Photo], albedo: &[Vec<f32>], params: Params) -> f64 {
+/// The mission corrected with `params`, each photo normalised, in mission order.
+fn corrected(photos: &[Photo], params: Params) -> Vec<Vec<f32>> {
     let mut engine = Engine::new(params, None::<&Scatter>, None).unwrap();
     let mut out = Vec::new();
     for (i, p) in photos.iter().cloned().enumerate() {
@@ -64,11 +64,26 @@ fn corrected_error(photos: &[Photo], albedo: &[Vec<f32>], params: Params) -> f64
     }
     out.extend(engine.finish());
     assert_eq!(out.len(), photos.len());
-    let got: Vec<Vec<f32>> = out
-        .iter()
+    out.sort_by_key(|c| c.index);
+    out.iter()
         .map(|c| normalised(c.photo.as_ref().unwrap()))
-        .collect();
-    scaled_error(&got, albedo)
+        .collect()
+}
+
+/// Albedo error of the mission corrected with `params`.
+fn corrected_error(photos: &[Photo], albedo: &[Vec<f32>], params: Params) -> f64 {
+    scaled_error(&corrected(photos, params), albedo)
+}
+
+/// `params` with exposure levelling on or off.
+fn levelling(params: Params, on: bool) -> Params {
+    Params {
+        steps: Steps {
+            level_exposures: on,
+            ..params.steps
+        },
+        ..params
+    }
 }
 
 #[test]
@@ -93,4 +108,77 @@ fn a_window_with_exposure_jumps_is_levelled_and_a_steady_one_is_left_alone() {
     let steady = corrected_error(&photos, &albedo, Params::default());
     let steady_without = corrected_error(&photos, &albedo, without);
     assert_eq!(steady, steady_without);
+}
+
+#[test]
+fn a_window_of_five_is_not_levelled() {
+    let jumps = [1.0, 0.7, 1.35, 0.85, 1.2, 0.75, 1.1, 0.9, 1.3];
+    let (photos, _) = jumpy_mission(12, &jumps);
+    for (window, levelled) in [(5, false), (7, true)] {
+        let params = Params {
+            window,
+            ..Params::default()
+        };
+        let on = corrected(&photos, levelling(params, true));
+        let off = corrected(&photos, levelling(params, false));
+        assert_eq!(on == off, !levelled, "window {window}");
+    }
+}
+
+#[test]
+fn a_near_window_is_levelled_only_with_its_window() {
+    // An exposure step at photo 9: no window of 9 has a photo off both its neighbours (a step is not a spike) but
+    // the windows with the step at an end (their last photo is 9, or their first is 8), where the three photos at
+    // that end hold the step. Photo 7's window (photos 3-11) and photo 10's (6-14) hold it inside, so they are
+    // not levelled; their near windows of 5 (5-9 and 8-12) hold it at an end, and would be.
+    let exposures: Vec<f32> = (0..18).map(|f| if f < 9 { 1.0 } else { 1.25 }).collect();
+    let (photos, _) = jumpy_mission(18, &exposures);
+    let params = Params {
+        window: 9,
+        steps: Steps {
+            near_window: Some(5),
+            ..Steps::default()
+        },
+        ..Params::default()
+    };
+    let on = corrected(&photos, levelling(params, true));
+    let off = corrected(&photos, levelling(params, false));
+    for i in [7, 10] {
+        assert!(
+            on[i] == off[i],
+            "photo {i}: its near window was levelled, its window not"
+        );
+    }
+    // The windows with the step at an end are levelled (photo 5's, 1-9; photo 12's, 8-16).
+    for i in [5, 12] {
+        assert!(on[i] != off[i], "photo {i}: its window was not levelled");
+    }
+}
+
+#[test]
+fn a_long_window_is_not_levelled_for_its_end_photo_alone() {
+    // Photo 17, the mission's last, 30 % brighter than the rest: in windows of 15 it is only ever at an end (the
+    // windows of photos 10-17 are photos 3-17), where a swing that turns looks like a jump. In windows of 11 the
+    // ends are judged.
+    let exposures: Vec<f32> = (0..18).map(|f| if f == 17 { 1.3 } else { 1.0 }).collect();
+    let (photos, _) = jumpy_mission(18, &exposures);
+    for (window, levelled) in [(15, false), (11, true)] {
+        let params = Params {
+            window,
+            ..Params::default()
+        };
+        let on = corrected(&photos, levelling(params, true));
+        let off = corrected(&photos, levelling(params, false));
+        assert_eq!(on == off, !levelled, "window {window}");
+    }
+    // The same photo inside the windows of 15 (photo 9 of 18): levelled.
+    let exposures: Vec<f32> = (0..18).map(|f| if f == 9 { 1.3 } else { 1.0 }).collect();
+    let (photos, _) = jumpy_mission(18, &exposures);
+    let params = Params {
+        window: 15,
+        ..Params::default()
+    };
+    assert!(
+        corrected(&photos, levelling(params, true)) != corrected(&photos, levelling(params, false))
+    );
 }
