@@ -491,7 +491,8 @@ struct CorrectArgs {
     /// Where the exposure jumps from photo to photo (a sledge that lifts and drops, an automatic exposure: some
     /// photo more than 10 % off its neighbours in every channel), the window's median at most blocks is the photo
     /// whose level is the middle one, and F takes that photo's burrows and nodules whole (ghosts); each photo of
-    /// such a window is divided by its gain against the window's M before the median. A smooth drift is left alone.
+    /// such a window is divided by its gain against the window's M before the median. A smooth drift is left alone,
+    /// and so are windows shorter than 7 photos and, in windows longer than 11, a jump at the first or last photo.
     #[arg(long, help_heading = H_METHOD)]
     no_level_exposures: bool,
 
