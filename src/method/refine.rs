@@ -187,7 +187,7 @@ pub fn levelled_stack(
         jumps(gains)
             .iter()
             .enumerate()
-            .any(|(j, g)| judged(j) && g.iter().all(|j| (j - 1.0).abs() > by))
+            .any(|(k, g)| judged(k) && g.iter().all(|j| (j - 1.0).abs() > by))
     };
     // Most windows have no jump: a first look on a few blocks (gains within a few thousandths of the full ones)
     // with half the threshold spares them the full gains.
