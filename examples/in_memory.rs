@@ -21,13 +21,10 @@ fn main() -> Result<(), abysslight::Error> {
     };
     let dive = sim.render()?;
 
-    // S from the water-column frames, then every survey photo through the sliding window.
+    // S from the water-column frames, then every survey photo through the method with its defaults (the window
+    // chosen per stretch by the engine's survey, as `abysslight correct` chooses it).
     let scatter = Scatter::from_frames(&dive.water)?;
-    let params = Params {
-        window: 7,
-        ..Params::default()
-    };
-    let mut engine = Engine::new(params, scatter.as_ref(), None)?;
+    let mut engine = Engine::new(Params::default(), scatter.as_ref(), None)?;
     let mut corrected: Vec<(usize, Photo)> = Vec::new();
     for (i, photo) in dive.survey.iter().cloned().enumerate() {
         for c in engine.push(photo, i)? {

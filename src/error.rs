@@ -47,6 +47,10 @@ pub enum Error {
         reason: String,
     },
 
+    /// The method's parameters are out of range ([`crate::method::params::Params::validate`]).
+    #[error(transparent)]
+    InvalidConfig(#[from] crate::method::params::InvalidConfig),
+
     /// A configuration file is malformed.
     #[error("{}: {reason}", path.display())]
     Config {
@@ -73,7 +77,7 @@ impl Error {
             | Error::Mismatch { path, .. }
             | Error::Encode { path, .. }
             | Error::Config { path, .. } => Some(path),
-            Error::Usage(_) => None,
+            Error::Usage(_) | Error::InvalidConfig(_) => None,
         }
     }
 
@@ -99,7 +103,7 @@ impl Error {
     /// Short machine-readable kind, used in the run report.
     pub fn kind(&self) -> &'static str {
         match self {
-            Error::Usage(_) => "usage",
+            Error::Usage(_) | Error::InvalidConfig(_) => "usage",
             Error::Io { .. } => "io",
             Error::Decode { .. } => "decode",
             Error::Mismatch { .. } => "mismatch",

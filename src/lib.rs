@@ -8,8 +8,9 @@
 //!   options, with its defaults), [`correct_mission`], its [`Report`] ([`report`] has the parts) and
 //!   [`Progress`]; [`merge_shards`] and [`cruise`] for cluster runs;
 //! - the method on photos in memory: a [`Scatter`] (`S` from water-column frames), [`Params`] (the method's
-//!   settings; [`Options::params`] maps a run's options onto them, [`Params::resolved`] resolves every `auto`), the
-//!   [`Engine`] that runs the sliding window over a stream of [`Photo`]s with memory bounded by the window;
+//!   settings, [`Params::validate`]d; [`Options::params`] maps a run's options onto them, [`Params::resolved`]
+//!   resolves every `auto`), the [`Engine`] that runs the method over a stream of [`Photo`]s with bounded memory:
+//!   its first pass, the [`Survey`], chooses each photo's window as the photos come, as a run over a folder does;
 //! - the window rule of the paper: [`p_half`] and [`choose_window`];
 //! - [`kernels`]: the method's steps one by one (medians, `F`, the correction), for callers who want one alone;
 //! - [`io`]: finding, decoding and writing photos (atomically, with their metadata);
@@ -23,7 +24,7 @@
 //!
 //! let dive = Simulation { frames: 9, width: 64, height: 48, ..Simulation::default() }.render()?;
 //! let scatter = Scatter::from_frames(&dive.water)?;
-//! let mut engine = Engine::new(Params { window: 5, ..Params::default() }, scatter.as_ref(), None)?;
+//! let mut engine = Engine::new(Params::default(), scatter.as_ref(), None)?;
 //! let mut corrected = Vec::new();
 //! for (i, photo) in dive.survey.into_iter().enumerate() {
 //!     corrected.extend(engine.push(photo, i)?);
@@ -69,9 +70,10 @@ pub use io::metadata::Metadata;
 pub use method::baseline::Method;
 pub use method::engine::{Corrected, Engine, Use};
 pub use method::mask::Mask;
-pub use method::params::{BlockRule, Facts, Params, SeafloorColour, Steps};
+pub use method::params::{BlockRule, Facts, InvalidConfig, Params, SeafloorColour, Steps, Window};
 pub use method::raster::{BitDepth, Layout, Photo, Raster, Sample, Samples};
 pub use method::scatter::Scatter;
+pub use method::survey::Survey;
 pub use method::transfer::Transfer;
 pub use method::window::{choose_window, p_half};
 pub use run::correct_mission;

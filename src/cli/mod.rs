@@ -554,7 +554,8 @@ struct CorrectArgs {
     /// Without --window and --contamination (--method abyss): auto, chosen per stretch of the mission from a
     /// survey of its photos (their dark share and how many photos see the same scene; docs/nodules.md): 7 and
     /// the median on sparse ground under a moving camera, longer windows and the (1 + c)/2 quantile on dense
-    /// nodule fields and under a slow camera. Photos as they come (--watch, --survey -) take 7 and the median.
+    /// nodule fields and under a slow camera, never longer than the mission. Photos as they come (--watch,
+    /// --survey -) are surveyed as they come: each is corrected once the 25 after it are in.
     #[arg(long, value_name = "N|auto", value_parser = parse_window, conflicts_with = "contamination", help_heading = H_METHOD)]
     window: Option<WindowArg>,
 

@@ -2,12 +2,12 @@
 //! corrected once the window around them is complete.
 //!
 //! ```
-//! use abysslight::{Engine, Params};
+//! use abysslight::{Engine, Params, Window};
 //! use abysslight::{Layout, Photo, Samples};
 //!
 //! let layout = Layout { width: 32, height: 24, channels: 3 };
 //! let photo = |level: u8| Photo { layout, samples: Samples::U8(vec![level; 32 * 24 * 3]), alpha: None };
-//! let mut engine = Engine::new(Params { window: 3, ..Params::default() }, None, None)?;
+//! let mut engine = Engine::new(Params { window: Window::Fixed(3), ..Params::default() }, None, None)?;
 //! let mut out = Vec::new();
 //! for (i, level) in [100u8, 110, 120, 130].into_iter().enumerate() {
 //!     out.extend(engine.push(photo(level), i)?); // photos come out once their window is complete
@@ -42,6 +42,7 @@ use crate::method::refine::{
 use crate::method::ring::Ring;
 use crate::method::scatter::{Prepared, Scatter};
 use crate::method::stretch::Choice;
+use crate::method::survey::{Survey, FIRST_DECIDED};
 use crate::method::transfer::{Curve, Transfer};
 use crate::method::window::near_range;
 
@@ -86,7 +87,7 @@ pub struct Corrected<T> {
     pub backscatter_scale: Vec<f32>,
     /// [`Method::Abyss`] with `denoise`: the noise and texture measured on the photo.
     pub noise: Option<NoiseModel>,
-    /// With the window chosen per stretch ([`Engine::set_stretches`]): what was chosen for this photo and why.
+    /// With the window chosen per stretch ([`Params::auto_window`]): what the survey chose for this photo and why.
     pub choice: Option<Choice>,
 }
 
@@ -128,8 +129,11 @@ pub struct Engine<T> {
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
-    /// Each photo's window, quantile and near window, chosen per stretch ([`Engine::set_stretches`]).
-    stretches: Option<Vec<Choice>>,
+    /// With [`Params::auto_window`]: the survey that chooses each photo's window, quantile and near window, fed
+    /// the engine's own block images as photos come ([`Survey`]) or given whole ([`Engine::set_survey`]).
+    survey: Option<Survey>,
+    /// [`Engine::finish`] was called: the mission is over.
+    finished: bool,
     /// With `steps.overlaps`: the texture of the last photo's block medians, to match the next one against.
     previous_texture: Option<crate::method::matching::Texture>,
 }
@@ -188,12 +192,8 @@ impl<T> Engine<T> {
     /// An engine for one mission. `scatter` is `S` (`None`: no backscatter removal); `mask` marks static pixels
     /// (overlays, vehicle parts), left out of every median, with `F` and `S` filled in smoothly beneath them.
     pub fn new(params: Params, scatter: Option<&Scatter>, mask: Option<Mask>) -> Result<Engine<T>> {
-        let n = params.window;
-        if n == 0 || n.is_multiple_of(2) {
-            return Err(Error::Usage(format!(
-                "the window must be an odd number of photos, got {n}"
-            )));
-        }
+        params.validate()?;
+        let n = params.window_length();
         // `auto` resolved (src/method/params.rs): the blocks from the photos' size where S or the mask knows it,
         // else at the first photo (`accept`); photos in memory declare no curve.
         let params = params.resolved(&Facts {
@@ -251,39 +251,52 @@ impl<T> Engine<T> {
                 .with_gain(params.method == Method::Abyss && params.steps.photo_gain),
             ring: Ring::new(n),
             judged_fixed: None,
-            stretches: None,
+            survey: None,
+            finished: false,
             previous_texture: None,
-        })
+        }
+        .with_own_survey())
     }
 
-    /// Each photo's window, quantile and near window (by the order photos are pushed), chosen per stretch of the
-    /// mission (`method::stretch::choose`), for [`Method::Abyss`] with [`Params::auto_window`]; photos
-    /// past the end take the last choice. The ring then holds the longest window. Refused once photos were pushed.
-    pub fn set_stretches(&mut self, choices: Vec<Choice>) -> Result<()> {
+    /// With [`Params::auto_window`], the engine's own survey of the photos as they come: photo `i` waits for its
+    /// decision ([`crate::method::survey::LOOK_AHEAD`] photos after it), so the ring holds the block images from the
+    /// start of the oldest waiting photo's longest window to the newest.
+    fn with_own_survey(mut self) -> Self {
+        if self.params.window_is_auto() {
+            self.survey = Some(Survey::new(self.scatter_low.as_ref()));
+            self.ring = Ring::new(FIRST_DECIDED + 1);
+        }
+        self
+    }
+
+    /// The survey of the whole mission, made before its photos are pushed (a run over a folder surveys it first,
+    /// from its JPEGs' block means where it can): its choices instead of the engine's own survey as photos come, so
+    /// that no photo waits for the decision and the ring holds only the longest window chosen. Only with
+    /// [`Params::auto_window`] and [`Method::Abyss`] (otherwise ignored); refused once photos were pushed, or
+    /// when the survey is not finished ([`Survey::finish`]).
+    pub fn set_survey(&mut self, survey: Survey) -> Result<()> {
         if self.ring.pushed() > 0 {
             return Err(Error::Usage(
-                "the stretches of a mission are set before its first photo".into(),
+                "the survey of a mission is set before its first photo".into(),
             ));
         }
-        if !self.params.window_is_auto() || choices.is_empty() {
+        if !self.params.window_is_auto() {
             return Ok(());
         }
-        if let Some(c) = choices.iter().find(|c| c.window % 2 == 0) {
-            return Err(Error::Usage(format!(
-                "the window must be an odd number of photos, got {}",
-                c.window
-            )));
+        if !survey.finished() || survey.decided() == 0 {
+            return Err(Error::Usage(
+                "a survey given to the engine is finished and holds at least one photo".into(),
+            ));
         }
-        let longest = choices.iter().map(|c| c.window).max().unwrap_or(1);
+        let longest = survey.choices().iter().map(|c| c.window).max().unwrap_or(1);
         self.ring = Ring::new(longest);
-        self.stretches = Some(choices);
+        self.survey = Some(survey);
         Ok(())
     }
 
-    /// A survey of the mission for [`Engine::set_stretches`], against this engine's `S`: push it
-    /// [`Engine::block_image`] of every photo, in order.
-    pub fn surveyor(&self) -> crate::method::stretch::Surveyor {
-        crate::method::stretch::Surveyor::new(self.scatter_low.as_ref())
+    /// `S` at block resolution in linear light, as the engine and its survey take it (`None`: no `S`).
+    pub fn scatter_low(&self) -> Option<&Raster> {
+        self.scatter_low.as_ref()
     }
 
     /// The block medians the engine takes of `photo` (its blocks, mask and curve, linear light); `None` while the
@@ -345,15 +358,15 @@ impl<T> Engine<T> {
         k > 0 && k.is_multiple_of(8) && self.mask.is_none()
     }
 
-    /// Photo `i`'s choice, when the window is chosen per stretch.
+    /// Photo `i`'s choice, when the window is chosen per stretch (once the survey decided it).
     fn choice(&self, i: usize) -> Option<&Choice> {
-        let s = self.stretches.as_ref()?;
-        s.get(i).or(s.last())
+        self.survey.as_ref()?.choice(i)
     }
 
     /// Photo `i`'s window length.
     fn window_of(&self, i: usize) -> usize {
-        self.choice(i).map_or(self.params.window, |c| c.window)
+        self.choice(i)
+            .map_or(self.params.window_length(), |c| c.window)
     }
 
     /// The quantile photo `i`'s window takes as `M`.
@@ -406,9 +419,19 @@ impl<T> Engine<T> {
 
     /// [`push`](Self::push), saying what to do with the photo.
     pub fn push_as(&mut self, photo: Photo, tag: T, use_: Use) -> Result<Vec<Corrected<T>>> {
+        if self.finished {
+            return Err(Error::Usage(
+                "this engine's mission is over (finish() was called): an engine corrects one mission; make a new \
+                 engine for the next"
+                    .into(),
+            ));
+        }
         self.accept(&photo)?;
         let t = Instant::now();
         let low = self.block_medians(&photo);
+        if let Some(s) = self.survey.as_mut().filter(|s| !s.finished()) {
+            s.push(&low);
+        }
         let judged = match pool_factor(self.params.downsample) {
             1 => None,
             p => Some(pooled(&low, p)),
@@ -438,6 +461,10 @@ impl<T> Engine<T> {
 
     /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
     pub fn finish(&mut self) -> Vec<Corrected<T>> {
+        if let Some(s) = self.survey.as_mut() {
+            s.finish();
+        }
+        self.finished = true;
         self.flush(true)
     }
 
@@ -596,11 +623,20 @@ impl<T> Engine<T> {
     fn flush(&mut self, eof: bool) -> Vec<Corrected<T>> {
         let mut out = Vec::new();
         loop {
-            let stretches = &self.stretches;
-            let window = self.params.window;
-            let ready = self.ring.next_ready_by(eof, |i| match stretches {
-                Some(s) => s.get(i).or(s.last()).map_or(window, |c| c.window),
-                None => window,
+            // With the engine's own survey, a photo waits for its decision as well as for its window.
+            let undecided = match (&self.survey, self.ring.front()) {
+                (Some(s), Some(i)) => s.choice(i).is_none(),
+                _ => false,
+            };
+            if undecided {
+                break;
+            }
+            let (survey, window) = (&self.survey, self.params.window_length());
+            let ready = self.ring.next_ready_by(eof, |i| {
+                survey
+                    .as_ref()
+                    .and_then(|s| s.choice(i))
+                    .map_or(window, |c| c.window)
             });
             let Some((i, w, range)) = ready else { break };
             if w.use_ != Use::Context {
@@ -656,8 +692,28 @@ impl<T> Engine<T> {
         });
         self.monitor = monitor;
         let (photos, n) = (self.ring.pushed(), self.window_of(i));
-        if eof && photos < n {
-            health.flags.push(Flag::ShortMission { photos, window: n });
+        // No advice of a window longer than the photos the mission is known to hold.
+        let holds = if photos.is_multiple_of(2) {
+            photos.saturating_sub(1)
+        } else {
+            photos
+        };
+        for f in &mut health.flags {
+            if let Flag::StructureAdded { longer, .. } = f {
+                *longer = longer.filter(|&m| m <= holds);
+            }
+        }
+        match self.choice(i) {
+            Some(c) if c.samples < c.needed => health.flags.push(Flag::FewSamples {
+                samples: c.samples,
+                needed: c.needed,
+                window: c.window,
+                whole_mission: c.rule == crate::method::stretch::Rule::Short,
+            }),
+            None if eof && photos < n => {
+                health.flags.push(Flag::ShortMission { photos, window: n })
+            }
+            _ => {}
         }
         let Estimate {
             f,

@@ -11,7 +11,8 @@
 //! - [`params`]: the method's parameters;
 //! - [`mask`]: static regions (overlays, vehicle parts) left out of the medians;
 //! - [`outliers`]: bright spots that move (laser dots, highlights), and `M` where they held the window;
-//! - [`stretch`]: the window per stretch of the mission, from its dark share and the camera's motion;
+//! - [`survey`] and [`stretch`]: the first pass, the window per stretch of the mission, from its dark share and the
+//!   camera's motion;
 //! - [`overlap`]: `F` from the ratios of overlapping photos, where the window's `M` holds the scene;
 //! - [`monitor`]: health figures that say where the method's assumptions fail;
 //! - [`baseline`]: the methods the paper compares with (mission mean, log-polynomial);
@@ -37,6 +38,7 @@ pub(crate) mod ring;
 pub(crate) mod running;
 pub mod scatter;
 pub mod stretch;
+pub mod survey;
 pub mod transfer;
 pub mod window;
 

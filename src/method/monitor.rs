@@ -101,6 +101,9 @@ pub enum Flag {
         texture_kept: f32,
         /// The photo's window.
         window: usize,
+        /// A longer window to try, one the mission holds (`None`: none; the engine leaves out what it does not
+        /// hold).
+        longer: Option<usize>,
     },
     /// Fewer photos in the mission than the window: every `F` is the median of all of them.
     ShortMission {
@@ -108,6 +111,18 @@ pub enum Flag {
         photos: usize,
         /// The window `n`.
         window: usize,
+    },
+    /// The window chosen per stretch holds fewer independent samples than its quantile needs (the camera moves
+    /// less than the dark objects' extent between photos, or the mission is too short): `F` may hold the scene.
+    FewSamples {
+        /// Independent samples the window holds.
+        samples: usize,
+        /// Independent samples its quantile needs.
+        needed: usize,
+        /// The window's photos.
+        window: usize,
+        /// The window is the whole mission (it could not grow further).
+        whole_mission: bool,
     },
 }
 
@@ -123,6 +138,7 @@ impl Flag {
             Flag::CameraStill { .. } => "camera-still",
             Flag::StructureAdded { .. } => "structure-added",
             Flag::ShortMission { .. } => "short-mission",
+            Flag::FewSamples { .. } => "few-samples",
         }
     }
 }
@@ -170,16 +186,33 @@ impl std::fmt::Display for Flag {
             Flag::StructureAdded {
                 texture_kept,
                 window,
+                longer,
             } => write!(
                 f,
                 "the correction added structure ({:.0} % of the photo's texture): F holds objects its {window} \
-                 photos saw at the same place (a slow camera); try --window {}",
+                 photos saw at the same place (a slow camera){}",
                 100.0 * texture_kept,
-                (2 * window + 1).min(31)
+                match longer {
+                    Some(n) => format!("; try --window {n}"),
+                    None => String::new(),
+                }
             ),
             Flag::ShortMission { photos, window } => write!(
                 f,
                 "only {photos} photos in the mission, fewer than the window n = {window}"
+            ),
+            Flag::FewSamples {
+                samples,
+                needed,
+                window,
+                whole_mission,
+            } => write!(
+                f,
+                "too few independent samples: the window of {window} photos{} sees {samples} of the {needed} \
+                 different views of the ground its quantile needs (the camera moves less than the dark objects' \
+                 size between photos{}): F may hold the scene",
+                if whole_mission { " (the whole mission)" } else { "" },
+                if whole_mission { ", or the mission is short" } else { "" }
             ),
         }
     }
@@ -706,7 +739,7 @@ const STILL_NCC: f32 = 0.6;
 /// at one place in most of the window, so the median keeps them in `F`.
 const STILL_SPAN: f32 = 0.25;
 /// Window assumed when the monitor is not told.
-const STILL_DEFAULT_WINDOW: usize = 7;
+const STILL_DEFAULT_WINDOW: usize = crate::method::params::BASE_WINDOW;
 /// Long side (block-median pixels) up to which photos are matched for the camera-still test without reduction;
 /// larger ones are reduced by an integer factor (at most twice this side after reduction).
 const STILL_MATCH_SIDE: usize = 192;
@@ -830,9 +863,12 @@ impl Monitor {
             }
         }
         if fit.texture_kept > t.structure_added {
+            let window = self.window.max(1);
             h.flags.push(Flag::StructureAdded {
                 texture_kept: fit.texture_kept,
-                window: self.window.max(1),
+                window,
+                longer: Some((2 * window + 1).min(crate::method::stretch::MAX_AUTO_WINDOW))
+                    .filter(|&n| n > window),
             });
         }
         if fit.texture_kept < t.texture_kept {
@@ -1035,6 +1071,8 @@ pub struct Summary {
     pub camera_still: usize,
     /// Photos flagged [`Flag::ShortMission`].
     pub short_mission: usize,
+    /// Photos flagged [`Flag::FewSamples`].
+    pub few_samples: usize,
     /// Photos flagged [`Flag::StructureAdded`].
     pub structure_added: usize,
     /// Photos whose exposure change the per-photo gain absorbed ([`Health::exposure_absorbed`]; not flagged).
@@ -1057,6 +1095,7 @@ impl Summary {
                 Flag::ExposureJump { .. } => self.exposure_jump += 1,
                 Flag::CameraStill { .. } => self.camera_still += 1,
                 Flag::ShortMission { .. } => self.short_mission += 1,
+                Flag::FewSamples { .. } => self.few_samples += 1,
                 Flag::StructureAdded { .. } => self.structure_added += 1,
             }
         }

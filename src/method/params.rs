@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 pub use crate::method::baseline::Method;
 use crate::method::factor::auto_block;
 use crate::method::transfer::Transfer;
+use crate::method::window::{choose_window, WindowChoice};
 
 /// Grey level of the default seafloor colour `C`. Below mid-grey, so that objects brighter than the sediment
 /// (corals, sponges, white shells, litter) keep 2.5× headroom before they clip.
@@ -107,26 +108,112 @@ impl fmt::Display for SeafloorColour {
     }
 }
 
+/// How each photo's sliding window is chosen ([`Params::window`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Window {
+    /// With [`Method::Abyss`], per stretch of the mission by the method's first pass, the survey
+    /// ([`crate::method::survey`]): each photo's window, the quantile its `M` takes and its near window, from how
+    /// much of the ground is dark and how far the camera moves. The other methods take the paper's
+    /// [`BASE_WINDOW`] photos and the median.
+    #[default]
+    Auto,
+    /// `n` photos (odd) for every photo.
+    Fixed(usize),
+    /// The paper's rule for a known contamination rate `c` (the share of non-seafloor pixels): the smallest odd
+    /// window whose median breaks down with probability at most `risk`. With [`Method::Abyss`] the window's `M` is
+    /// its `(1 + c)/2` quantile and the near window the 5 % window of `c`.
+    Contamination {
+        /// The contamination rate `c`, in `[0, 0.5)`.
+        rate: f64,
+        /// The breakdown probability `P_half` accepted, in `(0, 1)`.
+        risk: f64,
+    },
+}
+
+/// The paper's window, `n = 7`: the window of every method but [`Method::Abyss`] when none is given, and of a
+/// stretch where the survey finds nothing that calls for more.
+pub const BASE_WINDOW: usize = 7;
+
+/// Why [`Params`] cannot run ([`Params::validate`]): each variant names the option and the value, in the
+/// command line's words.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum InvalidConfig {
+    /// The window is not an odd number of photos from 1 to [`MAX_WINDOW`].
+    #[error("--window must be an odd number of photos from 1 to {MAX_WINDOW}, got {0}")]
+    Window(usize),
+    /// The contamination rate is not in `[0, 0.5)`.
+    #[error(
+        "--contamination must be in [0, 0.5), got {0}{hint}: a median breaks down once half its samples are \
+         contaminated, so no window size can help; {DENSE_HINT}",
+        hint = percent_hint(*.0)
+    )]
+    Contamination(f64),
+    /// The breakdown probability is not in `(0, 1)`.
+    #[error("--risk must be in (0, 1), got {0}")]
+    Risk(f64),
+    /// No window up to [`MAX_WINDOW`] photos keeps the breakdown probability at `risk`.
+    #[error(
+        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}; \
+         {DENSE_HINT}"
+    )]
+    NoWindow {
+        /// The contamination rate.
+        contamination: f64,
+        /// The breakdown probability asked.
+        risk: f64,
+    },
+    /// The block size is above [`MAX_DOWNSAMPLE`].
+    #[error("--downsample must be auto or 1 to {MAX_DOWNSAMPLE}, got {0}")]
+    Downsample(usize),
+    /// The near window is not off, auto or an odd number of photos up to [`MAX_WINDOW`].
+    #[error("--near-window must be auto, 0 (off) or an odd number of photos up to {MAX_WINDOW}, got {0}")]
+    NearWindow(usize),
+    /// The factor floor is not in `(0, 1]`.
+    #[error("--factor-floor must be above 0 and at most 1, got {0}")]
+    FactorFloor(f32),
+    /// The relative floor is not in `(0, 1)`.
+    #[error("--relative-floor must be above 0 and below 1, got {0}")]
+    RelativeFloor(f32),
+    /// The scale of `S` is not in `(0, 2]`.
+    #[error("--backscatter-scale must be above 0 and at most 2 (or auto), got {0}")]
+    BackscatterScale(f32),
+    /// The polynomial's degree is not 1 to [`MAX_DEGREE`].
+    #[error("--degree must be 1 to {MAX_DEGREE}, got {0}")]
+    Degree(usize),
+}
+
+/// What to do instead when `--contamination` asks for more than the median's window rule can give.
+pub(crate) const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
+     default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
+
+/// `" (did you mean 0.2, 20 %?)"` for a contamination given in per cent (from 1 to 100), else nothing.
+fn percent_hint(c: f64) -> String {
+    match (1.0..=100.0).contains(&c) && c / 100.0 < 0.5 {
+        true => format!(" (did you mean {}, {c} %?)", c / 100.0),
+        false => String::new(),
+    }
+}
+
+/// The longest window `--window` and `--contamination` may give.
+pub const MAX_WINDOW: usize = crate::method::window::MAX_WINDOW;
+/// The largest block size `K`.
+pub const MAX_DOWNSAMPLE: usize = 1024;
+/// The largest degree of [`Method::Polynomial`].
+pub const MAX_DEGREE: usize = 8;
+
 /// The method's parameters: what the [`Engine`](crate::method::engine::Engine) needs to know. `Params::default()`
-/// is exactly what `abysslight correct` runs without options (and `Options::default()`, through
-/// [`Options::params`](crate::run::options::Options::params)); the settings that say `auto` are resolved from the
-/// mission's photos in one place, [`Params::resolved`].
+/// is exactly what `abysslight correct` runs without options (`Options::default()` is made from it, and
+/// [`Options::params`](crate::run::options::Options::params) gives it back); the settings that say `auto` are
+/// resolved from the mission's photos in one place, [`Params::resolved`]; [`Params::validate`] checks them for the
+/// engine, the command line and Python alike.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Params {
     /// How the lighting is estimated. Default: [`Method::Abyss`].
     pub method: Method,
-    /// Photos in the sliding window, `n` (odd). Default: 7.
-    pub window: usize,
-    /// With [`Method::Abyss`]: each photo's window, quantile and near window chosen per stretch of the mission from
-    /// a survey of its photos before the correction (`method::stretch`; the engine takes it with
-    /// [`Engine::set_stretches`](crate::method::engine::Engine::set_stretches)); `window` is then the window of a
-    /// mission without a survey (photos as they come). Off when `window` or `contamination` is given. Default: true.
-    pub auto_window: bool,
-    /// Contamination rate `c`, the share of non-seafloor pixels, when known: with [`Method::Abyss`] the window's
-    /// `M` is its `(1 + c)/2` quantile (`window_quantile`) and the near window is the 5 % window of `c`. It does
-    /// not change `window` (`--contamination` chooses the window in
-    /// [`Options::params`](crate::run::options::Options::params)). Default: none.
-    pub contamination: Option<f64>,
+    /// How each photo's window is chosen. Default: [`Window::Auto`] (per stretch of the mission, by the survey).
+    pub window: Window,
     /// Block size `K` of the spatial median; 0 is `auto` ([`Params::auto_block`]: from the photos' size, taken from
     /// `S` or the mask when given, else from the first photo). Default: 0 (auto).
     pub downsample: usize,
@@ -201,9 +288,7 @@ impl Default for Params {
     fn default() -> Self {
         Params {
             method: Method::default(),
-            window: 7,
-            auto_window: true,
-            contamination: None,
+            window: Window::Auto,
             downsample: 0,
             seafloor_colour: SeafloorColour::default(),
             factor_floor: 0.05,
@@ -282,27 +367,95 @@ impl Params {
         }
     }
 
-    /// The near window in effect (`None`: off): `steps.near_window`, or for `auto`
+    /// The near window in effect for [`Params::window_length`] (`None`: off): `steps.near_window`, or for `auto`
     /// [`crate::method::window::near_window`]; only with [`Method::Abyss`], and only when shorter than the window.
     pub fn near_window(&self) -> Option<usize> {
         if self.method != Method::Abyss {
             return None;
         }
+        let n = self.window_length();
         match self.steps.near_window {
-            None => crate::method::window::near_window(self.window, self.contamination),
-            Some(k) => (k > 0 && k < self.window).then_some(k),
+            None => crate::method::window::near_window(n, self.contamination()),
+            Some(k) => (k > 0 && k < n).then_some(k),
         }
     }
 
-    /// The quantile the window takes as `M` (`window_quantile`).
+    /// The quantile the window takes as `M` (`window_quantile`) where the survey does not choose it.
     pub fn window_quantile(&self) -> f32 {
-        window_quantile(self.method, self.contamination) as f32
+        window_quantile(self.method, self.contamination()) as f32
     }
 
-    /// Whether each photo's window is chosen per stretch of the mission ([`Params::auto_window`], only with
+    /// Whether each photo's window is chosen per stretch of the mission by the survey ([`Window::Auto`] with
     /// [`Method::Abyss`]).
     pub fn window_is_auto(&self) -> bool {
-        self.auto_window && self.method == Method::Abyss
+        self.window == Window::Auto && self.method == Method::Abyss
+    }
+
+    /// The contamination rate given ([`Window::Contamination`]).
+    pub fn contamination(&self) -> Option<f64> {
+        match self.window {
+            Window::Contamination { rate, .. } => Some(rate),
+            _ => None,
+        }
+    }
+
+    /// The window of every photo the survey does not choose: the window given, the paper's rule's window for a
+    /// contamination rate, [`BASE_WINDOW`] for [`Window::Auto`] (the survey's starting point, and the window of the
+    /// other methods). A contamination rate that no window serves ([`Params::validate`] refuses it) gives
+    /// [`MAX_WINDOW`].
+    pub fn window_length(&self) -> usize {
+        self.window_choice().map_or(MAX_WINDOW, |w| w.n)
+    }
+
+    /// [`Params::window_length`] with its breakdown probability at the contamination rate given (NaN without one).
+    pub fn window_choice(&self) -> Result<WindowChoice, InvalidConfig> {
+        match self.window {
+            Window::Auto => Ok(WindowChoice {
+                n: BASE_WINDOW,
+                p_half: f64::NAN,
+            }),
+            Window::Fixed(n) => Ok(WindowChoice {
+                n,
+                p_half: f64::NAN,
+            }),
+            Window::Contamination { rate, risk } => choose_window(rate, risk),
+        }
+    }
+
+    /// Check every value against its range, each error naming its option (the command's checks and the engine's
+    /// are these).
+    pub fn validate(&self) -> Result<(), InvalidConfig> {
+        if let Window::Fixed(n) = self.window {
+            if n == 0 || n.is_multiple_of(2) || n > MAX_WINDOW {
+                return Err(InvalidConfig::Window(n));
+            }
+        }
+        self.window_choice()?;
+        if self.downsample > MAX_DOWNSAMPLE {
+            return Err(InvalidConfig::Downsample(self.downsample));
+        }
+        if let Some(k) = self
+            .steps
+            .near_window
+            .filter(|&k| k != 0 && (k.is_multiple_of(2) || k > MAX_WINDOW))
+        {
+            return Err(InvalidConfig::NearWindow(k));
+        }
+        if !(self.factor_floor > 0.0 && self.factor_floor <= 1.0) {
+            return Err(InvalidConfig::FactorFloor(self.factor_floor));
+        }
+        if !(self.steps.relative_floor > 0.0 && self.steps.relative_floor < 1.0) {
+            return Err(InvalidConfig::RelativeFloor(self.steps.relative_floor));
+        }
+        if let Some(k) = self.steps.backscatter_scale {
+            if !(k > 0.0 && k <= 2.0) {
+                return Err(InvalidConfig::BackscatterScale(k));
+            }
+        }
+        if !(1..=MAX_DEGREE).contains(&self.degree) {
+            return Err(InvalidConfig::Degree(self.degree));
+        }
+        Ok(())
     }
 
     /// The curve in effect: `transfer`, or linear where it is `auto` and not resolved ([`Params::resolved`]).

@@ -36,6 +36,11 @@ impl<E, W> Ring<E, W> {
         self.seq
     }
 
+    /// The number of the oldest photo waiting.
+    pub(crate) fn front(&self) -> Option<usize> {
+        self.waiting.front().map(|&(i, _)| i)
+    }
+
     /// Photos pushed and not yet out.
     pub(crate) fn waiting(&self) -> usize {
         self.waiting.len()

@@ -40,8 +40,8 @@ pub const STRETCH_QUANTILE: f64 = 0.75;
 pub const ACT_COVERAGE: f32 = 0.25;
 /// The longest window chosen (the engine's ring holds it; `n/2 + 1` full photos wait for it).
 pub const MAX_AUTO_WINDOW: usize = 31;
-/// The window of a stretch where nothing calls for more: the paper's 7 (today's default).
-pub const BASE_WINDOW: usize = 7;
+/// The window of a stretch where nothing calls for more: the paper's 7.
+pub use crate::method::params::BASE_WINDOW;
 /// Breakdown risk of the window's quantile ([`quantile_window`]).
 pub const RISK: f64 = 0.01;
 /// Correlation of two photos' scenes at the same blocks above which they are not independent samples.
@@ -194,6 +194,16 @@ impl Surveyor {
         }
     }
 
+    /// The photos measured so far, in order (those whose reference is known: all but the last
+    /// [`REFERENCE_HALF`] pushed, once the reference is full). The lags of the last [`MAX_LAG`] of them reach
+    /// photos not measured yet (NaN).
+    pub fn measured(&mut self) -> &[PhotoSurvey] {
+        if !self.pending.is_empty() {
+            self.measure_pending();
+        }
+        &self.done
+    }
+
     /// The survey of every photo pushed (shorter missions than the reference: against all their photos).
     pub fn finish(mut self) -> Vec<PhotoSurvey> {
         let first = self.pushed - self.greys.len();
@@ -336,6 +346,9 @@ pub enum Rule {
     Quantile,
     /// As [`Rule::Quantile`], but [`MAX_AUTO_WINDOW`] photos did not hold the samples asked.
     Capped,
+    /// As [`Rule::Quantile`], but the whole mission, shorter than [`MAX_AUTO_WINDOW`], did not hold the samples
+    /// asked: the window is as long as the mission allows.
+    Short,
 }
 
 /// What `--window auto` chose for one photo.
@@ -351,6 +364,10 @@ pub struct Choice {
     pub coverage: f32,
     /// Photos per independent sample in its window.
     pub photos_per_sample: f32,
+    /// Independent samples its window holds.
+    pub samples: usize,
+    /// Independent samples the window needs (at most [`MAX_AUTO_WINDOW`] photos are taken to find them).
+    pub needed: usize,
     /// Why.
     pub rule: Rule,
 }
@@ -364,6 +381,8 @@ impl Choice {
             near: crate::method::window::near_window(BASE_WINDOW, None),
             coverage: f32::NAN,
             photos_per_sample: 1.0,
+            samples: BASE_WINDOW,
+            needed: BASE_WINDOW,
             rule: Rule::NoSurvey,
         }
     }
@@ -372,71 +391,106 @@ impl Choice {
     pub fn why(&self) -> String {
         let c = 100.0 * self.coverage;
         match self.rule {
-            Rule::NoSurvey => "no survey of the mission before the correction: the window 7 and its median".into(),
+            Rule::NoSurvey => format!(
+                "no survey of the mission before the correction: the window {BASE_WINDOW} and its median"
+            ),
             Rule::Sparse => format!(
-                "{c:.0} % dark, {:.1} photo(s) per independent sample: the window 7 and its median",
+                "{c:.0} % dark, {:.1} photo(s) per independent sample: the window {BASE_WINDOW} and its median",
                 self.photos_per_sample
             ),
-            Rule::Quantile | Rule::Capped => format!(
+            Rule::Quantile | Rule::Capped | Rule::Short => format!(
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the {:.2} quantile of {} photos{}",
                 self.photos_per_sample,
                 self.quantile,
                 self.window,
-                if self.rule == Rule::Capped { " (capped)" } else { "" }
+                match self.rule {
+                    Rule::Capped => format!(
+                        " (capped: {} of the {} independent samples asked)",
+                        self.samples, self.needed
+                    ),
+                    Rule::Short => format!(
+                        " (the whole mission: {} of the {} independent samples asked)",
+                        self.samples, self.needed
+                    ),
+                    _ => String::new(),
+                }
             ),
         }
     }
 }
 
-/// Each photo's window, quantile and near window from the mission's survey (see the module documentation): the
-/// stretch's coverage `c` is [`STRETCH_QUANTILE`] of its photos' dark shares; the window needs [`BASE_WINDOW`]
-/// independent samples below [`ACT_COVERAGE`] (its median), else the samples [`quantile_window`] asks of the
-/// `(1 + c)/2` quantile, and grows from [`BASE_WINDOW`] photos until it holds them ([`independent`]).
+/// Each photo's window, quantile and near window from the mission's survey ([`choose_one`] of each photo).
 pub fn choose(photos: &[PhotoSurvey]) -> Vec<Choice> {
+    (0..photos.len()).map(|i| choose_one(photos, i)).collect()
+}
+
+/// The longest window a mission of `total` photos allows: [`MAX_AUTO_WINDOW`], or the largest odd number of photos
+/// the mission holds (at least 1).
+pub fn longest_window(total: usize) -> usize {
+    let odd = if total.is_multiple_of(2) {
+        total.saturating_sub(1)
+    } else {
+        total
+    };
+    MAX_AUTO_WINDOW.min(odd).max(1)
+}
+
+/// Photos of the survey that photo `i`'s choice reads: the photos of its longest possible window (the stretch's and
+/// the near window's lie inside it). Once the survey measured these, [`choose_one`] of `i` over the photos measured
+/// so far is its choice over the whole mission (what a survey streamed with the photos waits for).
+pub fn photos_read(i: usize) -> usize {
+    window_range(i, MAX_AUTO_WINDOW, usize::MAX).end
+}
+
+/// Photo `i`'s window, quantile and near window from the survey of the mission's photos `photos` (see the module
+/// documentation): the stretch's coverage `c` is [`STRETCH_QUANTILE`] of its photos' dark shares; the window needs
+/// [`BASE_WINDOW`] independent samples below [`ACT_COVERAGE`] (its median), else the samples [`quantile_window`]
+/// asks of the `(1 + c)/2` quantile, and grows from [`BASE_WINDOW`] photos until it holds them ([`independent`]),
+/// never past [`longest_window`] of the mission.
+pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
     let total = photos.len();
-    (0..total)
-        .map(|i| {
-            let stretch =
-                &photos[i.saturating_sub(STRETCH_HALF)..(i + STRETCH_HALF + 1).min(total)];
-            let mut c: Vec<f32> = stretch.iter().map(|p| p.coverage).collect();
-            let c = quantile(&mut c, STRETCH_QUANTILE);
-            let c = if c.is_finite() {
-                c.clamp(0.0, 0.6)
-            } else {
-                0.0
-            };
-            let dense = c >= ACT_COVERAGE;
-            let q = if dense { (1.0 + c as f64) / 2.0 } else { 0.5 };
-            let samples = |risk: f64, least: usize| match dense {
-                true => quantile_window(c as f64, q, risk, 1)
-                    .unwrap_or(MAX_AUTO_WINDOW)
-                    .max(least),
-                false => least,
-            };
-            let need = samples(RISK, BASE_WINDOW);
-            let (window, found) = grow(photos, BASE_WINDOW, MAX_AUTO_WINDOW, need, |n| {
-                window_range(i, n, total)
-            });
-            let range = window_range(i, window, total);
-            let need_near = samples(NEAR_RISK, NEAR_MIN);
-            let (near, _) = grow(photos, NEAR_MIN, window, need_near, |k| {
-                near_range(i, k, &range)
-            });
-            let rule = match (found >= need, dense || window > BASE_WINDOW) {
-                (false, _) => Rule::Capped,
-                (true, false) => Rule::Sparse,
-                (true, true) => Rule::Quantile,
-            };
-            Choice {
-                window,
-                quantile: q as f32,
-                near: (near < window).then_some(near),
-                coverage: c,
-                photos_per_sample: range.len() as f32 / found.max(1) as f32,
-                rule,
-            }
-        })
-        .collect()
+    let stretch = &photos[i.saturating_sub(STRETCH_HALF)..(i + STRETCH_HALF + 1).min(total)];
+    let mut c: Vec<f32> = stretch.iter().map(|p| p.coverage).collect();
+    let c = quantile(&mut c, STRETCH_QUANTILE);
+    let c = if c.is_finite() {
+        c.clamp(0.0, 0.6)
+    } else {
+        0.0
+    };
+    let dense = c >= ACT_COVERAGE;
+    let q = if dense { (1.0 + c as f64) / 2.0 } else { 0.5 };
+    let samples = |risk: f64, least: usize| match dense {
+        true => quantile_window(c as f64, q, risk, 1)
+            .unwrap_or(MAX_AUTO_WINDOW)
+            .max(least),
+        false => least,
+    };
+    let longest = longest_window(total);
+    let need = samples(RISK, BASE_WINDOW);
+    let (window, found) = grow(photos, BASE_WINDOW.min(longest), longest, need, |n| {
+        window_range(i, n, total)
+    });
+    let range = window_range(i, window, total);
+    let need_near = samples(NEAR_RISK, NEAR_MIN);
+    let (near, _) = grow(photos, NEAR_MIN.min(window), window, need_near, |k| {
+        near_range(i, k, &range)
+    });
+    let rule = match (found >= need, dense || window > BASE_WINDOW) {
+        (false, _) if window < MAX_AUTO_WINDOW => Rule::Short,
+        (false, _) => Rule::Capped,
+        (true, false) => Rule::Sparse,
+        (true, true) => Rule::Quantile,
+    };
+    Choice {
+        window,
+        quantile: q as f32,
+        near: (near < window).then_some(near),
+        coverage: c,
+        photos_per_sample: range.len() as f32 / found.max(1) as f32,
+        samples: found,
+        needed: need,
+        rule,
+    }
 }
 
 /// The shortest odd length from `from` up to `most` whose photos (`range_of(length)`) hold `need` independent

@@ -6,7 +6,7 @@
 
 use serde::Serialize;
 
-use crate::error::Error;
+use crate::method::params::InvalidConfig;
 
 /// Largest window [`choose_window`] will propose.
 pub const MAX_WINDOW: usize = 1001;
@@ -57,22 +57,14 @@ pub struct WindowChoice {
     pub p_half: f64,
 }
 
-/// What to do instead when `--contamination` asks for more than the median's window rule can give.
-const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
-     default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
-
-/// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`.
-pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Error> {
+/// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`; `c` must be in `[0, 0.5)`,
+/// `risk` in `(0, 1)`, and a window up to [`MAX_WINDOW`] photos must do.
+pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, InvalidConfig> {
     if !(0.0..0.5).contains(&contamination) {
-        return Err(Error::Usage(format!(
-            "--contamination must be in [0, 0.5), got {contamination}: a median breaks down once half its \
-             samples are contaminated, so no window size can help; {DENSE_HINT}"
-        )));
+        return Err(InvalidConfig::Contamination(contamination));
     }
     if !(risk > 0.0 && risk < 1.0) {
-        return Err(Error::Usage(format!(
-            "--risk must be in (0, 1), got {risk}"
-        )));
+        return Err(InvalidConfig::Risk(risk));
     }
     let mut n = 1;
     while n <= MAX_WINDOW {
@@ -82,9 +74,10 @@ pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Erro
         }
         n += 2;
     }
-    Err(Error::Usage(format!(
-        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}; {DENSE_HINT}"
-    )))
+    Err(InvalidConfig::NoWindow {
+        contamination,
+        risk,
+    })
 }
 
 /// Probability that the `q` quantile of `n` samples falls on a contaminated one, each sample contaminated

@@ -338,7 +338,7 @@ mod tests {
         drop(acquire(&more_threads, &work).unwrap());
         // The same window given another way is the same run.
         let same_window = Options {
-            window: Some(crate::run::options::DEFAULT_WINDOW),
+            window: Some(crate::method::params::BASE_WINDOW),
             ..o.clone()
         };
         drop(acquire(&same_window, &work).unwrap());

@@ -338,6 +338,13 @@ fn merged_report(shards: &[ShardReport], work: &Path) -> Result<(Value, Vec<Fram
         r["layout"] = layout.clone();
     }
     r["monitor"] = serde_json::to_value(summary_of(&frames_json)).unwrap_or(Value::Null);
+    // The windows the mission's photos used, over every shard.
+    let used: Vec<u64> = frames_json
+        .iter()
+        .filter_map(|f| Some(f["window"][1].as_u64()? + 1 - f["window"][0].as_u64()?))
+        .collect();
+    r["window"]["shortest"] = used.iter().min().copied().unwrap_or(0).into();
+    r["window"]["longest"] = used.iter().max().copied().unwrap_or(0).into();
     r["frames"] = Value::Array(frames_json);
     r["errors"] = Value::Array(errors);
     r["warnings"] = Value::Array(union(shards, "warnings"));
@@ -396,6 +403,7 @@ fn summary_of(frames: &[Value]) -> Summary {
                 "exposure-jump" => s.exposure_jump += 1,
                 "camera-still" => s.camera_still += 1,
                 "short-mission" => s.short_mission += 1,
+                "few-samples" => s.few_samples += 1,
                 "structure-added" => s.structure_added += 1,
                 _ => {}
             }

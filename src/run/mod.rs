@@ -33,7 +33,7 @@ use crate::method::scatter::Scatter;
 use crate::run::options::Options;
 use crate::run::plan::Plan;
 use crate::run::prepare::{prepare, spread_indices, Setup};
-use crate::run::report::{FileError, FrameReport, Progress, Report, ScatterInfo};
+use crate::run::report::{FileError, FrameReport, Progress, Report, ScatterInfo, WindowSummary};
 use crate::run::threads::{stream, Outcome};
 
 /// Run `abysslight correct` as described by `opts`.
@@ -112,7 +112,7 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
         survey_skipped,
         warnings,
     };
-    let mut report = report_of(opts, &plan, before, outcome);
+    let mut report = report_of(opts, &params, &plan, before, outcome);
     report.elapsed_s = started.elapsed().as_secs_f64();
     report.write(opts, plan.work_dir.as_deref())?;
     Ok(report)
@@ -151,7 +151,23 @@ fn blocks(params: &crate::method::params::Params) -> String {
 
 /// The line that says what is corrected, with which window.
 fn say_what_runs(plan: &Plan, params: &crate::method::params::Params, progress: &dyn Progress) {
-    let n = plan.window.n;
+    if params.window_is_auto() {
+        let blocks = blocks(params);
+        progress.stage(&if plan.streaming {
+            format!(
+                "correcting survey photos as they come (windows chosen per stretch by the survey as the photos \
+                 come: each photo once the {} after it are in; blocks {blocks})",
+                crate::method::survey::Survey::LOOK_AHEAD
+            )
+        } else {
+            format!(
+                "correcting {} survey photos (windows chosen per stretch, blocks {blocks})",
+                plan.chunk.len() - plan.skipped_existing
+            )
+        });
+        return;
+    }
+    let n = params.window_length();
     let near = match params.near_window() {
         Some(k) => format!(", near window {k}"),
         None => String::new(),
@@ -181,7 +197,13 @@ struct BeforeStream {
 }
 
 /// The report of a run (its time is filled in by the caller).
-fn report_of(opts: &Options, plan: &Plan, before: BeforeStream, outcome: Outcome) -> Report {
+fn report_of(
+    opts: &Options,
+    params: &crate::method::params::Params,
+    plan: &Plan,
+    before: BeforeStream,
+    outcome: Outcome,
+) -> Report {
     let water_column_failed = before.water_column_errors.len();
     let mut errors = before.water_column_errors;
     errors.extend(before.survey_skipped);
@@ -198,7 +220,11 @@ fn report_of(opts: &Options, plan: &Plan, before: BeforeStream, outcome: Outcome
         version: env!("CARGO_PKG_VERSION").into(),
         options: opts.clone(),
         transfer_assumed: before.transfer_assumed,
-        window: plan.window,
+        window: WindowSummary::of(
+            params,
+            opts,
+            outcome.frames.iter().map(|f| f.window[1] + 1 - f.window[0]),
+        ),
         layout: outcome.layout,
         scatter: before.scatter,
         survey_photos: if plan.streaming {

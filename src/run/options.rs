@@ -8,12 +8,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::Error;
 pub use crate::method::baseline::Method;
 pub use crate::method::params::SeafloorColour;
-use crate::method::params::{Params, Steps};
+use crate::method::params::{InvalidConfig, Params, Steps, Window};
 pub use crate::method::transfer::Transfer;
-use crate::method::window::{choose_window, p_half, WindowChoice};
-
-/// Window size used when neither `window` nor `contamination` is given.
-pub const DEFAULT_WINDOW: usize = 7;
+use crate::method::window::{p_half, WindowChoice};
 
 /// One of `count` contiguous chunks of a survey (`--shard K/N`, `K` from 1 to `N`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -169,30 +166,24 @@ pub struct Options {
     /// `method = abyss`: the floor of `F` as a share of the photo's lit level (95th percentile of `F` per channel),
     /// with a smooth hand-over (`soft_floor`). Default: 0.001 (measured on the dive matrix,
     /// docs/evaluation.md).
-    #[serde(default = "default_relative_floor")]
     pub relative_floor: f32,
     /// `method = abyss`: where the exposure jumps from photo to photo within the window, its photos levelled to one
     /// exposure (each by its gain against the window's `M`) before `M` is taken (`levelled_stack`): the median
     /// otherwise takes the middle-exposure photo's scene whole into `F` (ghosts). Default: true.
-    #[serde(default = "default_true")]
     pub level_exposures: bool,
     /// `method = abyss`: one robust gain per photo and channel against its window's `M`. Default: true.
-    #[serde(default = "default_true")]
     pub photo_gain: bool,
     /// `method = abyss`: scale of the water-column `S` for the survey photos (the water column is deeper than the
     /// camera's altitude, so its backscatter can be stronger than the survey's); `None` (`auto`) estimates it per
     /// window from how the seafloor's contrast follows the light (`backscatter_scale`).
     /// Default: 1, `S` as measured (the estimate is biased low on red-starved channels, which tints dark objects
     /// red; docs/evaluation.md).
-    #[serde(default = "default_scale")]
     pub backscatter_scale: Option<f32>,
     /// `method = abyss`: blend dim regions towards their local level by their signal-to-noise ratio (measured on
     /// each photo) instead of amplifying noise (`noise`). Default: true.
-    #[serde(default = "default_true")]
     pub denoise: bool,
     /// `method = abyss` with `denoise`: even out the blend's block levels across light levels, so that dim regions
     /// come out as bright as lit ones (`level_by_light`). Default: true.
-    #[serde(default = "default_true")]
     pub level_by_light: bool,
     /// `method = abyss`: fill the window's `M` where bright spots that move — laser dots, specular highlights —
     /// held more than half of the window at a block (`outliers`). Default: false (it keeps the
@@ -203,14 +194,6 @@ pub struct Options {
     /// fauna cancel (`method::overlap`). Default: false (docs/overlaps.md).
     #[serde(default)]
     pub overlaps: bool,
-}
-
-fn default_relative_floor() -> f32 {
-    0.001
-}
-
-fn default_true() -> bool {
-    true
 }
 
 /// A TOML value that is a number (a whole one for a whole-number option), or the string `"auto"` (`None`); in
@@ -265,24 +248,28 @@ mod curve_or_auto {
     }
 }
 
-fn default_scale() -> Option<f32> {
-    Some(1.0)
-}
-
 impl Default for Options {
+    /// The method's options from [`Params::default`] (what a run gives back with [`Options::params`]), the run's
+    /// own defaults beside them.
     fn default() -> Self {
+        let p = Params::default();
+        let (window, contamination, risk) = match p.window {
+            Window::Auto => (None, None, DEFAULT_RISK),
+            Window::Fixed(n) => (Some(n), None, DEFAULT_RISK),
+            Window::Contamination { rate, risk } => (None, Some(rate), risk),
+        };
         Options {
             water_column: None,
             scatter: None,
             survey: None,
             out: None,
-            window: None,
-            contamination: None,
-            risk: 0.01,
-            downsample: None,
-            near_window: None,
-            seafloor_colour: SeafloorColour::default(),
-            factor_floor: 0.05,
+            window,
+            contamination,
+            risk,
+            downsample: (p.downsample > 0).then_some(p.downsample),
+            near_window: p.steps.near_window,
+            seafloor_colour: p.seafloor_colour,
+            factor_floor: p.factor_floor,
             save_scatter: false,
             save_factors: false,
             jpeg_quality: None,
@@ -292,27 +279,30 @@ impl Default for Options {
             scatter_memory_mib: 2048,
             resume: false,
             shard: None,
-            transfer: None,
+            transfer: p.transfer,
             mask: None,
             mask_auto: false,
-            method: Method::default(),
-            degree: 4,
+            method: p.method,
+            degree: p.degree,
             watch: false,
             idle_timeout: None,
             poll_interval: 500,
             limit: None,
             report: None,
-            relative_floor: default_relative_floor(),
-            level_exposures: true,
-            photo_gain: true,
-            backscatter_scale: default_scale(),
-            denoise: true,
-            level_by_light: true,
-            bright_spots: false,
-            overlaps: false,
+            relative_floor: p.steps.relative_floor,
+            level_exposures: p.steps.level_exposures,
+            photo_gain: p.steps.photo_gain,
+            backscatter_scale: p.steps.backscatter_scale,
+            denoise: p.steps.denoise,
+            level_by_light: p.steps.level_by_light,
+            bright_spots: p.steps.bright_spots,
+            overlaps: p.steps.overlaps,
         }
     }
 }
+
+/// The breakdown probability `P_half` accepted when `--contamination` chooses the window (the paper's 1 %).
+pub const DEFAULT_RISK: f64 = 0.01;
 
 impl Options {
     /// Read options from a TOML file. Relative paths in it are taken relative to the file's folder.
@@ -341,23 +331,12 @@ impl Options {
         Ok(opts)
     }
 
-    /// The window size to use, with its breakdown probability at the given contamination (if known).
+    /// The window of every photo the survey does not choose ([`Params::window_choice`]), with its breakdown
+    /// probability at the contamination rate given or, with `--window` and `--contamination` (refused by
+    /// [`Options::params`]), without one.
     pub fn window_choice(&self) -> Result<WindowChoice, Error> {
-        match (self.window, self.contamination) {
-            (Some(_), Some(_)) => Err(Error::Usage(
-                "give either --window or --contamination, not both".into(),
-            )),
-            (None, Some(c)) => choose_window(c, self.risk),
-            (Some(n), None) => Ok(WindowChoice {
-                n,
-                p_half: f64::NAN,
-            }),
-            (None, None) => Ok(WindowChoice {
-                n: DEFAULT_WINDOW,
-                p_half: f64::NAN,
-            }),
-        }
-        .map(|w| match self.contamination {
+        let w = self.params()?.window_choice()?;
+        Ok(match self.contamination {
             Some(c) => WindowChoice {
                 n: w.n,
                 p_half: p_half(w.n, c),
@@ -369,10 +348,11 @@ impl Options {
     /// The longest window a photo of the run can have: with `--window auto` (neither `--window` nor
     /// `--contamination`, `--method abyss`) the longest the survey chooses, 31 photos; else the window.
     pub fn longest_window(&self) -> Result<usize, Error> {
-        Ok(if self.params()?.window_is_auto() {
+        let params = self.params()?;
+        Ok(if params.window_is_auto() {
             crate::method::stretch::MAX_AUTO_WINDOW
         } else {
-            self.window_choice()?.n
+            params.window_length()
         })
     }
 
@@ -380,28 +360,8 @@ impl Options {
     pub fn validate(&self) -> Result<(), Error> {
         self.check_ranges()?;
         let usage = |m: String| Err(Error::Usage(m));
-        let w = self.window_choice()?;
-        if w.n == 0 || w.n % 2 == 0 {
-            return usage(format!(
-                "--window must be an odd number of photos (centred on the current one), got {}",
-                w.n
-            ));
-        }
         if self.limit == Some(0) {
             return usage("--limit must be at least 1 photo".into());
-        }
-        if let Some(k) = self.backscatter_scale {
-            if !(k > 0.0 && k <= 2.0) {
-                return usage(format!(
-                    "--backscatter-scale must be above 0 and at most 2 (or auto), got {k}"
-                ));
-            }
-        }
-        if !(self.relative_floor > 0.0 && self.relative_floor < 1.0) {
-            return usage(format!(
-                "--relative-floor must be above 0 and below 1, got {}",
-                self.relative_floor
-            ));
         }
         let stdin = self.survey.as_deref() == Some(Path::new("-"));
         let stdout = self.out.as_deref() == Some(Path::new("-"));
@@ -465,14 +425,11 @@ pub mod limits {
     /// `--window` (also the largest window `--contamination` may choose).
     pub const WINDOW: usize = crate::method::window::MAX_WINDOW;
     /// `--downsample` block size K.
-    pub const DOWNSAMPLE: usize = 1024;
-    /// `--factor-floor`: F is normalised so that a normally lit pixel has F ≈ 1; a floor above 1 would cap every
-    /// pixel's gain below that of a normally lit one.
-    pub const FACTOR_FLOOR: f32 = 1.0;
+    pub const DOWNSAMPLE: usize = crate::method::params::MAX_DOWNSAMPLE;
     /// `--threads`.
     pub const THREADS: usize = 1024;
     /// `--degree` of `--method polynomial`.
-    pub const DEGREE: usize = 8;
+    pub const DEGREE: usize = crate::method::params::MAX_DEGREE;
     /// `--idle-timeout`, seconds (a year).
     pub const IDLE_TIMEOUT_S: f64 = 365.0 * 24.0 * 3600.0;
     /// `--poll-interval`, milliseconds (an hour).
@@ -543,12 +500,22 @@ impl Options {
             limit: _,
             report: _,
         } = *self;
+        let window = match (self.window, contamination) {
+            (Some(_), Some(_)) => {
+                return Err(Error::Usage(
+                    "give either --window or --contamination, not both".into(),
+                ))
+            }
+            (Some(n), None) => Window::Fixed(n),
+            (None, Some(rate)) => Window::Contamination {
+                rate,
+                risk: self.risk,
+            },
+            (None, None) => Window::Auto,
+        };
         Ok(Params {
             method,
-            // `window` and `risk` (or `contamination`) choose n; without either, per stretch of the mission.
-            window: self.window_choice()?.n,
-            auto_window: self.window.is_none() && contamination.is_none(),
-            contamination,
+            window,
             downsample: downsample.unwrap_or(0),
             seafloor_colour,
             factor_floor,
@@ -586,51 +553,23 @@ impl Options {
         self.check_run_ranges()
     }
 
-    /// Range checks of the options of the estimates of `S` and `F`: window, contamination, risk, downsampling,
-    /// near window, factor floor.
+    /// Range checks of the method's options: [`Params::validate`], and `--risk` (which only counts with
+    /// `--contamination`) on its own.
     fn check_estimate_ranges(&self) -> Result<(), Error> {
-        let usage = |m: String| Err(Error::Usage(m));
         if let Some(n) = self.window {
             if n == 0 || n % 2 == 0 || n > limits::WINDOW {
-                return usage(format!(
-                    "--window must be an odd number of photos from 1 to {}, got {n}",
-                    limits::WINDOW
-                ));
+                return Err(InvalidConfig::Window(n).into());
             }
         }
         if let Some(c) = self.contamination {
             if !(0.0..0.5).contains(&c) {
-                return usage(format!("--contamination must be in [0, 0.5), got {c}"));
+                return Err(InvalidConfig::Contamination(c).into());
             }
         }
         if !(self.risk > 0.0 && self.risk < 1.0) {
-            return usage(format!("--risk must be in (0, 1), got {}", self.risk));
+            return Err(InvalidConfig::Risk(self.risk).into());
         }
-        if let Some(k) = self.downsample {
-            if !(1..=limits::DOWNSAMPLE).contains(&k) {
-                return usage(format!(
-                    "--downsample must be auto or 1 to {}, got {k}",
-                    limits::DOWNSAMPLE
-                ));
-            }
-        }
-        if let Some(k) = self
-            .near_window
-            .filter(|&k| k != 0 && (k % 2 == 0 || k > limits::WINDOW))
-        {
-            return usage(format!(
-                "--near-window must be auto, 0 (off) or an odd number of photos up to {}, got {k}",
-                limits::WINDOW
-            ));
-        }
-        if !(self.factor_floor > 0.0 && self.factor_floor <= limits::FACTOR_FLOOR) {
-            return usage(format!(
-                "--factor-floor must be above 0 and at most {}, got {}",
-                limits::FACTOR_FLOOR,
-                self.factor_floor
-            ));
-        }
-        Ok(())
+        Ok(self.params()?.validate()?)
     }
 
     /// Range checks of the remaining numeric options: JPEG quality, threads, polynomial degree, watch timing,
@@ -647,13 +586,6 @@ impl Options {
                     limits::THREADS
                 ));
             }
-        }
-        if !(1..=limits::DEGREE).contains(&self.degree) {
-            return usage(format!(
-                "--degree must be 1 to {}, got {}",
-                limits::DEGREE,
-                self.degree
-            ));
         }
         if let Some(t) = self.idle_timeout {
             if !(0.0..=limits::IDLE_TIMEOUT_S).contains(&t) {
@@ -826,7 +758,10 @@ mod tests {
     fn validation() {
         let ok = Options::default();
         assert!(ok.validate().is_ok());
-        assert_eq!(ok.window_choice().unwrap().n, DEFAULT_WINDOW);
+        assert_eq!(
+            ok.window_choice().unwrap().n,
+            crate::method::params::BASE_WINDOW
+        );
         let even = Options {
             window: Some(6),
             ..Options::default()

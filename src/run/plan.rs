@@ -33,8 +33,10 @@ pub struct Plan {
     pub stdout: bool,
     /// No list of photos up front (stdin or `--watch`).
     pub streaming: bool,
-    /// The window `n` and its breakdown probability.
+    /// The window `n` and its breakdown probability (of photos the survey does not choose for).
     pub window: WindowChoice,
+    /// Each photo's window chosen per stretch by the survey (`--window auto`).
+    pub auto_window: bool,
     /// The survey photos found (empty when streaming).
     pub found: Found,
     /// The mission's photo size (width, height): the most common among the headers of the first photos, so that
@@ -105,7 +107,7 @@ impl Plan {
                 chunk.end,
                 total,
                 chunk.start - first,
-                window.n - 1
+                opts.longest_window()? - 1
             ));
         }
         if skipped_existing > 0 {
@@ -123,6 +125,7 @@ impl Plan {
             stdout,
             streaming,
             window,
+            auto_window: opts.params()?.window_is_auto(),
             found,
             photo_size,
             items,
@@ -231,7 +234,11 @@ impl Plan {
         let photos = &self.found.photos;
         let mut found = checks::other_sizes(photos, self.photo_size);
         found.extend(checks::mixed_formats(photos));
-        found.extend(checks::too_few(photos.len(), self.window.n));
+        found.extend(checks::too_few(
+            photos.len(),
+            self.window.n,
+            self.auto_window,
+        ));
         found.extend(checks::two_dives(photos));
         let (outputs, factors) = self.disk_need(opts, downsample);
         found.extend(checks::disk(outputs, factors, self.free_space(), &self.out));
@@ -279,13 +286,23 @@ impl Plan {
         if !self.streaming {
             line(self.describe_disk(opts, params.downsample));
         }
-        let window = if params.window_is_auto() && !self.streaming {
+        let window = if params.window_is_auto() {
+            let longest = match self.streaming {
+                true => crate::method::stretch::MAX_AUTO_WINDOW,
+                false => crate::method::stretch::longest_window(self.found.photos.len()),
+            };
             format!(
-                "window: auto, chosen per stretch of the mission by a survey of its photos before the correction \
-                 ({} and the median on sparse ground under a moving camera, up to {} photos and a higher quantile \
-                 on dense fields or under a slow camera)",
-                self.window.n,
-                crate::method::stretch::MAX_AUTO_WINDOW
+                "window: auto, chosen per stretch of the mission by a survey of its photos ({}: {} and the median \
+                 on sparse ground under a moving camera, up to {longest} photos and a higher quantile on dense \
+                 fields or under a slow camera; the near window with it)",
+                match self.streaming {
+                    true => format!(
+                        "as they come, each photo once the {} after it are in",
+                        crate::method::survey::Survey::LOOK_AHEAD
+                    ),
+                    false => "before the correction".into(),
+                },
+                crate::method::params::BASE_WINDOW.min(longest),
             )
         } else if self.window.p_half.is_nan() {
             format!("window: n = {}", self.window.n)
@@ -298,8 +315,10 @@ impl Plan {
             )
         };
         line(match params.near_window() {
-            Some(k) => format!("{window}, near window {k} (--near-window)"),
-            None => window,
+            Some(k) if !params.window_is_auto() => {
+                format!("{window}, near window {k} (--near-window)")
+            }
+            _ => window,
         });
         line(format!(
             "S: {}",

@@ -14,9 +14,10 @@ use crate::method::outliers::{laser_spots, SpotPath, SPOT_GROW};
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
 use crate::method::stretch::{
-    choose, Choice, PhotoSurvey, Rule, MAX_AUTO_WINDOW, MEANS_CHECKED_EVERY, REFERENCE_HALF,
+    Choice, PhotoSurvey, Rule, Surveyor, MAX_AUTO_WINDOW, MEANS_CHECKED_EVERY, REFERENCE_HALF,
     STRETCH_HALF,
 };
+use crate::method::survey::Survey;
 use crate::method::transfer::Transfer;
 use crate::run::options::Options;
 use crate::run::plan::Plan;
@@ -76,23 +77,16 @@ pub fn prepare<T: Sync>(
     }
     let mut engine = Engine::new(*params, scatter.as_ref(), mask)?;
     drop(scatter);
-    if params.window_is_auto() {
-        match plan.streaming {
-            true => warnings.warn(
-                "--window auto: photos as they come cannot be surveyed before the correction; the window 7 and \
-                 its median (give --window or --contamination to choose)"
-                    .into(),
-            ),
-            false => {
-                // Without a mask, the survey also looks for laser dots' paths (a warning that names the fix).
-                let lasers = opts.mask.is_none() && !opts.mask_auto;
-                let (choices, path) = survey(&engine, plan, progress, lasers);
-                progress.stage(&stretches_line(&choices));
-                engine.set_stretches(choices)?;
-                if let Some(w) = lasers_warning(&path) {
-                    warnings.warn(w);
-                }
-            }
+    // Photos as they come (`--watch`, standard input) are surveyed by the engine as it takes them; a folder is
+    // surveyed first, from its JPEGs' block means where they stand for the block medians.
+    if params.window_is_auto() && !plan.streaming {
+        // Without a mask, the survey also looks for laser dots' paths (a warning that names the fix).
+        let lasers = opts.mask.is_none() && !opts.mask_auto;
+        let (survey, path) = survey(&engine, plan, progress, lasers);
+        progress.stage(&stretches_line(survey.choices()));
+        engine.set_survey(survey)?;
+        if let Some(w) = lasers_warning(&path) {
+            warnings.warn(w);
         }
     }
     if opts.method == Method::Mean {
@@ -134,7 +128,7 @@ fn survey<T: Sync>(
     plan: &Plan,
     progress: &dyn Progress,
     lasers: bool,
-) -> (Vec<Choice>, SpotPath) {
+) -> (Survey, SpotPath) {
     let end = (plan.chunk.end + SURVEY_AFTER)
         .saturating_sub(plan.first)
         .min(plan.items.len());
@@ -161,7 +155,7 @@ fn survey<T: Sync>(
             survey_pass(engine, plan, items, false, spots_every).unwrap_or_default()
         }
     };
-    (choose(&photos), path)
+    (Survey::of_mission(&photos), path)
 }
 
 /// The warning for laser dots' paths the survey found ([`SpotPath`]), if it found one at least as large as a spot
@@ -194,7 +188,7 @@ fn survey_pass<T: Sync>(
     // The survey's measures run in mission order on a thread of their own while the workers read and block-median
     // the next batch: the reads are most of the pass, and the measures would otherwise leave a core idle.
     let batch = (4 * rayon::current_num_threads()).max(4);
-    let mut surveyor = engine.surveyor();
+    let mut surveyor = Surveyor::new(engine.scatter_low());
     let mut disagreed = None;
     let surveyed = std::thread::scope(|scope| {
         let (send, receive) = std::sync::mpsc::sync_channel::<Vec<SurveyRead>>(1);

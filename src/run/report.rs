@@ -159,6 +159,75 @@ impl From<crate::method::stretch::Choice> for WindowAuto {
     }
 }
 
+/// How a run's windows were chosen, and the lengths its photos used.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowSummary {
+    /// `auto` (per stretch of the mission, by the survey), `fixed` (`--window`) or `contamination` (the paper's rule
+    /// for `--contamination`).
+    pub rule: String,
+    /// The window given, or the paper's rule's for the contamination given (`None` under `auto`).
+    pub n: Option<usize>,
+    /// The breakdown probability `P_half` of `n` at the contamination given (NaN, in JSON `null`, without one).
+    pub p_half: f64,
+    /// The shortest window a photo of the run used (0: no photo).
+    pub shortest: usize,
+    /// The longest window a photo of the run used (0: no photo).
+    pub longest: usize,
+}
+
+impl WindowSummary {
+    /// The summary of a run whose windows were chosen by `params` (resolved), its photos having used windows of
+    /// `used` photos each.
+    pub fn of(
+        params: &crate::method::params::Params,
+        opts: &Options,
+        used: impl Iterator<Item = usize>,
+    ) -> Self {
+        use crate::method::params::Window;
+        let (mut shortest, mut longest) = (usize::MAX, 0);
+        for n in used {
+            shortest = shortest.min(n);
+            longest = longest.max(n);
+        }
+        let fixed = opts.window_choice().ok();
+        let (rule, n) = match params.window {
+            _ if params.window_is_auto() => ("auto", None),
+            Window::Contamination { .. } => ("contamination", fixed.map(|w| w.n)),
+            _ => ("fixed", fixed.map(|w| w.n)),
+        };
+        WindowSummary {
+            rule: rule.into(),
+            n,
+            p_half: fixed.map_or(f64::NAN, |w| w.p_half),
+            shortest: if longest == 0 { 0 } else { shortest },
+            longest,
+        }
+    }
+
+    /// In words, for the console: `windows 7..31 photos, chosen per stretch` or `window n = 9`.
+    pub fn describe(&self) -> String {
+        match (self.rule.as_str(), self.n) {
+            ("auto", _) if self.longest == 0 => {
+                "windows chosen per stretch (no photo corrected)".into()
+            }
+            ("auto", _) if self.shortest == self.longest => {
+                format!("window {} photos, chosen per stretch", self.longest)
+            }
+            ("auto", _) => format!(
+                "windows {}..{} photos, chosen per stretch",
+                self.shortest, self.longest
+            ),
+            (_, Some(n)) if self.longest > 0 && self.longest < n => {
+                format!(
+                    "window n = {n}, {} photos (the whole mission)",
+                    self.longest
+                )
+            }
+            (_, n) => format!("window n = {}", n.unwrap_or_default()),
+        }
+    }
+}
+
 /// Where `S` came from.
 #[derive(Debug, Clone, Serialize)]
 pub struct ScatterInfo {
@@ -185,8 +254,8 @@ pub struct Report {
     pub options: Options,
     /// With `--transfer auto`: the curve taken and why (what the first survey photo's file declares).
     pub transfer_assumed: Option<String>,
-    /// The window `n` used.
-    pub window: WindowChoice,
+    /// How the windows were chosen and the lengths the photos used (each photo's own is in its frame).
+    pub window: WindowSummary,
     /// Size of the mission's photos.
     pub layout: Option<Layout>,
     /// Where `S` came from.
@@ -292,9 +361,12 @@ mod report_fallback_tests {
             version: String::new(),
             options: opts.clone(),
             transfer_assumed: None,
-            window: crate::method::window::WindowChoice {
-                n: 7,
+            window: WindowSummary {
+                rule: "auto".into(),
+                n: None,
                 p_half: f64::NAN,
+                shortest: 7,
+                longest: 7,
             },
             layout: None,
             scatter: ScatterInfo {

@@ -243,7 +243,8 @@ impl Feed<'_> {
             let out = engine.finish();
             self.emit(out)?;
             let seen = engine.accepted();
-            if seen > 0 && seen < n {
+            // Under auto the windows fit the mission (the photos short of samples are flagged).
+            if seen > 0 && seen < n && !engine.params().window_is_auto() {
                 let m = format!(
                     "only {seen} usable survey photo(s), fewer than the window n = {n}: every photo's F is the \
                      median of all of them"

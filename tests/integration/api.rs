@@ -36,7 +36,7 @@ fn photo(width: usize, height: usize, channels: usize, samples: usize) -> Photo 
 fn engine() -> Engine<usize> {
     Engine::new(
         Params {
-            window: 3,
+            window: abysslight::Window::Fixed(3),
             ..Params::default()
         },
         None,
@@ -108,7 +108,7 @@ fn malformed_water_frames_are_errors_and_none_is_no_scatter() {
 fn impossible_params_are_refused_up_front() {
     for window in [0, 2] {
         let p = Params {
-            window,
+            window: abysslight::Window::Fixed(window),
             ..Params::default()
         };
         assert!(

@@ -26,7 +26,9 @@ fn corrected_photos_match_albedo_up_to_a_per_channel_scale() {
         ..Options::default()
     };
     let report = run(&opts);
-    assert_eq!(report.window.n, 13);
+    assert_eq!(report.window.n, Some(13));
+    assert_eq!(report.window.rule, "contamination");
+    assert_eq!((report.window.shortest, report.window.longest), (13, 13));
     assert_eq!(report.corrected, frames);
     assert_eq!(report.failed, 0);
     assert_eq!(report.scatter.frames, 9);

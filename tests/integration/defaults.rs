@@ -263,7 +263,11 @@ fn options_default_is_params_default_and_every_method_setting_reaches_params() {
     }
     .params()
     .unwrap();
-    assert_eq!(c.window, 13, "--contamination 0.2 chooses the 1 % window");
+    assert_eq!(
+        c.window_length(),
+        13,
+        "--contamination 0.2 chooses the 1 % window"
+    );
     assert_eq!(c.window_quantile(), 0.6);
     assert_eq!(c.near_window(), Some(7));
     let s = Options {
@@ -358,7 +362,10 @@ fn auto_settings_resolve_in_one_place() {
         paper.resolved(&facts(None, false)).steps.near_window,
         Some(0)
     );
-    let short = Params { window: 5, ..p };
+    let short = Params {
+        window: abysslight::Window::Fixed(5),
+        ..p
+    };
     assert_eq!(short.near_window(), None);
     // The engine resolves the mask rule too: a masked mission in memory keeps the paper's 8.
     let mask = abysslight::Mask {

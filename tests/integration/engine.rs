@@ -28,7 +28,7 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
     let n = 5;
     let mut engine = Engine::new(
         Params {
-            window: n,
+            window: abysslight::Window::Fixed(n),
             ..Params::default()
         },
         scatter.as_ref(),
@@ -77,7 +77,7 @@ fn other_uses_and_a_photo_of_another_size() {
     let dive = small_dive(6, 9);
     let mut engine = Engine::new(
         Params {
-            window: 3,
+            window: abysslight::Window::Fixed(3),
             ..Params::default()
         },
         None,
@@ -156,7 +156,7 @@ fn engine_and_folder_run_give_the_same_photos() {
     let scatter = Scatter::from_frames(&water).unwrap();
     let mut engine = Engine::new(
         Params {
-            window: 5,
+            window: abysslight::Window::Fixed(5),
             // The folder run's `--downsample auto` for photos of this size (the engine takes a block size).
             downsample: abysslight::kernels::auto_block(96, 64),
             ..Params::default()
@@ -248,7 +248,7 @@ fn a_wandering_laser_dot_leaves_no_stain_where_it_is_not() {
         let mut engine = Engine::new(
             Params {
                 method: Method::Abyss,
-                window: 9,
+                window: abysslight::Window::Fixed(9),
                 downsample: 4,
                 steps: abysslight::Steps {
                     bright_spots,

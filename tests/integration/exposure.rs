@@ -113,7 +113,7 @@ fn a_window_with_exposure_jumps_is_levelled_and_a_steady_one_is_left_alone() {
 /// Whether levelling changes any corrected photo of the mission under windows of `window` photos.
 fn levels(photos: &[Photo], window: usize) -> bool {
     let params = Params {
-        window,
+        window: abysslight::Window::Fixed(window),
         ..Params::default()
     };
     corrected(photos, levelling(params, true)) != corrected(photos, levelling(params, false))
@@ -136,7 +136,7 @@ fn a_near_window_is_levelled_only_with_its_window() {
     let exposures: Vec<f32> = (0..18).map(|f| if f < 9 { 1.0 } else { 1.25 }).collect();
     let (photos, _) = jumpy_mission(18, &exposures);
     let params = Params {
-        window: 9,
+        window: abysslight::Window::Fixed(9),
         steps: Steps {
             near_window: Some(5),
             ..Steps::default()

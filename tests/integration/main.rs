@@ -25,6 +25,7 @@ mod live;
 mod merge_shards;
 mod metadata;
 mod nodules;
+mod one_method;
 mod real_photos;
 mod run_locks;
 mod simulate_evaluate;

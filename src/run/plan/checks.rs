@@ -102,7 +102,18 @@ pub(crate) fn mixed_formats(photos: &[Entry]) -> Option<String> {
 
 /// Fewer survey photos than the window `n`: every window is then the whole survey and the median's breakdown
 /// probability is that of the shorter window.
-pub(crate) fn too_few(total: usize, n: usize) -> Option<String> {
+pub(crate) fn too_few(total: usize, n: usize, auto: bool) -> Option<String> {
+    if auto {
+        let longest = crate::method::stretch::longest_window(total);
+        return (longest < n).then(|| {
+            format!(
+                "the survey has {total} photo(s): every window is at most {longest} photo(s), fewer than the {n} a \
+                 stretch of clean seafloor takes; clutter at one place in {} of them stays in F (the run flags \
+                 photos whose window holds too few independent samples); give more photos",
+                longest.div_ceil(2)
+            )
+        });
+    }
     (total < n).then(|| {
         format!(
             "the survey has {total} photo(s), fewer than the window n = {n}: every photo's F would be the median of \
@@ -595,7 +606,14 @@ mod tests {
         assert!(mixed_formats(&entries(&["a.jpg", "b.JPEG"])).is_none());
         let m = mixed_formats(&entries(&["a.jpg", "b.png", "c.jpg"])).unwrap();
         assert!(m.contains("2 JPEG") && m.contains("1 PNG"), "{m}");
-        assert!(too_few(7, 7).is_none());
-        assert!(too_few(4, 7).unwrap().contains("n = 7"));
+        assert!(too_few(7, 7, false).is_none());
+        assert!(too_few(4, 7, false).unwrap().contains("n = 7"));
+        // Under auto: a window as long as the mission allows (the largest odd number of its photos), never "n = 7".
+        assert!(too_few(7, 7, true).is_none());
+        let four = too_few(4, 7, true).unwrap();
+        assert!(
+            four.contains("at most 3 photo(s)") && !four.contains("n = 7"),
+            "{four}"
+        );
     }
 }
