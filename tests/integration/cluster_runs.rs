@@ -5,7 +5,109 @@
 
 use crate::common;
 
+use std::path::Path;
+
 use common::*;
+
+/// A cruise in `root/cruise`: dive1 with survey and water column, dive2 with a survey only (9 photos each).
+fn cruise(root: &Path) {
+    for (i, name) in ["dive1", "dive2"].iter().enumerate() {
+        let dv = dive(40, 24, 9, 5, 0.2, false, 70 + i as u64);
+        let dir = root.join("cruise").join(name);
+        write_all(&dv.photos, &dir.join("survey"), "img", "png");
+        if i == 0 {
+            write_all(&dv.water, &dir.join("water-column"), "wc", "png");
+        }
+    }
+}
+
+#[test]
+fn a_cruise_never_writes_into_a_dives_inputs() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    cruise(root);
+    let before = snapshot(&[&root.join("cruise")]);
+    for (out, input) in [
+        ("cruise/dive2/survey/corrected", "survey of dive dive2"),
+        // dive2 has no water-column folder yet: outputs there would be its water column on the next run.
+        ("cruise/dive2/water-column", "water column of dive dive2"),
+        (
+            "cruise/dive1/water-column/out",
+            "water column of dive dive1",
+        ),
+        ("cruise", "contains the survey of dive dive1"),
+    ] {
+        let o = abysslight_in(
+            &["correct", "--cruise", "cruise", "--out", out, "--quiet"],
+            root,
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "--out {out}: {e}");
+        assert!(e.contains(input) && e.contains(out), "--out {out}: {e}");
+        assert_eq!(
+            snapshot(&[&root.join("cruise")]),
+            before,
+            "--out {out} wrote into the cruise"
+        );
+        assert!(!root.join("cruise/dive2/water-column").exists(), "{out}");
+        // The library's cruise refuses it as well, before any dive runs.
+        let base = abysslight::Options {
+            out: Some(root.join(out)),
+            window: Some(5),
+            ..abysslight::Options::default()
+        };
+        let r =
+            abysslight::cruise::correct_cruise(&base, &root.join("cruise"), &abysslight::Silent);
+        assert!(r.is_err(), "library, --out {out}");
+        assert_eq!(snapshot(&[&root.join("cruise")]), before, "library, {out}");
+    }
+    // Beside the cruise: both dives run.
+    let o = abysslight_in(
+        &["correct", "--cruise", "cruise", "--out", "out", "--quiet"],
+        root,
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(outputs(&root.join("out/dive1")).len(), 9);
+    assert_eq!(outputs(&root.join("out/dive2")).len(), 9);
+}
+
+#[test]
+fn a_sharded_cruise_names_the_dive_no_task_reported() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    cruise(root);
+    // dive3's survey is still being copied: empty.
+    std::fs::create_dir_all(root.join("cruise/dive3/survey")).unwrap();
+    for k in ["1/2", "2/2"] {
+        let o = abysslight_in(
+            &[
+                "correct", "--cruise", "cruise", "--out", "out", "--shard", k, "--quiet",
+            ],
+            root,
+        );
+        assert_eq!(o.status.code(), Some(2), "task {k}: {}", stderr(&o));
+    }
+    let o = abysslight_in(&["merge-shards", "out"], root);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("dive dive3") && e.contains("no"), "{e}");
+    // The dives that ran are merged all the same.
+    assert!(
+        root.join("out/dive1/_abysslight/report.json").is_file(),
+        "{e}"
+    );
+    assert!(
+        root.join("out/dive2/_abysslight/report.json").is_file(),
+        "{e}"
+    );
+    // The library's merge names it too.
+    let merged = abysslight::cruise::merge_cruise(&root.join("out")).unwrap();
+    let names: Vec<(&str, bool)> = merged
+        .iter()
+        .map(|(n, r)| (n.as_str(), r.is_ok()))
+        .collect();
+    assert_eq!(names, [("dive1", true), ("dive2", true), ("dive3", false)]);
+}
 
 #[test]
 fn a_mask_hiding_every_pixel_is_refused_without_a_water_column() {
@@ -84,5 +186,57 @@ fn photos_of_any_legal_size_are_corrected_or_fail_one_by_one() {
             );
         }
         assert_eq!(outputs(&out).len(), frames, "{w}x{h}");
+    }
+}
+
+#[test]
+fn a_cruise_keeps_every_dives_report_and_its_own_water_column() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    cruise(root);
+    // A config naming a water column (dive1's): dive2, which has none, must not take it.
+    std::fs::write(
+        root.join("cruise.toml"),
+        "water-column = \"cruise/dive1/water-column\"\nwindow = 5\n",
+    )
+    .unwrap();
+    let o = abysslight_in(
+        &[
+            "correct",
+            "--cruise",
+            "cruise",
+            "--out",
+            "out",
+            "--config",
+            "cruise.toml",
+            "--report",
+            "cruise.json",
+            "--quiet",
+        ],
+        root,
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // --report FILE: one per dive (the report goes there instead of OUT/<dive>/_abysslight/).
+    let dive = |name: &str| json(&root.join(format!("cruise-{name}.json")));
+    let (dive1, dive2) = (dive("dive1"), dive("dive2"));
+    assert_eq!(
+        dive1["scatter"]["frames"].as_u64(),
+        Some(5),
+        "{}",
+        dive1["scatter"]
+    );
+    assert_eq!(
+        dive2["scatter"]["frames"].as_u64().unwrap_or(0),
+        0,
+        "dive2 took another dive's water column: {}",
+        dive2["scatter"]
+    );
+    for name in ["dive1", "dive2"] {
+        let r = json(&root.join(format!("cruise-{name}.json")));
+        assert_eq!(r["corrected"].as_u64(), Some(9), "{name}");
+        assert!(
+            r["options"]["survey"].as_str().unwrap().contains(name),
+            "{name}"
+        );
     }
 }
