@@ -189,6 +189,103 @@ fn photos_of_any_legal_size_are_corrected_or_fail_one_by_one() {
     }
 }
 
+/// Copy `from` (a file or a folder, recursively) to `to`.
+fn copy_tree(from: &Path, to: &Path) {
+    if from.is_dir() {
+        std::fs::create_dir_all(to).unwrap();
+        for e in std::fs::read_dir(from).unwrap().flatten() {
+            copy_tree(&e.path(), &to.join(e.file_name()));
+        }
+    } else {
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(from, to).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+    }
+}
+
+/// The build stage's context as deploy/container/Containerfile's `COPY` lines assemble it below its `WORKDIR`
+/// (no container engine runs here): each `COPY SRC... DEST` of the first stage, `--from` copies left out.
+fn container_build_context(repo: &Path, into: &Path) -> usize {
+    let text = std::fs::read_to_string(repo.join("deploy/container/Containerfile")).unwrap();
+    // Continuation lines joined, comments left out.
+    let joined = text
+        .lines()
+        .filter(|l| !l.trim_start().starts_with('#'))
+        .collect::<Vec<_>>()
+        .join("\n")
+        .replace("\\\n", " ");
+    let (mut stages, mut workdir, mut copies) = (0, into.to_path_buf(), 0);
+    for line in joined.lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.first().map(|w| w.to_ascii_uppercase()).as_deref() {
+            Some("FROM") => stages += 1,
+            Some("WORKDIR") if stages == 1 => {
+                workdir = into.join(words[1].trim_start_matches('/'));
+                std::fs::create_dir_all(&workdir).unwrap();
+            }
+            Some("COPY") if stages == 1 => {
+                let args: Vec<&str> = words[1..]
+                    .iter()
+                    .copied()
+                    .filter(|w| !w.starts_with("--"))
+                    .collect();
+                assert!(
+                    !words[1..].iter().any(|w| w.starts_with("--from")),
+                    "{line}"
+                );
+                let (dest, sources) = args.split_last().unwrap();
+                let dest = workdir.join(dest);
+                for src in sources {
+                    let target = if sources.len() > 1 || dest.to_string_lossy().ends_with('/') {
+                        dest.join(Path::new(src).file_name().unwrap())
+                    } else {
+                        dest.clone()
+                    };
+                    copy_tree(&repo.join(src), &target);
+                    copies += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+    assert!(stages >= 2, "a build stage and a runtime stage: {text}");
+    copies
+}
+
+#[test]
+fn the_container_build_context_holds_the_whole_workspace() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let d = tempfile::tempdir().unwrap();
+    let copies = container_build_context(repo, d.path());
+    assert!(copies >= 4, "{copies} sources copied");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let o = std::process::Command::new(cargo)
+        .args(["metadata", "--offline", "--locked", "--format-version", "1"])
+        .current_dir(d.path().join("src"))
+        .env("CARGO_TARGET_DIR", d.path().join("target"))
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "cargo metadata in the container's build context: {}",
+        stderr(&o)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let names: Vec<&str> = meta["packages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["source"].is_null())
+        .filter_map(|p| p["name"].as_str())
+        .collect();
+    assert!(
+        names.contains(&"abysslight") && names.contains(&"abysslight-python"),
+        "{names:?}"
+    );
+    // The run examples write as the calling user.
+    let text = std::fs::read_to_string(repo.join("deploy/container/Containerfile")).unwrap();
+    assert!(text.contains("--user \"$(id -u):$(id -g)\""), "{text}");
+}
+
 #[test]
 fn a_cruise_keeps_every_dives_report_and_its_own_water_column() {
     let d = tempfile::tempdir().unwrap();
