@@ -115,7 +115,8 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
         ));
     }
     // Every output path against every dive's inputs before the first write; held until every dive has run.
-    let run = open_cruise(cruise, &out, args.shard)?;
+    // A dry run writes nothing, not even the record of the dives a sharded cruise's task was given.
+    let run = open_cruise(cruise, &out, args.shard.filter(|_| !args.dry_run))?;
     let dives = &run.dives;
     args.cruise = None;
     let report = args.report.clone();

@@ -78,6 +78,21 @@ fn a_sharded_cruise_names_the_dive_no_task_reported() {
     cruise(root);
     // dive3's survey is still being copied: empty.
     std::fs::create_dir_all(root.join("cruise/dive3/survey")).unwrap();
+    // A dry run writes nothing, not even the record of the dives.
+    let o = abysslight_in(
+        &[
+            "correct",
+            "--cruise",
+            "cruise",
+            "--out",
+            "out",
+            "--shard",
+            "1/2",
+            "--dry-run",
+        ],
+        root,
+    );
+    assert!(!root.join("out").exists(), "{}", stderr(&o));
     for k in ["1/2", "2/2"] {
         let o = abysslight_in(
             &[
