@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use abysslight::run::cruise::{find_dives, merge_cruise};
+use abysslight::run::cruise::{merge_cruise, open_cruise, recorded_dives};
 use abysslight::run::merge::{merge_shards, Merged};
 use abysslight::Error;
 use clap::Args;
@@ -15,8 +15,10 @@ use super::{CorrectArgs, EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE};
 pub const MERGE_LONG_HELP: &str = "\
 Reads OUT/_abysslight/report-shard-K-of-N.json of every shard and writes OUT/_abysslight/report.json,
 overview.png and flagged.png as one run over the whole survey would have. Refuses (naming the shard) when a
-shard is missing or unfinished, or ran with other options. Where OUT holds one folder per dive (correct
---cruise), each dive is merged.
+shard is missing or unfinished, ran with other options, or left photos of its chunk out of its report (a run
+with --limit, an edited report): every photo of the survey is corrected or failed in a merged report. Where OUT
+holds one folder per dive (correct --cruise), each dive is merged, and a dive the tasks were given that has no
+shard reports is named.
 
 Examples:
   sbatch --array=1-16 deploy/slurm/correct-array.sbatch --water-column W --survey S --out OUT
@@ -28,7 +30,8 @@ Examples:
 Exit status:
   0  merged; every photo was corrected
   1  merged, but some files failed in the shards (listed in report.json)
-  2  not merged: a shard is missing, unfinished or ran differently (named on stderr)";
+  2  not merged: a shard is missing, unfinished, ran differently or left photos out, or a dive of the cruise
+     has no reports (named on stderr)";
 
 #[derive(Args, Debug)]
 pub struct MergeShardsArgs {
@@ -55,7 +58,7 @@ fn summary(m: &Merged) -> String {
 
 /// `abysslight merge-shards OUT`.
 pub fn merge(a: MergeShardsArgs) -> Result<ExitCode, Error> {
-    if a.out.join(abysslight::io::WORK_DIR).is_dir() {
+    if a.out.join(abysslight::io::WORK_DIR).is_dir() && recorded_dives(&a.out).is_none() {
         let m = merge_shards(&a.out)?;
         if !a.quiet {
             eprintln!("abysslight: {}", summary(&m));
@@ -86,6 +89,19 @@ pub fn merge(a: MergeShardsArgs) -> Result<ExitCode, Error> {
     Ok(ExitCode::from(code))
 }
 
+/// The `--report FILE` of dive `dive` in a cruise: `FILE-<dive>.<ext>` beside FILE (`-`, stdout, stays `-`).
+fn dive_report(file: &Path, dive: &str) -> PathBuf {
+    if file == Path::new("-") {
+        return file.to_owned();
+    }
+    let stem = file.file_stem().unwrap_or_default().to_string_lossy();
+    let name = match file.extension() {
+        Some(ext) => format!("{stem}-{dive}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{dive}"),
+    };
+    file.with_file_name(name)
+}
+
 /// `abysslight correct --cruise DIR --out OUT`: each dive as its own `correct` run (the same flags, the dive's
 /// survey, water column and `OUT/<dive>`), one after the other; a dive that fails does not stop the others. The
 /// exit status is the worst of the dives'.
@@ -98,8 +114,12 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
             "--cruise writes one folder per dive: --out - cannot be used".into(),
         ));
     }
-    let dives = find_dives(cruise)?;
+    // Every output path against every dive's inputs before the first write; held until every dive has run.
+    // A dry run writes nothing, not even the record of the dives a sharded cruise's task was given.
+    let run = open_cruise(cruise, &out, args.shard.filter(|_| !args.dry_run))?;
+    let dives = &run.dives;
     args.cruise = None;
+    let report = args.report.clone();
     let mut worst = EXIT_OK;
     let mut failed = Vec::new();
     for (i, d) in dives.iter().enumerate() {
@@ -107,10 +127,11 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
             eprintln!("abysslight: dive {} ({} of {})", d.name, i + 1, dives.len());
         }
         args.survey = Some(d.survey.clone());
-        if args.scatter.is_none() {
-            args.water_column = d.water_column.clone();
-        }
+        args.water_column = d.water_column.clone();
+        args.dive_of_cruise = true;
         args.out = Some(out.join(&d.name));
+        // One report file per dive (FILE-<dive>.json beside FILE): one file for all would keep the last dive's.
+        args.report = report.as_deref().map(|r| dive_report(r, &d.name));
         let code = match super::correct(&args) {
             Ok(code) => code,
             Err(e) => {

@@ -387,8 +387,13 @@ struct CorrectArgs {
     /// Every folder CRUISE/<dive>/ holding a survey/ folder is a dive, its water-column frames in
     /// CRUISE/<dive>/water-column/ (or S from --scatter for every dive). The dives run one after the other with
     /// the same flags (with --shard K/N: chunk K of each dive); a dive that fails does not stop the others.
+    /// With --report FILE each dive's report goes to FILE-<dive>.json. --out must lie outside every dive.
     #[arg(long, value_name = "CRUISE", conflicts_with_all = ["survey", "water_column"], help_heading = H_IN)]
     cruise: Option<PathBuf>,
+
+    /// Set by --cruise for each dive's run: the dive's survey and water column replace those of --config.
+    #[arg(skip)]
+    dive_of_cruise: bool,
 
     /// Reuse a scatter image saved by an earlier run with --save-scatter.
     ///
@@ -714,8 +719,19 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         Some(p) => Options::from_toml_file(p)?,
         None => Options::default(),
     };
+    let config_scatter = o.scatter.clone();
     set_run_flags(args, &mut o);
     set_method_flags(args, &mut o);
+    if args.dive_of_cruise {
+        // A dive of a cruise reads its own water column (none when it has none), unless a scatter image, given as
+        // a flag or in --config, serves every dive: a --config water column is another dive's.
+        o.scatter = args.scatter.clone().or(config_scatter);
+        o.water_column = if o.scatter.is_some() {
+            None
+        } else {
+            args.water_column.clone()
+        };
+    }
     if o.survey.is_none() {
         return Err(Error::Usage(
             "--survey DIR is required (or survey = \"DIR\" in --config)".into(),

@@ -7,7 +7,9 @@ use crate::method::mask::Mask;
 use crate::method::raster::{Layout, Photo, Raster, Samples};
 
 impl Mask {
-    /// Load a mask image: white (brighter than mid-grey) = ignore.
+    /// Load a mask image: white (brighter than mid-grey) = ignore. A mask that ignores every pixel is refused
+    /// here, whatever it is used for: nothing would be left to estimate the lighting from (a run without a water
+    /// column would otherwise write its photos unchanged and call them sound).
     pub fn load(path: &Path) -> Result<Mask> {
         let photo = crate::io::decode(path)?;
         let r = Raster::from_photo(&photo);
@@ -16,11 +18,20 @@ impl Mask {
             .chunks_exact(r.channels)
             .map(|px| px.iter().sum::<f32>() / px.len() as f32 > 0.5)
             .collect();
-        Ok(Mask {
+        let mask = Mask {
             width: r.width,
             height: r.height,
             ignore,
-        })
+        };
+        if mask.count() == mask.ignore.len() {
+            return Err(crate::error::Error::Mismatch {
+                path: path.to_owned(),
+                reason: "mask ignores every pixel: nothing is left to estimate the lighting from (white marks \
+                         what is not seafloor: is the mask inverted?)"
+                    .into(),
+            });
+        }
+        Ok(mask)
     }
 
     /// Save as an 8-bit grey PNG (white = ignored).

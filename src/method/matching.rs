@@ -129,6 +129,10 @@ pub fn texture(photo: &Raster, scale: usize) -> Texture {
 
 /// Mean over the clamped `(2r + 1)²` square (separable running sums).
 pub(crate) fn box_blur(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    // No rows or no columns (a photo thinner than a block, reduced): nothing to blur, nothing to index.
+    if w == 0 || h == 0 {
+        return v.to_vec();
+    }
     let pass = |src: &[f32], len: usize, stride: usize, count: usize, step: usize| -> Vec<f32> {
         let mut out = vec![0.0f32; src.len()];
         let last = len.saturating_sub(1);

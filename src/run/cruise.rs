@@ -17,8 +17,9 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
+use crate::io::gate::{Gate, Output};
 use crate::run::merge::{merge_shards, Merged};
-use crate::run::options::Options;
+use crate::run::options::{Options, Shard};
 use crate::run::report::{Progress, Report};
 
 /// Folder of a dive's survey photos, below the dive's folder.
@@ -86,6 +87,106 @@ pub fn find_dives(cruise: &Path) -> Result<Vec<Dive>> {
         .collect())
 }
 
+/// The folders every dive of a cruise reads: its survey and its water-column folder, the latter whether or not it
+/// exists (photos written there would be read as the dive's water column by the next run), each named for a
+/// message.
+fn dive_inputs(dives: &[Dive]) -> Vec<(String, PathBuf)> {
+    let mut inputs = Vec::new();
+    for d in dives {
+        inputs.push((format!("survey of dive {}", d.name), d.survey.clone()));
+        let wc = d.water_column.clone().unwrap_or_else(|| {
+            d.survey
+                .parent()
+                .map_or_else(|| PathBuf::from(WATER_COLUMN), |p| p.join(WATER_COLUMN))
+        });
+        inputs.push((format!("water column of dive {}", d.name), wc));
+    }
+    inputs
+}
+
+/// A cruise about to be corrected: its dives, and the write gate that protects every dive's inputs from every
+/// dive's writes for as long as it is held.
+#[derive(Debug)]
+pub struct CruiseRun {
+    /// The dives, in natural name order.
+    pub dives: Vec<Dive>,
+    _gate: Gate,
+}
+
+/// Name of the file a sharded cruise's task `K/N` leaves in `OUT/_abysslight/`: the dives it was given, so that
+/// `merge-shards OUT` names the dives no task wrote a report for.
+fn dives_file(shard: Shard) -> String {
+    format!("cruise-shard-{}-of-{}.json", shard.index, shard.count)
+}
+
+/// Before the first write of a cruise: find its dives, check every output path (`out` and each `out/<dive>`)
+/// against every dive's inputs ([`dive_inputs`]) and hold them in a write gate; with `--shard K/N`, record the
+/// dives this task was given in `out/_abysslight/cruise-shard-K-of-N.json` (for [`merge_cruise`]).
+pub fn open_cruise(cruise: &Path, out: &Path, shard: Option<Shard>) -> Result<CruiseRun> {
+    let dives = find_dives(cruise)?;
+    let outs: Vec<PathBuf> = dives.iter().map(|d| out.join(&d.name)).collect();
+    let mut outputs = vec![Output::Folder("--out", out)];
+    outputs.extend(
+        outs.iter()
+            .map(|p| Output::Folder("--out (a dive's output)", p)),
+    );
+    let named = dive_inputs(&dives);
+    let inputs: Vec<(&str, &Path)> = named
+        .iter()
+        .map(|(w, p)| (w.as_str(), p.as_path()))
+        .collect();
+    let gate = Gate::open(&outputs, &inputs)?;
+    if let Some(s) = shard {
+        let path = out.join(crate::io::WORK_DIR).join(dives_file(s));
+        let names: Vec<&str> = dives.iter().map(|d| d.name.as_str()).collect();
+        let record = serde_json::json!({
+            "cruise": cruise,
+            "shard": s,
+            "dives": names,
+        });
+        crate::io::write_with(&path, |w| {
+            serde_json::to_writer_pretty(w, &record).map_err(|e| Error::Encode {
+                path: path.clone(),
+                reason: e.to_string(),
+            })
+        })?;
+    }
+    Ok(CruiseRun { dives, _gate: gate })
+}
+
+/// The dives the tasks of a sharded cruise into `out` were given (from the files [`open_cruise`] leaves), in
+/// natural name order; `None` when `out` is not the output of a sharded cruise.
+pub fn recorded_dives(out: &Path) -> Option<Vec<String>> {
+    let work = out.join(crate::io::WORK_DIR);
+    let mut names: Vec<String> = Vec::new();
+    let mut found = false;
+    for e in std::fs::read_dir(work).ok()?.flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        if !(file.starts_with("cruise-shard-") && file.ends_with(".json")) {
+            continue;
+        }
+        found = true;
+        let listed = std::fs::read_to_string(e.path())
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| {
+                v["dives"].as_array().map(|a| {
+                    a.iter()
+                        .filter_map(|n| n.as_str().map(str::to_owned))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .unwrap_or_default();
+        for n in listed {
+            if !names.contains(&n) {
+                names.push(n);
+            }
+        }
+    }
+    alphanumeric_sort::sort_str_slice(&mut names);
+    found.then_some(names)
+}
+
 /// Correct every dive of `cruise` with the options `base` (its `out` the root of the dives' outputs), one after
 /// the other. A dive that cannot run does not stop the others: each dive's result is returned.
 pub fn correct_cruise(
@@ -96,9 +197,11 @@ pub fn correct_cruise(
     let out = base.out.clone().ok_or_else(|| {
         Error::Usage("--cruise needs --out DIR (one folder per dive is made in it)".into())
     })?;
-    let dives = find_dives(cruise)?;
-    Ok(dives
-        .into_iter()
+    let run = open_cruise(cruise, &out, base.shard)?;
+    Ok(run
+        .dives
+        .iter()
+        .cloned()
         .map(|d| {
             let opts = d.options(base, &out);
             progress.stage(&format!(
@@ -115,8 +218,9 @@ pub fn correct_cruise(
         .collect())
 }
 
-/// `merge-shards` over the output of a sharded cruise: every `out/<dive>/` that has an `_abysslight/` folder, in
-/// natural name order, each merged on its own.
+/// `merge-shards` over the output of a sharded cruise: every `out/<dive>/` that has an `_abysslight/` folder and
+/// every dive the tasks were given ([`recorded_dives`]), in natural name order, each merged on its own; a dive
+/// the tasks were given that has no reports is an error naming it.
 pub fn merge_cruise(out: &Path) -> Result<Vec<(String, Result<Merged>)>> {
     let rd = std::fs::read_dir(out).map_err(|e| Error::io(out, e))?;
     let mut names: Vec<String> = rd
@@ -124,6 +228,12 @@ pub fn merge_cruise(out: &Path) -> Result<Vec<(String, Result<Merged>)>> {
         .filter(|e| e.path().join(crate::io::WORK_DIR).is_dir())
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
+    let given = recorded_dives(out).unwrap_or_default();
+    for n in &given {
+        if !names.contains(n) {
+            names.push(n.clone());
+        }
+    }
     alphanumeric_sort::sort_str_slice(&mut names);
     if names.is_empty() {
         return Err(Error::Usage(format!(
@@ -137,7 +247,17 @@ pub fn merge_cruise(out: &Path) -> Result<Vec<(String, Result<Merged>)>> {
     Ok(names
         .into_iter()
         .map(|n| {
-            let r = merge_shards(&out.join(&n));
+            let dir = out.join(&n);
+            let r = if dir.join(crate::io::WORK_DIR).is_dir() {
+                merge_shards(&dir)
+            } else {
+                Err(Error::Usage(format!(
+                    "dive {n}: the tasks of the cruise were given this dive but none wrote a report into {} (its \
+                     survey unreadable or empty when they ran? see the tasks' logs): correct it, then rerun the \
+                     tasks",
+                    dir.display()
+                )))
+            };
             (n, r)
         })
         .collect())

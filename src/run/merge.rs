@@ -74,6 +74,7 @@ pub fn merge_shards(out: &Path) -> Result<Merged> {
     }
     let shards = read_shards(&work)?;
     check_same(&shards)?;
+    check_complete(&shards, out)?;
     let (report, frames) = merged_report(&shards, &work)?;
     let report_path = work.join("report.json");
     crate::io::write_with(&report_path, |w| {
@@ -264,6 +265,112 @@ fn check_same(shards: &[ShardReport]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Up to five names of `paths`, for a message.
+fn some_names(paths: &[String]) -> String {
+    let mut list = paths[..paths.len().min(5)].join(", ");
+    if paths.len() > 5 {
+        list.push_str(&format!(", ... ({} more)", paths.len() - 5));
+    }
+    list
+}
+
+/// Every photo of the survey is accounted for by the shard it belongs to: in its frames (corrected, or found
+/// corrected by `--resume`) or in its errors (failed); and each shard's counts agree with its lists. The photos
+/// of a shard are those [`Shard::range`] gives in the survey as listed now (when the survey can be listed from here
+/// and still holds as many photos as the shards found), else only their number is compared. A photo accounted
+/// for by no shard (a shard run with `--limit`, a report that lost entries or whose counts were edited) is an
+/// error naming the photos and the shard.
+fn check_complete(shards: &[ShardReport], out: &Path) -> Result<()> {
+    let Some(first) = shards.first() else {
+        return Ok(());
+    };
+    let total = first.json["survey_photos"].as_u64().unwrap_or(0) as usize;
+    let survey: Option<Vec<String>> = first.json["options"]["survey"]
+        .as_str()
+        .and_then(|s| crate::io::find_photos_excluding(Path::new(s), &[out]).ok())
+        .map(|f| {
+            f.photos
+                .into_iter()
+                .map(|e| e.path.to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+        })
+        .filter(|v| v.len() == total);
+    let mut problems = Vec::new();
+    for s in shards {
+        let frames = s.json["frames"].as_array().cloned().unwrap_or_default();
+        let errors = s.json["errors"].as_array().cloned().unwrap_or_default();
+        let count = |k: &str| s.json[k].as_u64().unwrap_or(0) as usize;
+        let rerun = format!("rerun it (--shard {})", s.shard);
+        let limit = s.json["options"]["limit"]
+            .as_u64()
+            .map_or(String::new(), |l| format!(" (it ran with --limit {l})"));
+        let resumed = frames
+            .iter()
+            .filter(|f| f["resumed"].as_bool() == Some(true))
+            .count();
+        let photo_errors = errors.len().saturating_sub(count("water_column_failed"));
+        if count("corrected") != frames.len() - resumed || count("failed") != photo_errors {
+            problems.push(format!(
+                "shard {}: its counts ({} corrected, {} failed) disagree with its lists ({} photos corrected, {} \
+                 failed) in {}: the report was edited or damaged; {rerun}",
+                s.shard,
+                count("corrected"),
+                count("failed"),
+                frames.len() - resumed,
+                photo_errors,
+                s.path.display()
+            ));
+            continue;
+        }
+        let range = s.shard.range(total);
+        match &survey {
+            Some(list) => {
+                let text = |v: &Value| v.as_str().map(str::to_owned);
+                let seen: HashSet<String> = frames
+                    .iter()
+                    .filter_map(|f| text(&f["input"]))
+                    .chain(errors.iter().filter_map(|e| text(&e["path"])))
+                    .collect();
+                let missing: Vec<String> = list[range.clone()]
+                    .iter()
+                    .filter(|p| !seen.contains(*p))
+                    .cloned()
+                    .collect();
+                if !missing.is_empty() {
+                    problems.push(format!(
+                        "shard {}: {} of its {} photos are neither corrected nor failed in {}{limit}: {}; {rerun}",
+                        s.shard,
+                        missing.len(),
+                        range.len(),
+                        s.path.display(),
+                        some_names(&missing)
+                    ));
+                }
+            }
+            None => {
+                let accounted = frames.len() + photo_errors;
+                if accounted < range.len() {
+                    problems.push(format!(
+                        "shard {}: {} of its {} photos are neither corrected nor failed in {}{limit}; {rerun}",
+                        s.shard,
+                        range.len() - accounted,
+                        range.len(),
+                        s.path.display()
+                    ));
+                }
+            }
+        }
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    Err(Error::Usage(format!(
+        "cannot merge: photos of the survey are missing from the shards' reports (a mission is merged only when \
+         every photo is corrected or failed):\n  {}",
+        problems.join("\n  ")
+    )))
 }
 
 impl std::fmt::Display for Shard {

@@ -16,7 +16,8 @@ if [[ -z $engine ]]; then
     say "skipped: neither podman nor docker is installed and working here (docker's daemon not running?)"
     exit 0
 fi
-for base in docker.io/library/rust:1-slim-bookworm docker.io/library/debian:bookworm-slim; do
+# The base images the Containerfile names (pinned by digest where it pins them).
+for base in $(awk 'toupper($1) == "FROM" { print $2 }' deploy/container/Containerfile); do
     if ! "$engine" pull -q "$base" >/dev/null 2>&1; then
         say "skipped: $engine cannot pull $base (no registry access)"
         exit 0

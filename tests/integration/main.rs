@@ -8,6 +8,7 @@ mod api;
 mod batch;
 mod budgets;
 mod cli;
+mod cluster_runs;
 mod correct_e2e;
 mod defaults;
 mod engine;

@@ -303,3 +303,80 @@ fn a_cruise_is_corrected_dive_by_dive() {
     let e = abysslight::cruise::find_dives(&root.join("cruise/notes")).unwrap_err();
     assert!(e.to_string().contains("no dives"), "{e}");
 }
+
+#[test]
+fn a_shard_that_left_photos_out_is_not_merged() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    mission(root);
+    // Shard 2 of 4 (img7 to img12) timed with --limit 2: img7 and img8 only.
+    for k in 1..=4 {
+        let o = Options {
+            limit: (k == 2).then_some(2),
+            ..opts(root, "out")
+        };
+        run_shard(root, "out", k, 4, o);
+    }
+    expect_error(
+        &root.join("out"),
+        &[
+            "shard 2/4: 4 of its 6 photos",
+            "--limit 2",
+            "img10.png",
+            "img12.png",
+        ],
+    );
+    let o = abysslight_in(&["merge-shards", "out"], root);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("img11.png"), "{}", stderr(&o));
+    // Rerun without --limit: merged.
+    run_shard(root, "out", 2, 4, opts(root, "out"));
+    assert_eq!(merge_shards(&root.join("out")).unwrap().frames, 23);
+}
+
+#[test]
+fn an_edited_shard_report_is_not_merged() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    mission(root);
+    for k in 1..=3 {
+        run_shard(root, "out", k, 3, opts(root, "out"));
+    }
+    let path = root.join("out/_abysslight/report-shard-3-of-3.json");
+    let original = std::fs::read_to_string(&path).unwrap();
+    let edit = |f: &dyn Fn(&mut Value)| {
+        let mut v: Value = serde_json::from_str(&original).unwrap();
+        f(&mut v);
+        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+    };
+    // Two frames lost, the counts edited to match.
+    edit(&|v| {
+        let frames = v["frames"].as_array_mut().unwrap();
+        frames.truncate(frames.len() - 2);
+        v["corrected"] = (v["corrected"].as_u64().unwrap() - 2).into();
+    });
+    expect_error(
+        &root.join("out"),
+        &["shard 3/3: 2 of its 8 photos", "img23.png", "img24.png"],
+    );
+    // Two frames lost, the counts left as they were.
+    edit(&|v| {
+        let frames = v["frames"].as_array_mut().unwrap();
+        frames.truncate(frames.len() - 2);
+    });
+    expect_error(&root.join("out"), &["shard 3/3", "counts", "edited"]);
+    // A failed photo's error (img9, shard 2) removed, its count too.
+    let first = root.join("out/_abysslight/report-shard-2-of-3.json");
+    let one = std::fs::read_to_string(&first).unwrap();
+    std::fs::write(&path, &original).unwrap();
+    let mut v: Value = serde_json::from_str(&one).unwrap();
+    v["errors"] = Value::Array(Vec::new());
+    v["failed"] = 0.into();
+    std::fs::write(&first, serde_json::to_string(&v).unwrap()).unwrap();
+    expect_error(
+        &root.join("out"),
+        &["shard 2/3: 1 of its 8 photos", "img9.png"],
+    );
+    std::fs::write(&first, &one).unwrap();
+    assert_eq!(merge_shards(&root.join("out")).unwrap().frames, 23);
+}

@@ -6,7 +6,9 @@
 #      `abysslight correct` run, and the merged report listing every photo once, as the one run's does;
 #   2. the same with task 3 killed in its first attempt (a stale lock, no report): the array fails, the merge
 #      refuses naming shard 3/4, task 3 alone is resubmitted, and the merge then gives the same outputs;
-#   3. a cruise of two dives (--cruise) through the same script, each dive merged and identical to its own run.
+#   3. a cruise of two dives (--cruise) through the same script, each dive merged and identical to its own run;
+#   4. one bad photo among the mission's, run by a binary whose path holds a space: every task succeeds (exit 1,
+#      some photos failed, counts as done), the afterok merge runs and exits 1, its report naming the photo.
 # It stops the daemons it started, by pid. It skips (exit 0, with the reason) only where it cannot be root or
 # there is no apt-get. ABYSSLIGHT=path uses that binary instead of building one.
 set -euo pipefail
@@ -234,5 +236,25 @@ same_as_one "$tmp/cr/dive1" "$tmp/one1" 16
 same_as_one "$tmp/cr/dive2" "$tmp/one2" 16
 say "3. cruise of 2 dives as an array of 3: each dive identical to its own run ($((SECONDS - t)) s)"
 
+# --- 4. one bad photo among many; a binary whose path holds a space -----------------------------------------
+t=$SECONDS
+mkdir -p "$tmp/bad" "$tmp/with space"
+cp -r "$tmp/sim/survey" "$tmp/bad/survey"
+bad=$(cd "$tmp/bad/survey" && find . -type f -printf '%P\n' | sort | sed -n 5p)
+printf 'not a photo' >"$tmp/bad/survey/$bad"
+spaced="$tmp/with space/abysslight"
+cp "$bin" "$spaced"
+args=(--water-column "$tmp/sim/water" --survey "$tmp/bad/survey" --out "$tmp/badout")
+job=$(ABYSSLIGHT=$spaced submit_array --array=1-4 -- "${args[@]}") ||
+    { logs; fail "one bad photo (or the space in ABYSSLIGHT) failed the array: exit 1 must count as done"; }
+rc=0
+ABYSSLIGHT=$spaced sbatch --parsable --wait --dependency="afterok:$job" --output="$tmp/logs/merge-%j.out" \
+    "$repo/deploy/slurm/merge-shards.sbatch" "$tmp/badout" >/dev/null || rc=$?
+((rc == 1)) || { logs; fail "the merge of a mission with one bad photo exited $rc, 1 expected"; }
+r=$tmp/badout/_abysslight/report.json
+grep -q '"failed": 1,' "$r" || fail "$r does not count the bad photo"
+grep -q "$bad" "$r" || fail "$r does not name $bad"
+say "4. one bad photo, ABYSSLIGHT with a space: array succeeded, merge ran and exited 1 naming it ($((SECONDS - t)) s)"
+
 say "all done in $((SECONDS - started)) s"
-echo "slurm: 3 passed, 0 failed"
+echo "slurm: 4 passed, 0 failed"
