@@ -21,6 +21,8 @@
 //! Nothing here reads or writes files; [`crate::io`] does, and [`crate::run`] streams whole missions.
 
 pub mod baseline;
+pub(crate) mod blocks;
+pub(crate) mod chain;
 pub mod correct;
 pub mod engine;
 pub mod factor;
@@ -37,6 +39,7 @@ pub mod refine;
 pub(crate) mod ring;
 pub(crate) mod running;
 pub mod scatter;
+pub(crate) mod steps;
 pub mod stretch;
 pub mod survey;
 pub mod transfer;

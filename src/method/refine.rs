@@ -13,7 +13,6 @@
 //!
 //! All work on block-resolution rasters in linear light.
 
-use crate::method::params::Steps;
 use crate::method::raster::Raster;
 
 /// Percentile of `F` (per channel, over blocks) taken as the photo's lit level.
@@ -400,26 +399,6 @@ pub fn apply_gain(f: &mut Raster, gain: &[f32]) {
     for (i, v) in f.data.iter_mut().enumerate() {
         *v *= gain[i % c];
     }
-}
-
-/// What the abyss method does to one photo's `F` (block resolution, linear light): the per-photo gain against the
-/// window's `M` (when `steps.photo_gain`), then the soft relative floor. `own` is the photo's block-median image,
-/// `s_low` the (scaled) backscatter at block resolution, `gain_quantile` the quantile of the gain. Returns the floor levels `φ` per channel.
-pub fn refine_factor(
-    f: &mut Raster,
-    own: &Raster,
-    m: &Raster,
-    s_low: Option<&Raster>,
-    steps: &Steps,
-    gain_quantile: f64,
-) -> Vec<f32> {
-    if steps.photo_gain {
-        // The engine gives the median unless the window is chosen per stretch: the window's quantile here wins on
-        // dense nodule fields but moved the twelve dives of the matrix by up to 8 % either way (docs/nodules.md).
-        let g = photo_gain(own, m, s_low, GAIN_MIN_LIT, gain_quantile);
-        apply_gain(f, &g);
-    }
-    soft_floor(f, steps.relative_floor)
 }
 
 /// Radius of [`near_shape`]'s squares, as a share of the longer side (in blocks): 1/8 of the frame (1/4 and

@@ -298,6 +298,49 @@ fn band_median(out: &mut [u16], band: &[Vec<u16>], row_len: usize, max: f32) {
     );
 }
 
+/// `S` as the engine takes it: prepared for the correction at full resolution and at blocks of `k` in linear light
+/// (`transfer`), the blocks a mask leaves without samples filled from their neighbours and, under the mask, the
+/// smooth fill at full resolution too (the water-column frames hold whatever is burned in there).
+pub(crate) fn for_the_engine(
+    scatter: Option<&Scatter>,
+    mask: Option<&crate::method::mask::Mask>,
+    k: usize,
+    transfer: crate::method::transfer::Transfer,
+) -> crate::error::Result<(Option<Prepared>, Option<Raster>)> {
+    use crate::method::mask::{block_median_masked, fill_missing};
+    if let (Some(m), Some(s)) = (mask, scatter) {
+        if (m.width, m.height) != (s.layout.width, s.layout.height) {
+            return Err(crate::error::Error::Usage(format!(
+                "the mask is {}x{} but the scatter image is {}",
+                m.width, m.height, s.layout
+            )));
+        }
+    }
+    let scatter_low_codes = scatter.map(|s| {
+        let mut low = match mask {
+            Some(m) => block_median_masked(&s.q, s.layout, k, m),
+            None => s.downsampled(k),
+        };
+        fill_missing(&mut low);
+        low
+    });
+    let prepared = scatter.map(|s| match (mask, &scatter_low_codes) {
+        // Under the mask, S holds whatever is burned into the water-column frames too: use the smooth fill.
+        (Some(m), Some(low)) => {
+            let smooth = crate::method::factor::upsample(low, k, s.layout.width, s.layout.height);
+            s.with_pixels_from(&smooth, &m.ignore).prepare(transfer)
+        }
+        _ => s.prepare(transfer),
+    });
+    let scatter_low = scatter_low_codes.map(|mut low| {
+        for v in &mut low.data {
+            *v = transfer.to_linear(*v);
+        }
+        low
+    });
+    Ok((prepared, scatter_low))
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
