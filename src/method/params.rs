@@ -232,10 +232,14 @@ pub struct Params {
     pub steps: Steps,
 }
 
-/// The steps [`Method::Abyss`] adds to the paper, in the order the engine runs them on a photo's window
-/// (docs/method.md says what each one measured). The other methods ignore them.
+/// The steps [`Method::Abyss`] adds to the paper, in the order they run on a photo's window (after the window's
+/// quantile; docs/method.md says what each one measured). The other methods ignore them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Steps {
+    /// Where the exposure jumps from photo to photo within the window, its photos levelled to one exposure (each
+    /// by its gain against the window's `M`) before `M` is taken (`levelled_stack`): the median otherwise takes
+    /// the middle-exposure photo's scene whole (ghosts). Default: true.
+    pub level_exposures: bool,
     /// Fill the window's `M` where bright spots that move — laser dots, highlights — held more than half of the
     /// window at a block (`outliers`). Default: false.
     pub bright_spots: bool,
@@ -243,14 +247,14 @@ pub struct Steps {
     /// (`near_shape`); `Some(0)`, or a length not shorter than `window`: off; `None` is
     /// `auto`: [`crate::method::window::near_window`]. Default: `None` (auto: 5 inside the default window).
     pub near_window: Option<usize>,
+    /// Bend `F` to the ratios of the window's overlapping photos, registered by phase correlation
+    /// (`method::overlap`): nodules, burrows and fauna that held the window's `M` cancel in them.
+    /// Default: false.
+    pub overlaps: bool,
     /// The scale of the water-column `S` for the survey photos; `None` estimates it per window
     /// (`backscatter_scale`). Default: `Some(1.0)` (`S` as measured: the estimate is
     /// biased low on red-starved channels).
     pub backscatter_scale: Option<f32>,
-    /// Where the exposure jumps from photo to photo within the window, its photos levelled to one exposure (each
-    /// by its gain against the window's `M`) before `M` is taken (`levelled_stack`): the median otherwise takes
-    /// the middle-exposure photo's scene whole (ghosts). Default: true.
-    pub level_exposures: bool,
     /// One robust gain per photo and channel against its window's `M`. Default: true.
     pub photo_gain: bool,
     /// The floor of `F` as a share of the photo's lit level, with a smooth hand-over
@@ -262,24 +266,20 @@ pub struct Steps {
     /// With `denoise`: even out the blend's block levels across light levels
     /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
-    /// Bend `F` to the ratios of the window's overlapping photos, registered by phase correlation
-    /// (`method::overlap`): nodules, burrows and fauna that held the window's `M` cancel in them.
-    /// Default: false.
-    pub overlaps: bool,
 }
 
 impl Default for Steps {
     fn default() -> Self {
         Steps {
+            level_exposures: true,
             bright_spots: false,
             near_window: None,
+            overlaps: false,
             backscatter_scale: Some(1.0),
-            level_exposures: true,
             photo_gain: true,
             relative_floor: 0.001,
             denoise: true,
             level_by_light: true,
-            overlaps: false,
         }
     }
 }

@@ -376,3 +376,50 @@ fn auto_settings_resolve_in_one_place() {
     let e: Engine<usize> = Engine::new(p, None, Some(mask)).unwrap();
     assert_eq!(e.params().downsample, 8);
 }
+
+/// `correct --help` prints the method's defaults of `Params::default()` (and `Options::default()`, made from it):
+/// each `[default: …]` of the method's options is the value a run takes without the option.
+#[test]
+fn help_prints_the_defaults_params_default_holds() {
+    let o = crate::common::abysslight(&["correct", "--help"]);
+    let help = crate::common::stdout(&o)
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    let default_of = |flag: &str| -> String {
+        let at = help
+            .find(&format!("{flag} <"))
+            .or_else(|| help.find(&format!("{flag} ")))
+            .unwrap_or_else(|| panic!("{flag} not in --help"));
+        let rest = &help[at..];
+        let d = rest
+            .find("[default: ")
+            .unwrap_or_else(|| panic!("{flag}: no default"));
+        let v = &rest[d + 10..];
+        v[..v.find(']').unwrap()].to_string()
+    };
+    let p = Params::default();
+    let o = Options::default();
+    assert_eq!(default_of("--method"), p.method.to_string());
+    assert_eq!(
+        default_of("--relative-floor").parse::<f32>().unwrap(),
+        p.steps.relative_floor
+    );
+    assert_eq!(
+        default_of("--factor-floor").parse::<f32>().unwrap(),
+        p.factor_floor
+    );
+    assert_eq!(default_of("--degree").parse::<usize>().unwrap(), p.degree);
+    assert_eq!(default_of("--risk").parse::<f64>().unwrap(), o.risk);
+    assert_eq!(
+        Some(default_of("--backscatter-scale").parse::<f32>().unwrap()),
+        p.steps.backscatter_scale
+    );
+    assert_eq!(default_of("--window"), "auto");
+    assert_eq!(p.window, abysslight::Window::Auto);
+    assert_eq!(default_of("--near-window"), "auto");
+    assert_eq!(p.steps.near_window, None);
+    assert_eq!(default_of("--downsample"), "auto");
+    assert_eq!(p.downsample, 0);
+    assert_eq!(o.params().unwrap(), p);
+}
