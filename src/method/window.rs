@@ -61,12 +61,26 @@ pub struct WindowChoice {
 const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
      default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
 
+/// For a contamination given in per cent (`--contamination 20`): " (did you mean 0.2, that is 20 %?)"; else
+/// nothing. A share is a number below 1, so 1 to 100 reads as per cent.
+pub(crate) fn percent_hint(contamination: f64) -> String {
+    if (1.0..=100.0).contains(&contamination) {
+        format!(
+            " (did you mean {}, that is {contamination} %?)",
+            contamination / 100.0
+        )
+    } else {
+        String::new()
+    }
+}
+
 /// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`.
 pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, Error> {
     if !(0.0..0.5).contains(&contamination) {
         return Err(Error::Usage(format!(
-            "--contamination must be in [0, 0.5), got {contamination}: a median breaks down once half its \
-             samples are contaminated, so no window size can help; {DENSE_HINT}"
+            "--contamination must be in [0, 0.5), got {contamination}{}: a median breaks down once half its \
+             samples are contaminated, so no window size can help; {DENSE_HINT}",
+            percent_hint(contamination)
         )));
     }
     if !(risk > 0.0 && risk < 1.0) {

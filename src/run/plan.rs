@@ -230,6 +230,16 @@ impl Plan {
         }
         let photos = &self.found.photos;
         let mut found = checks::other_sizes(photos, self.photo_size);
+        let frames = match (&opts.scatter, &opts.water_column) {
+            (None, Some(dir)) => find_photos(dir).map(|f| f.photos).unwrap_or_default(),
+            _ => Vec::new(),
+        };
+        found.extend(checks::water_sizes(
+            &frames,
+            opts.scatter.as_deref(),
+            self.photo_size,
+            opts.water_column.as_deref(),
+        ));
         found.extend(checks::mixed_formats(photos));
         found.extend(checks::too_few(photos.len(), self.window.n));
         found.extend(checks::two_dives(photos));
@@ -314,8 +324,13 @@ impl Plan {
                 (None, None) => "none (no --water-column or --scatter: S = 0)".into(),
             }
         ));
+        // `abyss` floors F relative to each photo's lit level (--relative-floor), the others at --factor-floor.
+        let floor = match opts.method {
+            Method::Abyss => format!("relative floor {}", opts.relative_floor),
+            _ => format!("factor floor {}", opts.factor_floor),
+        };
         line(format!(
-            "method: {}, blocks {}, seafloor colour {}, transfer {}, factor floor {}",
+            "method: {}, blocks {}, seafloor colour {}, transfer {}, {floor}",
             opts.method,
             match (params.downsample, facts.blocks_why(&given)) {
                 (k, Some(why)) if k > 0 => format!("{k}x{k} (auto: {why})"),
@@ -327,7 +342,6 @@ impl Plan {
                 Some(why) => format!("auto, {why}"),
                 None => params.curve().to_string(),
             },
-            opts.factor_floor
         ));
         for l in self.describe_checks(opts, params.downsample) {
             line(l);
@@ -344,7 +358,7 @@ impl Plan {
             .collect();
         if !self.streaming {
             lines.push(match lines.len() {
-                0 => "checks: photo sizes, formats, window, one dive, disk: nothing found"
+                0 => "checks: photo sizes, water-column size, formats, window, one dive, disk: nothing found"
                     .to_string(),
                 k => format!(
                     "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"
@@ -452,13 +466,24 @@ fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Re
         }
         return Ok(Found::default());
     }
+    if !survey.is_dir() {
+        return Err(Error::Usage(format!(
+            "--survey {}: {}",
+            survey.display(),
+            if survey.exists() {
+                "not a folder (give the folder of the survey photos)"
+            } else {
+                "no such folder"
+            }
+        )));
+    }
     // A survey link pointing at --out is not read back.
     let found = find_photos_excluding(survey, &[out])?;
     if found.photos.is_empty() {
         return Err(Error::Usage(format!(
-            "no photos ({}) found below {}",
+            "--survey {}: no photos ({}) found below it",
+            survey.display(),
             io::PHOTO_EXTENSIONS.join(", "),
-            survey.display()
         )));
     }
     Ok(found)

@@ -24,6 +24,7 @@ mod jpeg_reference;
 mod live;
 mod merge_shards;
 mod metadata;
+mod newcomer;
 mod nodules;
 mod real_photos;
 mod run_locks;
