@@ -76,8 +76,13 @@ fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
         .collect();
     keys.sort();
     keys.dedup();
-    let shown = |v: Option<&serde_json::Value>| match v {
-        None | Some(serde_json::Value::Null) => "none".to_string(),
+    // An option left out reads as the command line says it: auto, the input's, or none.
+    let shown = |k: &str, v: Option<&serde_json::Value>| match v {
+        None | Some(serde_json::Value::Null) => match k {
+            "downsample" | "near-window" | "transfer" | "backscatter-scale" => "auto".to_string(),
+            "jpeg-quality" | "jpeg-subsampling" => "the input's".to_string(),
+            _ => "none".to_string(),
+        },
         Some(serde_json::Value::String(s)) => s.clone(),
         Some(v) => v.to_string(),
     };
@@ -88,7 +93,11 @@ fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
                 "window-in-effect" => "--window".to_string(),
                 k => format!("--{k}"),
             };
-            format!("{flag} {} before, {} now", shown(a.get(k)), shown(b.get(k)))
+            format!(
+                "{flag} {} before, {} now",
+                shown(k, a.get(k)),
+                shown(k, b.get(k))
+            )
         })
         .collect()
 }

@@ -70,6 +70,7 @@ impl Plan {
         let stdin = survey == Path::new("-");
         let stdout = out == Path::new("-");
         let streaming = stdin || opts.watch;
+        inputs_exist(opts, streaming)?;
         // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
         let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
@@ -448,6 +449,26 @@ impl Plan {
 }
 
 /// The survey photos found (none when streaming), or why there are none to correct.
+/// The input folders and files of a run are there, each named by its flag where not (the path checks after it
+/// name only the path).
+fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
+    let inputs = [
+        ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
+        ("--water-column", opts.water_column.as_deref()),
+        ("--scatter", opts.scatter.as_deref()),
+        ("--mask", opts.mask.as_deref()),
+    ];
+    for (flag, path) in inputs {
+        if let Some(p) = path.filter(|p| !p.exists()) {
+            return Err(Error::Usage(format!(
+                "{flag} {}: no such file or folder",
+                p.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Result<Found> {
     // Baseline `--method mean` needs the whole mission's mean before the stream.
     if streaming && opts.method == Method::Mean {
@@ -465,17 +486,6 @@ fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Re
             )));
         }
         return Ok(Found::default());
-    }
-    if !survey.is_dir() {
-        return Err(Error::Usage(format!(
-            "--survey {}: {}",
-            survey.display(),
-            if survey.exists() {
-                "not a folder (give the folder of the survey photos)"
-            } else {
-                "no such folder"
-            }
-        )));
     }
     // A survey link pointing at --out is not read back.
     let found = find_photos_excluding(survey, &[out])?;

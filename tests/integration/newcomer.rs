@@ -64,7 +64,7 @@ fn water_column_frames_of_another_size_are_named_and_a_failed_run_does_not_block
     let other = run(&water, &["-q", "--downsample", "2"]);
     assert_eq!(other.status.code(), Some(2));
     let e = stderr(&other);
-    assert!(e.contains("--downsample"), "{e}");
+    assert!(e.contains("--downsample 4 before, 2 now"), "{e}");
     assert!(!e.contains("window-in-effect"), "{e}");
 }
 
@@ -100,6 +100,18 @@ fn a_missing_survey_folder_names_the_flag() {
         e.contains("--survey") && e.contains("no-such-survey"),
         "{e}"
     );
+    // The same for the water-column folder.
+    let (survey, _) = tiny_mission(d.path(), 3);
+    let water = d.path().join("no-such-descent");
+    #[rustfmt::skip]
+    let o = abysslight(&["correct", "--survey", s(&survey), "--water-column", s(&water), "--out", s(&out)]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(
+        e.contains("--water-column") && e.contains("no-such-descent"),
+        "{e}"
+    );
+    assert!(!out.exists(), "nothing written");
 }
 
 #[test]
