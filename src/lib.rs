@@ -64,6 +64,7 @@ pub mod io;
 pub mod kernels;
 pub(crate) mod method;
 pub(crate) mod run;
+mod simd;
 
 pub use error::{Error, Result};
 pub use io::metadata::Metadata;

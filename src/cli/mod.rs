@@ -61,9 +61,10 @@ Examples:
     abysslight correct --water-column dive042/descent --survey dive042/survey \\
         --out dive042/corrected
 
-  Cluttered terrain, JPEGs from an sRGB camera, pictures to check the estimate:
+  JPEGs from an sRGB camera, pictures to check the estimate (on cluttered ground and nodule fields too: the
+  default window is chosen per stretch from a survey of the photos; --contamination C pins one for the dive):
     abysslight correct --water-column descent --survey survey --out corrected \\
-        --contamination 0.2 --transfer srgb --save-factors
+        --transfer srgb --save-factors
 
   Finish an interrupted run (finished photos are skipped, the result is the same):
     abysslight correct --water-column descent --survey survey --out corrected --resume
@@ -474,6 +475,46 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_OUT)]
     save_scatter: bool,
 
+    /// Photos in the sliding window whose median gives F (odd) [default: auto].
+    ///
+    /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
+    /// shadow) at one place in the frame, but follow altitude changes more slowly.
+    /// Without --window and --contamination (--method abyss): auto, chosen per stretch of the mission from a
+    /// survey of its photos (their dark share and how many photos see the same scene; docs/nodules.md): 7 and
+    /// the median on sparse ground under a moving camera, longer windows and the (1 + c)/2 quantile on dense
+    /// nodule fields and under a slow camera, never longer than the mission. Photos as they come (--watch,
+    /// --survey -) are surveyed as they come: each is corrected once the 25 after it are in.
+    #[arg(long, value_name = "N|auto", value_parser = parse_window, conflicts_with = "contamination", help_heading = H_METHOD)]
+    window: Option<WindowArg>,
+
+    /// --method abyss: photos in the near window, or auto; 0 turns it off [default: auto].
+    ///
+    /// The window is long enough that its median almost never breaks; over that many photos the lights' footprint
+    /// moves with the vehicle's altitude and roll. The median of the nearest photos follows it, and only its smooth
+    /// shape (the median ratio over squares an eighth of the frame across) bends the window's M, so its local
+    /// breakdowns are outvoted.
+    /// auto: with --contamination the smallest window with P_half <= 5 % (at least 5), else 5; used when shorter
+    /// than --window.
+    #[arg(long, value_name = "N|auto", value_parser = parse_near, help_heading = H_METHOD)]
+    near_window: Option<NearArg>,
+
+    /// Expected share of non-seafloor pixels (0 to 0.5); sets --window from it.
+    ///
+    /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`). With --method abyss
+    /// the contamination is taken to be darker than the seafloor (nodules, shadows, burrows): M is the window's
+    /// (1 + C)/2 quantile instead of its median, the seafloor's own median; bright clutter (fauna, shells) above
+    /// (1 - C)/2 of the window then breaks the estimate sooner than with the median. One window for the whole
+    /// mission: on nodule fields (C of 0.3 and more) the default without it, a window per stretch from a survey of
+    /// the photos, does better (docs/guide.md).
+    /// auto: as without --window and --contamination, measured per stretch of the mission (also undoes a config
+    /// file's window or contamination).
+    #[arg(long, value_name = "C|auto", value_parser = parse_contamination, help_heading = H_METHOD)]
+    contamination: Option<ContaminationArg>,
+
+    /// Accepted breakdown probability of the median, for --contamination [default: 0.01].
+    #[arg(long, value_name = "R", help_heading = H_METHOD)]
+    risk: Option<f64>,
+
     /// How the lighting is estimated: abyss, paper, mean or polynomial [default: abyss].
     ///
     /// abyss is the paper's sliding-window F (with --contamination C: the window's (1 + C)/2 quantile) with a
@@ -551,46 +592,6 @@ struct CorrectArgs {
     /// leave open (across the track, the overall level) comes from the window's median. See docs/overlaps.md.
     #[arg(long, help_heading = H_METHOD)]
     overlaps: bool,
-
-    /// Photos in the sliding window whose median gives F (odd) [default: auto].
-    ///
-    /// Centred on the photo, shifted at the mission's ends. More photos tolerate more clutter (rocks, fauna,
-    /// shadow) at one place in the frame, but follow altitude changes more slowly.
-    /// Without --window and --contamination (--method abyss): auto, chosen per stretch of the mission from a
-    /// survey of its photos (their dark share and how many photos see the same scene; docs/nodules.md): 7 and
-    /// the median on sparse ground under a moving camera, longer windows and the (1 + c)/2 quantile on dense
-    /// nodule fields and under a slow camera, never longer than the mission. Photos as they come (--watch,
-    /// --survey -) are surveyed as they come: each is corrected once the 25 after it are in.
-    #[arg(long, value_name = "N|auto", value_parser = parse_window, conflicts_with = "contamination", help_heading = H_METHOD)]
-    window: Option<WindowArg>,
-
-    /// --method abyss: photos in the near window, or auto; 0 turns it off [default: auto].
-    ///
-    /// The window is long enough that its median almost never breaks; over that many photos the lights' footprint
-    /// moves with the vehicle's altitude and roll. The median of the nearest photos follows it, and only its smooth
-    /// shape (the median ratio over squares an eighth of the frame across) bends the window's M, so its local
-    /// breakdowns are outvoted.
-    /// auto: with --contamination the smallest window with P_half <= 5 % (at least 5), else 5; used when shorter
-    /// than --window.
-    #[arg(long, value_name = "N|auto", value_parser = parse_near, help_heading = H_METHOD)]
-    near_window: Option<NearArg>,
-
-    /// Expected share of non-seafloor pixels (0 to 0.5); sets --window from it.
-    ///
-    /// --window becomes the smallest odd n with P_half <= --risk (see `abysslight window`). With --method abyss
-    /// the contamination is taken to be darker than the seafloor (nodules, shadows, burrows): M is the window's
-    /// (1 + C)/2 quantile instead of its median, the seafloor's own median; bright clutter (fauna, shells) above
-    /// (1 - C)/2 of the window then breaks the estimate sooner than with the median. One window for the whole
-    /// mission: on nodule fields (C of 0.3 and more) the default without it, a window per stretch from a survey of
-    /// the photos, does better (docs/guide.md).
-    /// auto: as without --window and --contamination, measured per stretch of the mission (also undoes a config
-    /// file's window or contamination).
-    #[arg(long, value_name = "C|auto", value_parser = parse_contamination, help_heading = H_METHOD)]
-    contamination: Option<ContaminationArg>,
-
-    /// Accepted breakdown probability of the median, for --contamination [default: 0.01].
-    #[arg(long, value_name = "R", help_heading = H_METHOD)]
-    risk: Option<f64>,
 
     /// Block size K of the spatial median before the temporal median, or auto [default: auto].
     ///
@@ -916,11 +917,14 @@ impl Progress for Console {
             b.inc(1);
         } else if self.plain {
             let status = if ok { "done" } else { "FAILED" };
+            // Below the current folder: the path as the user would type it, not the machine's absolute one.
+            let cwd = std::env::current_dir().unwrap_or_default();
+            let shown = input.strip_prefix(&cwd).unwrap_or(input).display();
             if n == 0 {
                 // A watch or a stream: the total is not known.
-                eprintln!("abysslight: [{i}] {status} {}", input.display());
+                eprintln!("abysslight: [{i}] {status} {shown}");
             } else {
-                eprintln!("abysslight: [{i}/{n}] {status} {}", input.display());
+                eprintln!("abysslight: [{i}/{n}] {status} {shown}");
             }
         }
     }

@@ -5,7 +5,11 @@
 use rayon::prelude::*;
 
 use crate::method::raster::{Raster, Sample};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::Avx2;
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 mod unrolled;
 
 /// Median of integer samples, reordering `v`. Returns the value in sample units. `v` must not be empty.
@@ -126,17 +130,9 @@ fn median_positions(n: usize) -> Vec<usize> {
 /// The inner loop runs over lanes with `min`/`max` only, which the compiler vectorises.
 fn apply_network<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked above); the body is the same safe code, compiled for AVX2.
-        return unsafe { apply_network_avx2(net, v, lanes) };
+    if let Some(t) = Avx2::detect() {
+        return avx2::apply_network(t, net, v, lanes);
     }
-    apply_network_portable(net, v, lanes)
-}
-
-/// [`apply_network`] compiled with AVX2 enabled (twice the lanes per instruction).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn apply_network_avx2<T: Copy + PartialOrd>(net: &[(u16, u16)], v: &mut [T], lanes: usize) {
     apply_network_portable(net, v, lanes)
 }
 
@@ -389,93 +385,10 @@ fn gather_blocks<'a, T: Sample, const C: usize, const C1: usize>(
 /// [`gather_blocks`]. Same result (tested bit for bit).
 fn gather_rgb8_k8(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked above).
-        return unsafe { gather_rgb8_k8_avx2(rows, v, lanes, lane0) };
+    if let Some(t) = Avx2::detect() {
+        return avx2::gather_rgb8_k8(t, rows, v, lanes, lane0);
     }
     gather_blocks::<u8, 3, 4>(rows.iter().copied(), v, 8, lanes, lanes, lane0)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn gather_rgb8_k8_avx2(rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {
-    use std::arch::x86_64::*;
-    debug_assert!(lane0.is_multiple_of(3) && lanes.is_multiple_of(3));
-    let (bx0, nb) = (lane0 / 3, lanes / 3);
-    // 3-byte pixels to 32-bit lanes (the fourth byte zero), within each 128-bit half: pixels 0–3 of a block
-    // row from its bytes 0–11 in the low half, pixels 4–7 from bytes 12–23 in the high half.
-    let widen = _mm256_setr_epi8(
-        0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, 9, 10, 11, -1, 0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8,
-        -1, 9, 10, 11, -1,
-    );
-    // And back: 12 bytes at the start of each half, then the two halves' 3 + 3 words made contiguous.
-    let narrow = _mm256_setr_epi8(
-        0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13,
-        14, -1, -1, -1, -1,
-    );
-    let join = _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7);
-    let mut g = 0;
-    // A group of 8 blocks reads 28 bytes from its last block's row start (4 past it): stay inside the row.
-    let row_len = rows[0].len();
-    while g + 8 <= nb && (bx0 + g + 7) * 24 + 28 <= row_len {
-        for (dy, row) in rows.iter().enumerate() {
-            let mut r = [_mm256_setzero_si256(); 8];
-            for (j, rj) in r.iter_mut().enumerate() {
-                let src = &row[(bx0 + g + j) * 24..(bx0 + g + j) * 24 + 28];
-                // SAFETY: `src` holds 28 bytes; the loads read bytes 0–15 and 12–27.
-                let lo = _mm_loadu_si128(src.as_ptr() as *const __m128i);
-                let hi = _mm_loadu_si128(src.as_ptr().add(12) as *const __m128i);
-                *rj = _mm256_shuffle_epi8(_mm256_set_m128i(hi, lo), widen);
-            }
-            // 8×8 transpose of 32-bit lanes: t[dx] = pixel dx of blocks g..g+8.
-            let a0 = _mm256_unpacklo_epi32(r[0], r[1]);
-            let a1 = _mm256_unpackhi_epi32(r[0], r[1]);
-            let a2 = _mm256_unpacklo_epi32(r[2], r[3]);
-            let a3 = _mm256_unpackhi_epi32(r[2], r[3]);
-            let a4 = _mm256_unpacklo_epi32(r[4], r[5]);
-            let a5 = _mm256_unpackhi_epi32(r[4], r[5]);
-            let a6 = _mm256_unpacklo_epi32(r[6], r[7]);
-            let a7 = _mm256_unpackhi_epi32(r[6], r[7]);
-            let b0 = _mm256_unpacklo_epi64(a0, a2);
-            let b1 = _mm256_unpackhi_epi64(a0, a2);
-            let b2 = _mm256_unpacklo_epi64(a1, a3);
-            let b3 = _mm256_unpackhi_epi64(a1, a3);
-            let b4 = _mm256_unpacklo_epi64(a4, a6);
-            let b5 = _mm256_unpackhi_epi64(a4, a6);
-            let b6 = _mm256_unpacklo_epi64(a5, a7);
-            let b7 = _mm256_unpackhi_epi64(a5, a7);
-            let t = [
-                _mm256_permute2x128_si256(b0, b4, 0x20),
-                _mm256_permute2x128_si256(b1, b5, 0x20),
-                _mm256_permute2x128_si256(b2, b6, 0x20),
-                _mm256_permute2x128_si256(b3, b7, 0x20),
-                _mm256_permute2x128_si256(b0, b4, 0x31),
-                _mm256_permute2x128_si256(b1, b5, 0x31),
-                _mm256_permute2x128_si256(b2, b6, 0x31),
-                _mm256_permute2x128_si256(b3, b7, 0x31),
-            ];
-            for (dx, &tx) in t.iter().enumerate() {
-                let packed = _mm256_permutevar8x32_epi32(_mm256_shuffle_epi8(tx, narrow), join);
-                let at = (dy * 8 + dx) * lanes + g * 3;
-                let dst = &mut v[at..at + 24];
-                // SAFETY: `dst` holds 24 bytes; the stores write bytes 0–15 and 16–23.
-                _mm_storeu_si128(
-                    dst.as_mut_ptr() as *mut __m128i,
-                    _mm256_castsi256_si128(packed),
-                );
-                _mm_storel_epi64(
-                    dst.as_mut_ptr().add(16) as *mut __m128i,
-                    _mm256_extracti128_si256(packed, 1),
-                );
-            }
-        }
-        g += 8;
-    }
-    if g < nb {
-        // The blocks left over, into lanes g·3.. of every element row.
-        let rest = rows.iter().copied();
-        gather_blocks::<u8, 3, 4>(rest, &mut v[g * 3..], 8, lanes, (nb - g) * 3, lane0 + g * 3);
-    }
 }
 
 /// [`gather_blocks`] for any channel count.

@@ -148,8 +148,9 @@ impl std::fmt::Display for Flag {
         match *self {
             Flag::Contamination { share } => write!(
                 f,
-                "contamination {:.0} % is near the 50 % at which the median breaks down",
-                100.0 * share
+                "contamination {:.0} % is {} the 50 % at which the median breaks down",
+                100.0 * share,
+                if share > 0.5 { "past" } else { "near" }
             ),
             Flag::FactorChange { change } => write!(
                 f,
@@ -1497,6 +1498,15 @@ mod tests {
             let h = mon.observe(&blue, 0.1);
             assert!(has(&h.flags, "colour-shift"), "{:?}", h.flags);
         }
+    }
+
+    /// A share past the median's breakdown point is not "near" it.
+    #[test]
+    fn contamination_past_half_is_said_to_be_past_it() {
+        let past = Flag::Contamination { share: 0.94 }.to_string();
+        assert!(past.contains("94 % is past the 50 %"), "{past}");
+        let near = Flag::Contamination { share: 0.42 }.to_string();
+        assert!(near.contains("42 % is near the 50 %"), "{near}");
     }
 
     #[test]

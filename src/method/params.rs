@@ -188,10 +188,11 @@ pub enum InvalidConfig {
 pub(crate) const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
      default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
 
-/// `" (did you mean 0.2, 20 %?)"` for a contamination given in per cent (from 1 to 100), else nothing.
+/// For a contamination given in per cent (`--contamination 20`): `" (did you mean 0.2, that is 20 %?)"`; else
+/// nothing. A share is a number below 1, so 1 to 100 reads as per cent.
 fn percent_hint(c: f64) -> String {
-    match (1.0..=100.0).contains(&c) && c / 100.0 < 0.5 {
-        true => format!(" (did you mean {}, {c} %?)", c / 100.0),
+    match (1.0..=100.0).contains(&c) {
+        true => format!(" (did you mean {}, that is {c} %?)", c / 100.0),
         false => String::new(),
     }
 }

@@ -7,6 +7,9 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+
 /// A transfer curve between stored values `v` and linear light `L`, both in `[0, 1]`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
@@ -214,58 +217,13 @@ impl Curve {
         }
     }
 
-    /// [`Curve::code`] of 8 values at once, the same codes bit for bit (tested), for a non-linear curve. The
-    /// codes come back as `i32` lanes. Curves with at most one threshold inside a bucket take one gather of the
-    /// packed bucket table (start and the low bits of the threshold inside the bucket); the others gather the
-    /// bucket start, then step up the thresholds (a second, dependent gather per step). For a 12 MP 8-bit sRGB
-    /// photo the packed table took the correction from 71–73 ms to 60–62 ms on one core.
-    ///
-    /// # Safety
-    /// The CPU must have AVX2, and the curve must not be linear (it has thresholds).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub unsafe fn codes_avx2(&self, l: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256i {
-        use std::arch::x86_64::*;
-        debug_assert!(!self.thresholds.is_empty());
-        let n = self.thresholds.len() as i32;
-        let nv = _mm256_set1_epi32(n);
-        // l ≥ thresholds[0] (false for NaN and everything below): otherwise the code is 0.
-        let valid = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GE_OQ>(
-            l,
-            _mm256_set1_ps(self.thresholds[0]),
-        ));
-        let b = _mm256_sub_epi32(
-            _mm256_srl_epi32(_mm256_castps_si256(l), _mm_cvtsi32_si128(self.shift as i32)),
-            _mm256_set1_epi32(self.base as i32),
-        );
-        // Buckets past the table: every threshold is below (the largest code).
-        let in_table = _mm256_cmpgt_epi32(_mm256_set1_epi32(self.start.len() as i32), b);
-        let use_b = _mm256_and_si256(valid, in_table);
-        let bi = _mm256_and_si256(b, use_b);
-        if !self.packed.is_empty() {
-            // One gather: the bucket's start and the low bits of the threshold inside it (see `packed`).
-            let e = _mm256_i32gather_epi32::<4>(self.packed.as_ptr(), bi);
-            let start = _mm256_srli_epi32::<16>(e);
-            let low = _mm256_and_si256(e, _mm256_set1_epi32(0xFFFF));
-            let mask = _mm256_set1_epi32(((1u32 << self.shift) - 1) as i32);
-            let l_low = _mm256_and_si256(_mm256_castps_si256(l), mask);
-            // low(l) ≥ low ⇔ low(l) > low − 1 (all below 2¹⁶: no overflow); the compare gives −1 where true.
-            let above = _mm256_cmpgt_epi32(l_low, _mm256_sub_epi32(low, _mm256_set1_epi32(1)));
-            let i = _mm256_sub_epi32(start, above);
-            let top = _mm256_blendv_epi8(nv, i, in_table);
-            return _mm256_and_si256(top, valid);
-        }
-        let mut i = _mm256_i32gather_epi32::<4>(self.start32.as_ptr(), bi);
-        let last = _mm256_set1_epi32(n - 1);
-        for _ in 0..self.max_steps {
-            let idx = _mm256_min_epi32(i, last);
-            let t = _mm256_i32gather_ps::<4>(self.thresholds.as_ptr(), idx);
-            let below = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(t, l));
-            let step = _mm256_and_si256(below, _mm256_cmpgt_epi32(nv, i));
-            i = _mm256_sub_epi32(i, step);
-        }
-        let top = _mm256_blendv_epi8(nv, i, in_table);
-        _mm256_and_si256(top, valid)
+    /// Whether the vector codes (`Curve::codes_avx2`, x86-64) can run on this curve: it has thresholds and a
+    /// bucket table. A curve whose first threshold rounds to 0 in `f32` (`gamma:9` and steeper at 16 bits) has
+    /// none.
+    #[inline]
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    pub(crate) fn has_vector_codes(&self) -> bool {
+        !self.thresholds.is_empty() && !self.start.is_empty()
     }
 
     /// The stored code nearest to `l` by binary search over the thresholds (the definition [`Curve::code`] must
@@ -334,7 +292,10 @@ impl Curve {
         let b = ((l.to_bits() >> self.shift) - self.base) as usize;
         let mut i = match self.start.get(b) {
             Some(&i) => i as usize,
-            None => return self.thresholds.len() as u16,
+            // Past the table: every threshold is below.
+            None if !self.start.is_empty() => return self.thresholds.len() as u16,
+            // No table (the first threshold is 0 in f32: gamma:9 and steeper at 16 bits).
+            None => return self.code_by_search(l),
         };
         while i < self.thresholds.len() && self.thresholds[i] <= l {
             i += 1;
@@ -350,11 +311,10 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn vector_codes_equal_scalar_codes() {
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        let Some(avx2) = crate::simd::Avx2::detect() else {
             eprintln!("no AVX2 on this CPU: vector codes not tested");
             return;
-        }
-        use std::arch::x86_64::*;
+        };
         let mut next = crate::method::xorshift32(0x2468_ACE1);
         let mut packed_seen = [false; 2];
         for (t, levels) in [
@@ -400,10 +360,10 @@ mod tests {
                 vals.push(f32::from_bits(next()));
             }
             for chunk in vals.chunks_exact(8) {
-                let got: [i32; 8] = unsafe {
-                    let v = c.codes_avx2(_mm256_loadu_ps(chunk.as_ptr()));
-                    std::mem::transmute(v)
-                };
+                assert!(c.has_vector_codes());
+                // SAFETY: the curve has vector codes (asserted above).
+                let v = unsafe { c.codes_avx2(avx2, avx2.load_ps(chunk)) };
+                let got = avx2.to_epi32(v);
                 for (x, g) in chunk.iter().zip(got) {
                     assert_eq!(
                         g as u16,
@@ -416,6 +376,36 @@ mod tests {
             }
         }
         assert_eq!(packed_seen, [true, true], "both vector paths tested");
+    }
+
+    /// A curve so steep at 16 bits that its first threshold is 0 in `f32` has no bucket table: its codes are the
+    /// binary search's (every value used to get the largest code), and the vector codes are not offered for it
+    /// (their gathers would read an empty table).
+    #[test]
+    fn a_curve_without_a_bucket_table_codes_by_search() {
+        for g in [9.0f32, 10.0] {
+            let c = Curve::new(Transfer::Gamma(g), 65536);
+            assert_eq!(c.thresholds[0], 0.0, "gamma {g}");
+            assert!(!c.has_vector_codes(), "gamma {g}");
+            for l in [
+                0.0f32,
+                1e-30,
+                1e-6,
+                0.01,
+                0.2,
+                0.5,
+                0.9,
+                1.0,
+                2.0,
+                -1.0,
+                f32::NAN,
+            ] {
+                assert_eq!(c.code(l), c.code_by_search(l), "gamma {g}, {l}");
+            }
+            assert!(c.code(0.2) < 65535, "gamma {g}");
+        }
+        assert!(Curve::new(Transfer::Srgb, 65536).has_vector_codes());
+        assert!(!Curve::new(Transfer::Linear, 256).has_vector_codes());
     }
 
     #[test]

@@ -63,20 +63,54 @@ pub fn fingerprint(opts: &Options) -> serde_json::Value {
     v
 }
 
-/// Names of the top-level keys whose values differ between two fingerprints.
+/// The options whose values differ between two fingerprints (`a` the earlier run's), each as a user gave it: the
+/// flag, with the earlier and this run's value (`--window 9 before, 5 now`).
 fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
     let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {
-        return vec!["(all)".into()];
+        return vec!["all options".into()];
     };
-    let mut keys: Vec<String> = a
+    let mut keys: Vec<&String> = a
         .keys()
         .chain(b.keys())
         .filter(|k| a.get(*k) != b.get(*k))
-        .cloned()
         .collect();
     keys.sort();
     keys.dedup();
-    keys
+    // An option left out reads as the command line says it: auto, the input's, or none.
+    let shown = |k: &str, v: Option<&serde_json::Value>| match v {
+        None | Some(serde_json::Value::Null) => match k {
+            "downsample" | "near-window" | "transfer" | "backscatter-scale" => "auto".to_string(),
+            "jpeg-quality" | "jpeg-subsampling" => "the input's".to_string(),
+            _ => "none".to_string(),
+        },
+        Some(serde_json::Value::String(s)) => s.clone(),
+        Some(v) => v.to_string(),
+    };
+    keys.into_iter()
+        .map(|k| {
+            // The window in effect, however it was given (--window, --contamination or auto).
+            let flag = match k.as_str() {
+                "window-in-effect" => "--window".to_string(),
+                k => format!("--{k}"),
+            };
+            format!(
+                "{flag} {} before, {} now",
+                shown(k, a.get(k)),
+                shown(k, b.get(k))
+            )
+        })
+        .collect()
+}
+
+/// Whether `out` holds a file written by an earlier run (anything but `_abysslight` and temp files): a corrected
+/// photo this run's could mix with.
+fn holds_outputs(out: &Path) -> bool {
+    walkdir::WalkDir::new(out)
+        .follow_links(false)
+        .into_iter()
+        .filter_entry(|e| e.depth() != 1 || e.file_name() != crate::io::WORK_DIR)
+        .flatten()
+        .any(|e| !e.file_type().is_dir() && !e.file_name().to_string_lossy().ends_with(TEMP_SUFFIX))
 }
 
 /// The locks a run holds (see [`acquire`]); the operating system releases them when the process ends, however it
@@ -196,32 +230,41 @@ fn check_options(opts: &Options, work_dir: &Path, fp: &serde_json::Value) -> Res
                     reason: format!("unreadable record of an earlier run's options: {e}"),
                 })?;
             let diff = differing(&old, fp);
-            if !diff.is_empty() {
-                return Err(Error::Usage(format!(
-                    "{} was written by a run with other options ({} differ; recorded in {}): its photos would \
-                     mix with this run's{}. Use the same options, or another --out",
-                    work_dir.parent().unwrap_or(work_dir).display(),
-                    diff.join(", "),
-                    recorded.display(),
-                    if opts.resume {
-                        " (--resume keeps the photos already there)"
-                    } else {
-                        ""
-                    }
-                )));
+            if diff.is_empty() {
+                return Ok(());
             }
-            Ok(())
+            let out = work_dir.parent().unwrap_or(work_dir);
+            // A plain run holds the folder alone: where the earlier run wrote no photo (it stopped at a bad
+            // option or folder), nothing would mix, and this run's options replace the record.
+            if opts.shard.is_none() && !holds_outputs(out) {
+                return record(&recorded, fp);
+            }
+            Err(Error::Usage(format!(
+                "{} holds photos of a run with other options ({}; recorded in {}): its photos would mix with \
+                 this run's{}. Use the same options, or another --out",
+                out.display(),
+                diff.join("; "),
+                recorded.display(),
+                if opts.resume {
+                    " (--resume keeps the photos already there)"
+                } else {
+                    ""
+                }
+            )))
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            let text = serde_json::to_string_pretty(fp).unwrap_or_default();
-            crate::io::write_with(&recorded, |w| {
-                use std::io::Write;
-                w.write_all(text.as_bytes())
-                    .map_err(|e| Error::io(&recorded, e))
-            })
-        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => record(&recorded, fp),
         Err(e) => Err(Error::io(&recorded, e)),
     }
+}
+
+/// Write the fingerprint `fp` to `recorded` (atomically).
+fn record(recorded: &Path, fp: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(fp).unwrap_or_default();
+    crate::io::write_with(recorded, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())
+            .map_err(|e| Error::io(recorded, e))
+    })
 }
 
 /// Delete abysslight temp files (`.<name>.<random>.abysslight-tmp`) below `out`, not following links and not
@@ -328,6 +371,8 @@ mod tests {
         std::fs::create_dir_all(&work).unwrap();
         let o = opts(&out);
         drop(acquire(&o, &work).unwrap());
+        // The first run wrote a photo.
+        std::fs::write(out.join("IMG_1.png"), b"x").unwrap();
         // Options that do not change the pixels are free to differ.
         let more_threads = Options {
             threads: Some(3),
@@ -363,6 +408,49 @@ mod tests {
             assert!(e.contains(key) && e.contains("other options"), "{e}");
             drop(acquire(&o, &work).expect("a refused run leaves no lock held"));
         }
+        // Named as flags, with both values.
+        let e = acquire(
+            &Options {
+                window: Some(9),
+                ..o.clone()
+            },
+            &work,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("--window 7 before, 9 now"), "{e}");
+        assert!(!e.contains("window-in-effect"), "{e}");
+    }
+
+    /// A run that wrote no photo (it stopped at a bad folder) leaves nothing that blocks the next: a plain run
+    /// with other options replaces its record. A shard, which runs beside others, still may not.
+    #[test]
+    fn a_run_that_wrote_no_photo_does_not_block_the_next() {
+        let d = tempfile::tempdir().unwrap();
+        let out = d.path().join("out");
+        let work = out.join("_abysslight");
+        std::fs::create_dir_all(&work).unwrap();
+        let o = opts(&out);
+        drop(acquire(&o, &work).unwrap());
+        // Its own files and a temp file of a killed write are not photos.
+        std::fs::write(work.join("report.json"), b"{}").unwrap();
+        std::fs::write(out.join(".IMG_1.png.a1.abysslight-tmp"), b"x").unwrap();
+        let other = Options {
+            window: Some(9),
+            ..o.clone()
+        };
+        let shard = Options {
+            shard: Some("1/2".parse().unwrap()),
+            ..other.clone()
+        };
+        assert!(acquire(&shard, &work).is_err(), "a shard is refused");
+        drop(acquire(&other, &work).expect("nothing written, nothing to mix"));
+        let recorded = std::fs::read_to_string(work.join("options.json")).unwrap();
+        assert!(recorded.contains("\"window-in-effect\": 9"), "{recorded}");
+        // Once a photo is there, other options are refused again.
+        std::fs::create_dir_all(out.join("leg1")).unwrap();
+        std::fs::write(out.join("leg1/IMG_2.png"), b"x").unwrap();
+        assert!(acquire(&o, &work).is_err());
     }
 
     #[test]

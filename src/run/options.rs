@@ -304,14 +304,52 @@ impl Default for Options {
 /// The breakdown probability `P_half` accepted when `--contamination` chooses the window (the paper's 1 %).
 pub const DEFAULT_RISK: f64 = 0.01;
 
+/// The switches the command line turns off with `--no-…`, by their config-file keys.
+const SWITCHES: [&str; 4] = ["level-exposures", "photo-gain", "denoise", "level-by-light"];
+
+/// Turn a config file's `no-denoise = true` (and the other `--no-…` switches) into `denoise = false`; whether any
+/// was there. An error where the value is not true or false, or where `denoise` says otherwise.
+fn negated_switches(table: &mut toml::Table) -> Result<bool, String> {
+    let mut any = false;
+    for key in SWITCHES {
+        let no = format!("no-{key}");
+        let Some(v) = table.remove(&no) else {
+            continue;
+        };
+        let off = v
+            .as_bool()
+            .ok_or_else(|| format!("{no} must be true or false, got {v}"))?;
+        if let Some(on) = table.get(key) {
+            if on.as_bool() != Some(!off) {
+                return Err(format!(
+                    "{no} = {off} and {key} = {on} contradict each other: give one"
+                ));
+            }
+        }
+        table.insert(key.to_string(), toml::Value::Boolean(!off));
+        any = true;
+    }
+    Ok(any)
+}
+
 impl Options {
     /// Read options from a TOML file. Relative paths in it are taken relative to the file's folder.
     pub fn from_toml_file(path: &Path) -> Result<Options, Error> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let mut opts: Options = toml::from_str(&text).map_err(|e| Error::Config {
+        let config = |reason: String| Error::Config {
             path: path.to_owned(),
-            reason: e.to_string(),
-        })?;
+            reason,
+        };
+        let mut table: toml::Table = toml::from_str(&text).map_err(|e| config(e.to_string()))?;
+        // The switches as the command line spells them (`no-denoise = true`), as well as `denoise = false`.
+        let mut opts: Options = if negated_switches(&mut table).map_err(config)? {
+            table
+                .try_into()
+                .map_err(|e: toml::de::Error| config(e.to_string()))?
+        } else {
+            // Straight from the text, so that an error names its line.
+            toml::from_str(&text).map_err(|e| config(e.to_string()))?
+        };
         let base = path.parent().unwrap_or(Path::new("."));
         for p in [
             &mut opts.water_column,
@@ -632,6 +670,35 @@ impl Options {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A config file takes the switches as the command line spells them (`no-denoise = true`); a value that is
+    /// not a boolean, or that contradicts the positive key, is an error naming both.
+    #[test]
+    fn config_files_take_the_no_switches() {
+        let d = tempfile::tempdir().unwrap();
+        let file = d.path().join("dive.toml");
+        let read = |text: &str| {
+            std::fs::write(&file, text).unwrap();
+            Options::from_toml_file(&file)
+        };
+        let o =
+            read("no-denoise = true\nno-photo-gain = false\nno-level-by-light = true\n").unwrap();
+        assert!(!o.denoise && o.photo_gain && !o.level_by_light && o.level_exposures);
+        let o = read("no-level-exposures = true\nlevel-exposures = false\n").unwrap();
+        assert!(!o.level_exposures);
+        let e = read("no-denoise = true\ndenoise = true\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no-denoise") && e.contains("denoise = true"),
+            "{e}"
+        );
+        let e = read("no-denoise = 1\n").unwrap_err().to_string();
+        assert!(e.contains("no-denoise must be true or false"), "{e}");
+        // Other errors still name their line.
+        let e = read("window = 7\nbogus = 1\n").unwrap_err().to_string();
+        assert!(e.contains("bogus") && e.contains('2'), "{e}");
+    }
 
     #[test]
     fn colour_forms() {

@@ -88,6 +88,13 @@ impl Frame {
     }
 }
 
+/// A panel's title in lines that fit between the value axis and the right edge (a long title on the narrowest
+/// overview, 600 pixels of plot, was cut off): one line, or two in the panel's title band.
+fn title_lines(title: &str, f: &Frame) -> Vec<String> {
+    let chars = ((f.plot_w + 20 - 4) / 8).max(1) as usize;
+    wrap(title, chars).into_iter().take(2).collect()
+}
+
 /// Positions (0-based) of the ticks of the photo axis for `photos` photos: the first, then every `step` photos,
 /// `step` 1, 2 or 5 times a power of ten, at most 10 steps.
 fn photo_ticks(photos: usize) -> Vec<usize> {
@@ -128,7 +135,8 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
         "abysslight: {} photos, {flagged} flagged (red)",
         frames.len()
     );
-    let scale = if draw::text_width(&title, 2) as i64 + f.left < width as i64 {
+    // Scale 2 where it fits with the right margin.
+    let scale = if draw::text_width(&title, 2) as i64 + f.left + 10 <= width as i64 {
         2
     } else {
         1
@@ -147,7 +155,9 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
 /// One panel of the overview, its title at `top`: flagged bands, the axes with their ticks and labels (the photo
 /// axis labelled with the photos' numbers in the mission), the threshold and the series.
 fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top: i64) {
-    draw::text(img, f.left, top + 4, s.title, 1, BLACK);
+    for (k, line) in title_lines(s.title, f).iter().enumerate() {
+        draw::text(img, f.left, top + 1 + 10 * k as i64, line, 1, BLACK);
+    }
     let (y0, h) = (top + f.title_h, f.panel_h);
     let vmax = s
         .values
@@ -369,9 +379,16 @@ fn read_report(output: &Path) -> Option<serde_json::Value> {
 fn skipped_reason(report: &Option<serde_json::Value>, relative: &Path) -> String {
     let errors = report.as_ref().and_then(|r| r.get("errors")?.as_array());
     let message = errors.into_iter().flatten().find_map(|e| {
-        let path = Path::new(e.get("path")?.as_str()?);
-        path.ends_with(relative)
-            .then(|| e.get("message")?.as_str().map(str::to_owned))
+        let full = e.get("path")?.as_str()?;
+        // The message names the photo by the run's path (often absolute, of the machine that ran it): by its
+        // name in the survey instead.
+        Path::new(full)
+            .ends_with(relative)
+            .then(|| {
+                e.get("message")?
+                    .as_str()
+                    .map(|m| m.replace(full, &relative.display().to_string()))
+            })
             .flatten()
     });
     message.unwrap_or_else(|| match report {
@@ -541,6 +558,40 @@ pub fn save_png(img: &RgbImage, path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every panel title of the narrowest overview fits inside the picture, whole.
+    #[test]
+    fn overview_titles_fit_the_narrowest_overview() {
+        let f = Frame {
+            left: 70,
+            plot_w: 600,
+            panel_h: 130,
+            title_h: 22,
+            gap: 30,
+            photos: 20,
+        };
+        let width = f.left + f.plot_w + 20;
+        for s in overview_series(&[], &Thresholds::default()) {
+            let lines = title_lines(s.title, &f);
+            assert!(lines.len() <= 2, "{lines:?}");
+            assert_eq!(lines.join(" "), s.title, "nothing cut off");
+            for l in &lines {
+                assert!(f.left + draw::text_width(l, 1) as i64 <= width - 4, "{l}");
+            }
+        }
+    }
+
+    /// A skipped photo's tile names it by its place in the survey, not by the absolute path of the machine that
+    /// ran (which the report's message carries).
+    #[test]
+    fn a_skipped_photo_is_named_by_its_place_in_the_survey() {
+        let report = serde_json::json!({"errors": [
+            {"path": "/home/someone/dive042/survey/leg1/IMG_0003.png",
+             "message": "/home/someone/dive042/survey/leg1/IMG_0003.png: truncated (1200 of 40000 bytes)"}
+        ]});
+        let why = skipped_reason(&Some(report), Path::new("leg1/IMG_0003.png"));
+        assert_eq!(why, "leg1/IMG_0003.png: truncated (1200 of 40000 bytes)");
+    }
 
     #[test]
     fn factor_preview_maps_the_995th_percentile_to_white_and_enlarges() {

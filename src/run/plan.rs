@@ -72,6 +72,7 @@ impl Plan {
         let stdin = survey == Path::new("-");
         let stdout = out == Path::new("-");
         let streaming = stdin || opts.watch;
+        inputs_exist(opts, streaming)?;
         // Outputs never equal, lie in or contain an input; no link inside --out (src/io/paths.rs).
         let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
@@ -233,6 +234,16 @@ impl Plan {
         }
         let photos = &self.found.photos;
         let mut found = checks::other_sizes(photos, self.photo_size);
+        let frames = match (&opts.scatter, &opts.water_column) {
+            (None, Some(dir)) => find_photos(dir).map(|f| f.photos).unwrap_or_default(),
+            _ => Vec::new(),
+        };
+        found.extend(checks::water_sizes(
+            &frames,
+            opts.scatter.as_deref(),
+            self.photo_size,
+            opts.water_column.as_deref(),
+        ));
         found.extend(checks::mixed_formats(photos));
         found.extend(checks::too_few(
             photos.len(),
@@ -333,8 +344,13 @@ impl Plan {
                 (None, None) => "none (no --water-column or --scatter: S = 0)".into(),
             }
         ));
+        // `abyss` floors F relative to each photo's lit level (--relative-floor), the others at --factor-floor.
+        let floor = match opts.method {
+            Method::Abyss => format!("relative floor {}", opts.relative_floor),
+            _ => format!("factor floor {}", opts.factor_floor),
+        };
         line(format!(
-            "method: {}, blocks {}, seafloor colour {}, transfer {}, factor floor {}",
+            "method: {}, blocks {}, seafloor colour {}, transfer {}, {floor}",
             opts.method,
             match (params.downsample, facts.blocks_why(&given)) {
                 (k, Some(why)) if k > 0 => format!("{k}x{k} (auto: {why})"),
@@ -346,7 +362,6 @@ impl Plan {
                 Some(why) => format!("auto, {why}"),
                 None => params.curve().to_string(),
             },
-            opts.factor_floor
         ));
         for l in self.describe_checks(opts, params.downsample) {
             line(l);
@@ -363,7 +378,7 @@ impl Plan {
             .collect();
         if !self.streaming {
             lines.push(match lines.len() {
-                0 => "checks: photo sizes, formats, window, one dive, disk: nothing found"
+                0 => "checks: photo sizes, water-column size, formats, window, one dive, disk: nothing found"
                     .to_string(),
                 k => format!(
                     "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"
@@ -453,6 +468,26 @@ impl Plan {
 }
 
 /// The survey photos found (none when streaming), or why there are none to correct.
+/// The input folders and files of a run are there, each named by its flag where not (the path checks after it
+/// name only the path).
+fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
+    let inputs = [
+        ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
+        ("--water-column", opts.water_column.as_deref()),
+        ("--scatter", opts.scatter.as_deref()),
+        ("--mask", opts.mask.as_deref()),
+    ];
+    for (flag, path) in inputs {
+        if let Some(p) = path.filter(|p| !p.exists()) {
+            return Err(Error::Usage(format!(
+                "{flag} {}: no such file or folder",
+                p.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Result<Found> {
     // Baseline `--method mean` needs the whole mission's mean before the stream.
     if streaming && opts.method == Method::Mean {
@@ -475,9 +510,9 @@ fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Re
     let found = find_photos_excluding(survey, &[out])?;
     if found.photos.is_empty() {
         return Err(Error::Usage(format!(
-            "no photos ({}) found below {}",
+            "--survey {}: no photos ({}) found below it",
+            survey.display(),
             io::PHOTO_EXTENSIONS.join(", "),
-            survey.display()
         )));
     }
     Ok(found)

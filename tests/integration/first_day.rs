@@ -68,7 +68,7 @@ fn dry_run_reports_what_would_go_wrong_and_writes_nothing() {
     let out = dry(&["--window", "5"]);
     assert!(!out.contains("warning"), "{out}");
     assert!(
-        out.contains("checks: photo sizes, formats, window, one dive, disk: nothing found"),
+        out.contains("checks: photo sizes, water-column size, formats, window, one dive, disk: nothing found"),
         "{out}"
     );
 }

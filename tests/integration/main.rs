@@ -25,6 +25,7 @@ mod jpeg_reference;
 mod live;
 mod merge_shards;
 mod metadata;
+mod newcomer;
 mod nodules;
 mod one_method;
 mod real_photos;

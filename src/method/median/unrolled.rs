@@ -233,7 +233,7 @@ fn columns<T: Copy + Ord + Default, const W: usize, const KK: usize>(v: &mut [T]
 
 /// [`columns`] for the `kk` the kernel has a network for (`false`: none, `v` untouched).
 #[inline(always)]
-fn columns_of<T: Copy + Ord + Default, const W: usize>(
+pub(super) fn columns_of<T: Copy + Ord + Default, const W: usize>(
     v: &mut [T],
     kk: usize,
     lanes: usize,
@@ -280,22 +280,10 @@ fn dispatch<T: Copy + Ord + Default, const WIDE: usize, const NARROW: usize>(
     lanes: usize,
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked above).
-        return unsafe { columns_avx2::<T, WIDE>(v, kk, lanes) };
+    if let Some(t) = crate::simd::Avx2::detect() {
+        return super::avx2::columns::<T, WIDE>(t, v, kk, lanes);
     }
     columns_of::<T, NARROW>(v, kk, lanes)
-}
-
-/// [`columns_of`] compiled with AVX2 enabled.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn columns_avx2<T: Copy + Ord + Default, const W: usize>(
-    v: &mut [T],
-    kk: usize,
-    lanes: usize,
-) -> bool {
-    columns_of::<T, W>(v, kk, lanes)
 }
 
 #[cfg(test)]

@@ -61,6 +61,53 @@ pub(crate) fn other_sizes(photos: &[Entry], size: Option<(usize, usize)>) -> Vec
     found
 }
 
+/// Water-column frames of another size than the mission's photos `size` (`S` cannot be subtracted from photos of
+/// another size: left out of `S`, and with none of the mission's size the run stops), and a `--scatter` image of
+/// another size. Reads every frame's header.
+pub(crate) fn water_sizes(
+    frames: &[Entry],
+    scatter: Option<&Path>,
+    size: Option<(usize, usize)>,
+    dir: Option<&Path>,
+) -> Vec<String> {
+    let Some((w, h)) = size else {
+        return Vec::new();
+    };
+    if let Some(p) = scatter {
+        return match header_size(p) {
+            Ok((sw, sh)) if (sw, sh) != (w, h) => vec![format!(
+                "the scatter image {} is {sw}x{sh}, the survey photos {w}x{h}: the run would stop; give the \
+                 scatter image of a run on photos of this size, or --water-column",
+                p.display()
+            )],
+            _ => Vec::new(),
+        };
+    }
+    let sizes: Vec<(usize, usize)> = frames
+        .iter()
+        .filter_map(|e| header_size(&e.path).ok())
+        .collect();
+    let other: Vec<&(usize, usize)> = sizes.iter().filter(|&&s| s != (w, h)).collect();
+    let Some((ow, oh)) = other.first() else {
+        return Vec::new();
+    };
+    let dir = dir.map_or(String::new(), |d| format!(" in {}", d.display()));
+    if other.len() == sizes.len() {
+        vec![format!(
+            "the water-column frames{dir} are {ow}x{oh}, the survey photos {w}x{h}: S cannot be subtracted from \
+             photos of another size, and the run would stop; give frames of the survey camera at the survey's \
+             size (the descent of the same dive), or no --water-column (S = 0)"
+        )]
+    } else {
+        vec![format!(
+            "{} of {} water-column frames{dir} are of another size than the survey's {w}x{h} (such as {ow}x{oh}): \
+             left out of S",
+            other.len(),
+            sizes.len()
+        )]
+    }
+}
+
 /// The file format of a photo by its name: JPEG, PNG or TIFF.
 fn format_name(p: &Path) -> &'static str {
     match p
