@@ -1356,19 +1356,3 @@ fn parse_transfer(s: &str) -> Result<TransferArg, String> {
     }
     s.parse::<Transfer>().map(|t| TransferArg(Some(t)))
 }
-
-/// `abysslight correct`'s options from its arguments (`args` starts with the program's name and `correct`), as the
-/// command would run them: the Python binding's options go through here. The error is the command's message and
-/// whether an argument was unknown (otherwise a value was bad).
-pub fn correct_options(
-    args: impl IntoIterator<Item = std::ffi::OsString>,
-) -> Result<Options, (bool, String)> {
-    let cli = Cli::try_parse_from(args).map_err(|e| {
-        let unknown = e.kind() == clap::error::ErrorKind::UnknownArgument;
-        (unknown, e.render().to_string())
-    })?;
-    match cli.command {
-        Command::Correct(a) => options_from(&a).map_err(|e| (false, e.to_string())),
-        _ => Err((false, "expected the correct command".into())),
-    }
-}
