@@ -12,18 +12,32 @@ numpy arrays in, numpy arrays out::
     for c in engine.finish():
         corrected[c.tag] = c.image
 
+a list of arrays in one call::
+
+    corrected = abysslight.correct_arrays(photos, water_column=water_column_frames, transfer="srgb")
+
 or a whole mission from folders to folders, as ``abysslight correct`` runs it::
 
     report = abysslight.correct(water_column="descent", survey="survey", out="corrected")
 
-Options are the command's long names with ``_`` (``window=9``, ``method="paper"``); none given are the command's
-defaults. See docs/python.md.
+Options are the command's options by the config file's names with ``_`` (``window=9``, ``method="paper"``); none
+given are the command's defaults. See docs/python.md.
 """
 
 from typing import Any, Callable, Dict, Optional
 
 from . import _abysslight
-from ._abysslight import Corrected, Engine, Mask, Scatter, __version__, evaluate, read, simulate
+from ._abysslight import (
+    Corrected,
+    Engine,
+    Mask,
+    Scatter,
+    __version__,
+    correct_arrays,
+    evaluate,
+    read,
+    simulate,
+)
 
 __all__ = [
     "Corrected",
@@ -31,6 +45,7 @@ __all__ = [
     "Mask",
     "Scatter",
     "correct",
+    "correct_arrays",
     "evaluate",
     "read",
     "simulate",
@@ -71,11 +86,13 @@ def correct(
 ) -> Dict[str, Any]:
     """Run ``abysslight correct``: correct the photos of the folder ``survey`` into ``out``, with ``S`` from the
     water-column frames in ``water_column`` (or ``scatter="scatter.png"``), and return the run report (what
-    ``out/_abysslight/report.json`` holds) as a dict.
+    ``out/_abysslight/report.json`` holds) as a dict. With ``cruise="CRUISE"`` (instead of ``survey`` and
+    ``water_column``) every dive of the cruise into ``out/<dive>``, and ``{"dives": {name: report}, "failed":
+    {name: message}}``.
 
-    ``options`` are the command's long names with ``_`` (``window=9``, ``method="paper"``, ``transfer="srgb"``,
-    ``resume=True``, ``config="dive.toml"``); none given are the command's defaults. Flags that turn something off
-    are ``no_denoise=True`` or ``denoise=False``.
+    ``options`` are the command's options by the config file's names with ``_`` (``window=9``, ``method="paper"``,
+    ``transfer="srgb"``, ``resume=True``); ``config="dive.toml"`` is read first and the keywords override it. None
+    given are the command's defaults. Switches are ``denoise=False`` or ``no_denoise=True``.
 
     ``progress``: a callable ``progress(done, total, path, ok)`` called after each photo; ``None`` (default) shows a
     tqdm bar when tqdm is installed; ``False``: nothing. Stages and warnings go to the ``abysslight`` logger.
@@ -84,8 +101,8 @@ def correct(
     written so far are complete and ``resume=True`` finishes the run. An exception raised by ``progress`` stops it
     the same way and is raised here.
 
-    Raises TypeError for an unknown option, ValueError for a bad value (with the command's message), OSError when a
-    folder cannot be read.
+    Raises TypeError for an unknown option (naming the accepted ones) or a value of the wrong type, ValueError for a
+    bad value (with the command's message), OSError when a folder cannot be read.
     """
     close: Callable[[], None] = lambda: None
     if progress is None:

@@ -9,14 +9,17 @@ import numpy.typing as npt
 __version__: str
 
 PathLike = Union[str, "os.PathLike[str]"]
-PhotoArray = Union[npt.NDArray[np.uint8], npt.NDArray[np.uint16]]
+PhotoArray = Union[
+    npt.NDArray[np.uint8], npt.NDArray[np.uint16], npt.NDArray[np.float32], npt.NDArray[np.float64]
+]
+"""HxWx3 or HxW: uint8/uint16 as stored, or float32/float64 light levels in 0..1 (any byte order)."""
 
 class Scatter:
     """The backscatter image S: the per-pixel temporal median of water-column frames."""
 
     @staticmethod
     def from_frames(frames: Iterable[PhotoArray]) -> "Scatter":
-        """S from water-column frames in memory (HxWx3 or HxW, uint8 or uint16, all of one shape)."""
+        """S from water-column frames in memory (HxWx3 or HxW arrays of one shape and dtype)."""
     @staticmethod
     def from_files(files: Union[PathLike, Sequence[PathLike]], memory_mib: int = 2048) -> "Scatter":
         """S from a folder of water-column frames (searched recursively) or a list of files."""
@@ -69,12 +72,15 @@ class Corrected:
 class Engine:
     """The method over a stream of photos in memory; memory bounded by the window.
 
-    Options are `abysslight correct`'s method options by their long names with '_': window, contamination,
-    risk, downsample, near_window, seafloor_colour, factor_floor, transfer, method, degree, relative_floor,
-    level_exposures / no_level_exposures, photo_gain / no_photo_gain, backscatter_scale, denoise / no_denoise,
-    level_by_light / no_level_by_light, bright_spots. None given: the command's defaults. transfer="auto" (the default) means what the command assumes
-    for a file that declares no colour information: linear; give transfer="srgb" for arrays from JPEGs or
-    sRGB-encoded cameras.
+    Options are the method's options of `abysslight correct` (the config file's keys with '_'): window,
+    contamination, risk, downsample, near_window, seafloor_colour (or seafloor_color), factor_floor, transfer,
+    method, degree, relative_floor, level_exposures, photo_gain, backscatter_scale, denoise, level_by_light,
+    bright_spots, overlaps (and no_level_exposures, no_photo_gain, no_denoise, no_level_by_light). None given: the
+    command's defaults. transfer="auto" (the default) means what the command assumes for a file that declares no
+    colour information: linear; give transfer="srgb" for arrays from JPEGs or sRGB-encoded cameras.
+
+    One engine corrects one mission from one thread at a time: a photo after finish(), or a call while another
+    thread's call runs, raises RuntimeError.
     """
 
     def __init__(
@@ -86,9 +92,9 @@ class Engine:
     def push(self, photo: PhotoArray, tag: Any = None) -> List[Corrected]:
         """Give the next photo; returns the photos whose window became complete, in order (GIL released)."""
     def finish(self) -> List[Corrected]:
-        """Every photo still waiting, corrected with the window shifted back from the end."""
+        """Every photo still waiting, corrected with the window shifted back from the end; the mission's end."""
     @property
-    def window(self) -> int: ...
+    def window(self) -> Optional[int]: ...
     @property
     def downsample(self) -> int: ...
     @property
@@ -98,7 +104,17 @@ class Engine:
     @property
     def waiting(self) -> int: ...
 
-def correct(progress: Optional[Callable[[int, int, str, bool], Any]] = None, **options: Any) -> Dict[str, Any]: ...
+def correct_arrays(
+    photos: Iterable[PhotoArray],
+    water_column: Union[None, Scatter, Iterable[PhotoArray]] = None,
+    mask: Optional[Mask] = None,
+    **options: Any,
+) -> List[PhotoArray]:
+    """Correct a list of photos in one call through an Engine (the Engine's options); the corrected arrays in
+    order, each of its photo's shape and dtype. water_column: water-column frames, a Scatter, or None (S = 0)."""
+
+def correct(progress: Optional[Callable[[int, int, str, bool], Any]] = None, **options: Any) -> Dict[str, Any]:
+    """abysslight correct: the run report; with cruise=, {"dives": {name: report}, "failed": {name: message}}."""
 def run_cli(argv: List[str]) -> int:
     """Run the abysslight command with argv (argv[0] is the program's name); returns its exit status."""
 
@@ -117,7 +133,8 @@ def simulate(
     noise: float = 1.0,
 ) -> Dict[str, Any]:
     """A simulated dive in memory: {"survey": [arrays], "water_column": [arrays], "albedo": [float32 arrays],
-    "transfer": the curve the photos were encoded with}."""
+    "transfer": the curve the photos were encoded with}. The ranges of `abysslight simulate` (ValueError with
+    its messages); MemoryError when the dive cannot be held in memory."""
 
 def evaluate(
     sets: Sequence[Tuple[str, PathLike]],

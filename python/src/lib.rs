@@ -1,29 +1,43 @@
 //! The Python binding of abysslight: numpy arrays in, numpy arrays out, and the `abysslight` command.
 //!
-//! A thin layer over the library. Options are parsed by the command line's own parser
-//! ([`abysslight::cli::correct_options`]), so their names, defaults and error messages are the command's; the
-//! engine's parameters come from them as a run builds them ([`abysslight::Options::params`]). Long work
-//! runs with the GIL released. Errors come back as `TypeError`/`ValueError`/`OSError`, never as a panic.
+//! A thin layer over the library. Keyword arguments become [`abysslight::Options`] through its serde
+//! `Deserialize` (the config file's names and value forms, src/options.rs), checked by the command's own checks;
+//! the engine's parameters come from them as a run builds them ([`abysslight::Options::params`]). Long work runs
+//! with the GIL released. Errors come back as `TypeError`/`ValueError`/`OSError`/`MemoryError`/
+//! `KeyboardInterrupt`, never as a panic or an abort.
 
 mod arrays;
 mod options;
 mod progress;
 
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use abysslight::io::Entry;
-use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::exceptions::{
+    PyKeyboardInterrupt, PyMemoryError, PyOSError, PyRuntimeError, PyValueError,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use arrays::{array_from_photo, array_from_raster, photo_from_array, Shape};
 use options::{correct_kwargs, engine_kwargs};
 
-/// A library error as the Python exception a user expects: a file that cannot be read is an `OSError`, everything
-/// else (bad values, a photo of another size, a bad file) a `ValueError`, with the command's message.
+/// A library error as the Python exception a user expects: a file that cannot be read or written is an `OSError`
+/// (`FileNotFoundError`, `PermissionError`, ... by its errno), memory that cannot be had a `MemoryError`, an
+/// interrupted call a `KeyboardInterrupt`, everything else (bad values, a photo of another size, a bad file, and
+/// any kind of error added later) a `ValueError`, with the command's message.
 pub(crate) fn to_py(e: abysslight::Error) -> PyErr {
-    match e {
-        abysslight::Error::Io { .. } => PyOSError::new_err(e.to_string()),
+    use std::io::ErrorKind;
+    match &e {
+        abysslight::Error::Io { source, .. } => match source.kind() {
+            ErrorKind::OutOfMemory => PyMemoryError::new_err(e.to_string()),
+            ErrorKind::Interrupted => PyKeyboardInterrupt::new_err(e.to_string()),
+            _ => match source.raw_os_error() {
+                Some(errno) => PyOSError::new_err((errno, e.to_string())),
+                None => PyOSError::new_err(e.to_string()),
+            },
+        },
         _ => PyValueError::new_err(e.to_string()),
     }
 }
@@ -42,28 +56,10 @@ struct Scatter {
 
 #[pymethods]
 impl Scatter {
-    /// `S` from water-column frames held in memory (a list of HxWx3 or HxW uint8/uint16 arrays of one size).
+    /// `S` from water-column frames held in memory (a list of HxWx3 or HxW arrays of one size and dtype).
     #[staticmethod]
     fn from_frames(py: Python<'_>, frames: &Bound<'_, PyAny>) -> PyResult<Scatter> {
-        let mut photos = Vec::new();
-        let mut shape: Option<Shape> = None;
-        for (i, f) in frames.try_iter()?.enumerate() {
-            let (photo, s) = photo_from_array(&f?, &format!("frame {i}"))?;
-            if shape.is_some_and(|first| first != s) {
-                return Err(PyValueError::new_err(format!(
-                    "frame {i} is {}, the first frame is {}",
-                    s.describe(),
-                    shape.unwrap().describe()
-                )));
-            }
-            shape = Some(s);
-            photos.push(photo);
-        }
-        let s = py.allow_threads(|| abysslight::Scatter::from_frames(&photos));
-        match s.map_err(to_py)? {
-            Some(inner) => Ok(Scatter { inner }),
-            None => Err(PyValueError::new_err("no water-column frames given")),
-        }
+        scatter_from_frames(py, frames).map(|inner| Scatter { inner })
     }
 
     /// `S` from water-column frames on disk: a folder (searched as `--water-column` searches it) or a list of
@@ -130,6 +126,29 @@ impl Scatter {
             "Scatter({} from {} frames)",
             self.inner.layout, self.inner.frames
         )
+    }
+}
+
+/// `S` from arrays: each checked and copied as a photo is, all of one shape.
+fn scatter_from_frames(py: Python<'_>, frames: &Bound<'_, PyAny>) -> PyResult<abysslight::Scatter> {
+    let mut photos = Vec::new();
+    let mut shape: Option<Shape> = None;
+    for (i, f) in frames.try_iter()?.enumerate() {
+        let (photo, s) = photo_from_array(&f?, &format!("frame {i}"))?;
+        if let Some(first) = shape.filter(|&first| first != s) {
+            return Err(PyValueError::new_err(format!(
+                "frame {i} is {}, the first frame is {}",
+                s.describe(),
+                first.describe()
+            )));
+        }
+        shape = Some(s);
+        photos.push(photo);
+    }
+    let s = py.allow_threads(|| abysslight::Scatter::from_frames(&photos));
+    match s.map_err(to_py)? {
+        Some(inner) => Ok(inner),
+        None => Err(PyValueError::new_err("no water-column frames given")),
     }
 }
 
@@ -230,18 +249,46 @@ impl Corrected {
     }
 }
 
-/// The method over a stream of photos held in memory, with memory bounded by the window.
-#[pyclass(module = "abysslight._abysslight")]
+/// The method over a stream of photos held in memory, with memory bounded by the window. One engine corrects one
+/// mission, from one thread at a time: a call while another thread's call runs, or a photo after `finish()`, is a
+/// `RuntimeError` that says so.
+#[pyclass(module = "abysslight._abysslight", frozen)]
 struct Engine {
+    state: Mutex<EngineState>,
+    method: abysslight::Method,
+}
+
+struct EngineState {
     inner: abysslight::Engine<PyObject>,
-    /// The shape of the first photo (its rank is given back to every output).
+    /// The shape of the first photo (its rank and dtype are given back to every output).
     shape: Option<Shape>,
-    options: abysslight::Options,
+    /// `finish()` was called: the mission is over.
+    finished: bool,
+}
+
+/// An engine from the keyword options of `caller`: the method's options, `method="mean"` refused.
+fn new_engine<T>(
+    caller: &str,
+    scatter: Option<&abysslight::Scatter>,
+    mask: Option<abysslight::Mask>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(abysslight::Engine<T>, abysslight::Method)> {
+    let opts = engine_kwargs(options, caller)?;
+    // Arrays carry no file facts: `transfer="auto"` (the default) is what `--transfer auto` assumes for a file
+    // that declares nothing, linear; the engine resolves it (`Params::resolved`).
+    if opts.method == abysslight::Method::Mean {
+        return Err(PyValueError::new_err(
+            "method=\"mean\" needs the whole mission's mean image before the first photo; use correct()",
+        ));
+    }
+    let params = opts.params().map_err(to_py)?;
+    let inner = abysslight::Engine::new(params, scatter, mask).map_err(to_py)?;
+    Ok((inner, opts.method))
 }
 
 #[pymethods]
 impl Engine {
-    /// An engine with `correct`'s options by their long names with `_` (`window=9`, `method="paper"`,
+    /// An engine with `correct`'s method options by their names with `_` (`window=9`, `method="paper"`,
     /// `transfer="srgb"`); none given: the command's defaults.
     #[new]
     #[pyo3(signature = (scatter = None, mask = None, **options))]
@@ -250,37 +297,40 @@ impl Engine {
         mask: Option<PyRef<'_, Mask>>,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Engine> {
-        let opts = engine_kwargs(options)?;
-        // Arrays carry no file facts: `transfer="auto"` (the default) is what `--transfer auto` assumes for a
-        // file that declares nothing, linear; the engine resolves it (`Params::resolved`).
-        if opts.method == abysslight::Method::Mean {
-            return Err(PyValueError::new_err(
-                "method=\"mean\" needs the whole mission's mean image before the first photo; use correct()",
-            ));
-        }
-        let params = opts.params().map_err(to_py)?;
         let mask = mask.map(|m| m.inner.clone());
-        let inner = abysslight::Engine::new(params, scatter.as_ref().map(|s| &s.inner), mask)
-            .map_err(to_py)?;
+        let (inner, method) = new_engine(
+            "Engine()",
+            scatter.as_ref().map(|s| &s.inner),
+            mask,
+            options,
+        )?;
         Ok(Engine {
-            inner,
-            shape: None,
-            options: opts,
+            state: Mutex::new(EngineState {
+                inner,
+                shape: None,
+                finished: false,
+            }),
+            method,
         })
     }
 
-    /// Give the next photo (HxWx3 or HxW, uint8 or uint16) with a tag of your choice (e.g. its index or file
-    /// name). Returns the photos whose window became complete, in order. A photo of another size or dtype than
-    /// the first raises ValueError and leaves the engine as it was. The GIL is released while it works.
+    /// Give the next photo (HxWx3 or HxW; uint8, uint16, or float32/float64 in 0..1) with a tag of your choice
+    /// (e.g. its index or file name). Returns the photos whose window became complete, in order. A photo of
+    /// another size or dtype than the first raises ValueError and leaves the engine as it was. The GIL is released
+    /// while it works.
     #[pyo3(signature = (photo, tag = None))]
     fn push(
-        &mut self,
+        &self,
         py: Python<'_>,
         photo: &Bound<'_, PyAny>,
         tag: Option<PyObject>,
     ) -> PyResult<Vec<Corrected>> {
+        let mut state = self.state("push")?;
+        if state.finished {
+            return Err(finished("push"));
+        }
         let (photo, shape) = photo_from_array(photo, "photo")?;
-        if let Some(first) = self.shape {
+        if let Some(first) = state.shape {
             if first != shape {
                 return Err(PyValueError::new_err(format!(
                     "photo is {}, the mission's photos are {}",
@@ -290,79 +340,194 @@ impl Engine {
             }
         }
         let tag = tag.unwrap_or_else(|| py.None());
-        let inner = &mut self.inner;
+        let inner = &mut state.inner;
         let out = py.allow_threads(|| inner.push(photo, tag)).map_err(to_py)?;
-        self.shape.get_or_insert(shape);
-        out.into_iter().map(|c| self.corrected(py, c)).collect()
+        state.shape.get_or_insert(shape);
+        out.into_iter().map(|c| corrected(py, c, shape)).collect()
     }
 
     /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
-    fn finish(&mut self, py: Python<'_>) -> PyResult<Vec<Corrected>> {
-        let inner = &mut self.inner;
+    /// The engine takes no photo after it (one engine, one mission).
+    fn finish(&self, py: Python<'_>) -> PyResult<Vec<Corrected>> {
+        let mut state = self.state("finish")?;
+        if state.finished {
+            return Err(finished("finish"));
+        }
+        state.finished = true;
+        let inner = &mut state.inner;
         let out = py.allow_threads(|| inner.finish());
-        out.into_iter().map(|c| self.corrected(py, c)).collect()
+        let Some(shape) = state.shape else {
+            return Ok(Vec::new());
+        };
+        out.into_iter().map(|c| corrected(py, c, shape)).collect()
     }
 
-    /// The window `n` in photos.
+    /// The window `n` in photos when it is given (`window=` or `contamination=`); `None` at the default, where
+    /// the survey chooses each photo's window as the photos come (each `Corrected` has its own).
     #[getter]
-    fn window(&self) -> usize {
-        self.inner.params().window
+    fn window(&self) -> PyResult<Option<usize>> {
+        let p = *self.state("window")?.inner.params();
+        Ok((!p.window_is_auto()).then(|| p.window_length()))
     }
 
     /// The block size `K` (0 until the first photo when `auto` takes it from the photos' size).
     #[getter]
-    fn downsample(&self) -> usize {
-        self.inner.params().downsample
+    fn downsample(&self) -> PyResult<usize> {
+        Ok(self.state("downsample")?.inner.params().downsample)
     }
 
     /// The camera curve the engine assumes (`srgb`, `linear`, `gamma:G`).
     #[getter]
-    fn transfer(&self) -> String {
-        self.inner.params().curve().to_string()
+    fn transfer(&self) -> PyResult<String> {
+        Ok(self.state("transfer")?.inner.params().curve().to_string())
     }
 
     /// The method (`abyss`, `paper`, `polynomial`).
     #[getter]
     fn method(&self) -> String {
-        self.options.method.to_string()
+        self.method.to_string()
     }
 
     /// Photos pushed and not yet out (waiting for the photos after them).
     #[getter]
-    fn waiting(&self) -> usize {
-        self.inner.waiting()
+    fn waiting(&self) -> PyResult<usize> {
+        Ok(self.state("waiting")?.inner.waiting())
     }
 
     fn __repr__(&self) -> String {
-        let p = self.inner.params();
-        format!(
-            "Engine(method={}, window={}, transfer={})",
-            self.options.method,
-            p.window,
-            p.curve()
-        )
+        match self.state.try_lock() {
+            Ok(s) => {
+                let p = s.inner.params();
+                format!(
+                    "Engine(method={}, window={}, transfer={})",
+                    self.method,
+                    match p.window_is_auto() {
+                        true => "auto".to_string(),
+                        false => p.window_length().to_string(),
+                    },
+                    p.curve()
+                )
+            }
+            Err(_) => format!("Engine(method={}, busy)", self.method),
+        }
     }
 }
 
 impl Engine {
-    fn corrected(&self, py: Python<'_>, c: abysslight::Corrected<PyObject>) -> PyResult<Corrected> {
-        let shape = self.shape.expect("a photo came out, so one went in");
+    /// The engine's state for `call`, or a RuntimeError when another thread is in a call.
+    fn state(&self, call: &str) -> PyResult<MutexGuard<'_, EngineState>> {
+        match self.state.try_lock() {
+            Ok(s) => Ok(s),
+            Err(TryLockError::WouldBlock) => Err(PyRuntimeError::new_err(format!(
+                "Engine.{call}: this Engine is working in another thread. An Engine corrects one mission, one \
+                 photo at a time, from one thread at a time: give each thread (each mission) its own Engine"
+            ))),
+            Err(TryLockError::Poisoned(_)) => Err(PyRuntimeError::new_err(format!(
+                "Engine.{call}: this Engine stopped in an internal error in an earlier call and cannot go on: \
+                 make a new Engine (and please report the error)"
+            ))),
+        }
+    }
+}
+
+fn finished(call: &str) -> PyErr {
+    PyRuntimeError::new_err(format!(
+        "Engine.{call}: this Engine has finished its mission (finish() was called). An Engine corrects one \
+         mission: make a new Engine for the next one"
+    ))
+}
+
+/// A corrected photo as Python sees it, in the `shape` of the photos pushed.
+fn corrected(
+    py: Python<'_>,
+    c: abysslight::Corrected<PyObject>,
+    shape: Shape,
+) -> PyResult<Corrected> {
+    let image = match c.photo {
+        Some(p) => array_from_photo(py, p, shape)?.unbind(),
+        None => py.None(),
+    };
+    Ok(Corrected {
+        tag: c.tag,
+        index: c.index,
+        image,
+        factor: array_from_raster(py, &c.factor)?.unbind(),
+        health: to_dict(py, &c.health)?,
+        window: (c.window.start, c.window.end),
+    })
+}
+
+/// A list of photos corrected in one call, through an [`abysslight::Engine`] (which chooses the windows as it
+/// does for any stream): the corrected arrays in the photos' order, each of the shape and dtype of its photo.
+/// `water_column`: a `Scatter`, or water-column frames (a list of arrays), or None (`S = 0`).
+#[pyfunction]
+#[pyo3(signature = (photos, water_column = None, mask = None, **options))]
+fn correct_arrays(
+    py: Python<'_>,
+    photos: &Bound<'_, PyAny>,
+    water_column: Option<&Bound<'_, PyAny>>,
+    mask: Option<PyRef<'_, Mask>>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Py<PyList>> {
+    let scatter = match water_column {
+        None => None,
+        Some(w) => match w.downcast::<Scatter>() {
+            Ok(s) => Some(s.get().inner.clone()),
+            Err(_) => Some(scatter_from_frames(py, w)?),
+        },
+    };
+    let mask = mask.map(|m| m.inner.clone());
+    let (mut engine, _) = new_engine::<usize>("correct_arrays()", scatter.as_ref(), mask, options)?;
+    let mut shape: Option<Shape> = None;
+    let mut out: Vec<Option<PyObject>> = Vec::new();
+    for (i, p) in photos.try_iter()?.enumerate() {
+        let what = format!("photo {i}");
+        let (photo, s) = photo_from_array(&p?, &what)?;
+        if let Some(first) = shape.filter(|&first| first != s) {
+            return Err(PyValueError::new_err(format!(
+                "photo {i} is {}, photo 0 is {}",
+                s.describe(),
+                first.describe()
+            )));
+        }
+        shape = Some(s);
+        out.push(None);
+        let done = py
+            .allow_threads(|| engine.push(photo, i))
+            .map_err(|e| to_py(e.about(std::path::Path::new(&what))))?;
+        keep(py, &mut out, done, s)?;
+    }
+    let Some(shape) = shape else {
+        return Err(PyValueError::new_err("no photos given"));
+    };
+    let done = py.allow_threads(|| engine.finish());
+    keep(py, &mut out, done, shape)?;
+    let images: Vec<PyObject> = out
+        .into_iter()
+        .map(|o| o.unwrap_or_else(|| py.None()))
+        .collect();
+    Ok(PyList::new(py, images)?.unbind())
+}
+
+/// The corrected photos of `done` into `out`, each at its tag (its position in the list).
+fn keep(
+    py: Python<'_>,
+    out: &mut [Option<PyObject>],
+    done: Vec<abysslight::Corrected<usize>>,
+    shape: Shape,
+) -> PyResult<()> {
+    for c in done {
         let image = match c.photo {
             Some(p) => array_from_photo(py, p, shape)?.unbind(),
             None => py.None(),
         };
-        Ok(Corrected {
-            tag: c.tag,
-            index: c.index,
-            image,
-            factor: array_from_raster(py, &c.factor)?.unbind(),
-            health: to_dict(py, &c.health)?,
-            window: (c.window.start, c.window.end),
-        })
+        out[c.tag] = Some(image);
     }
+    Ok(())
 }
 
-/// The whole of `abysslight correct`: folders in, folders out, the report as a dict.
+/// The whole of `abysslight correct`: folders in, folders out, the report as a dict. With `cruise=`, every dive
+/// of the cruise: `{"dives": {name: report}, "failed": {name: message}}`.
 #[pyfunction]
 #[pyo3(signature = (progress = None, **options))]
 fn correct(
@@ -370,12 +535,32 @@ fn correct(
     progress: Option<PyObject>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyObject> {
-    let opts = correct_kwargs(options)?;
-    let report = progress::run_cancellable(py, &opts, progress)?;
-    to_dict(py, &report)
+    let given = correct_kwargs(options)?;
+    let opts = &given.options;
+    let Some(cruise) = given.cruise else {
+        let report =
+            progress::run_cancellable(py, progress, |p| abysslight::correct_mission(opts, p))?;
+        return to_dict(py, &report);
+    };
+    let dives = progress::run_cancellable(py, progress, |p| {
+        abysslight::cruise::correct_cruise(opts, &cruise, p)
+    })?;
+    let (done, failed) = (PyDict::new(py), PyDict::new(py));
+    for (dive, result) in dives {
+        match result {
+            Ok(report) => done.set_item(&dive.name, to_dict(py, &report)?)?,
+            Err(e) => failed.set_item(&dive.name, e.to_string())?,
+        }
+    }
+    let d = PyDict::new(py);
+    d.set_item("dives", done)?;
+    d.set_item("failed", failed)?;
+    Ok(d.into_any().unbind())
 }
 
-/// Run the `abysslight` command with `argv` (the first is the program's name); returns its exit status.
+/// Run the `abysslight` command with `argv` (the first is the program's name); returns its exit status. The one
+/// part of the extension that needs the library's `cli` feature (the package's console script).
+#[cfg(feature = "cli")]
 #[pyfunction]
 fn run_cli(py: Python<'_>, argv: Vec<String>) -> i32 {
     let args: Vec<std::ffi::OsString> = argv.into_iter().map(Into::into).collect();
@@ -412,16 +597,6 @@ fn simulate(
     noise: f32,
 ) -> PyResult<PyObject> {
     let encode: abysslight::Transfer = encode.parse().map_err(PyValueError::new_err)?;
-    if !(bit_depth == 8 || bit_depth == 16) {
-        return Err(PyValueError::new_err(format!(
-            "bit_depth must be 8 or 16, got {bit_depth}"
-        )));
-    }
-    if width < 16 || height < 16 || frames == 0 {
-        return Err(PyValueError::new_err(
-            "width and height must be at least 16 and frames at least 1",
-        ));
-    }
     let sim = abysslight::eval::simulate::Simulation {
         frames,
         water_column,
@@ -434,6 +609,9 @@ fn simulate(
         noise,
         ..Default::default()
     };
+    // The command's ranges and messages, then whether the dive fits in memory at all.
+    sim.validate().map_err(to_py)?;
+    fits_in_memory(&sim)?;
     let dive = py.allow_threads(|| sim.render()).map_err(to_py)?;
     let to_list = |photos: Vec<abysslight::Photo>| -> PyResult<Bound<'_, PyList>> {
         let arrays = photos
@@ -458,6 +636,32 @@ fn simulate(
     Ok(d.into_any().unbind())
 }
 
+/// Refuse a dive whose photos and albedos could not be allocated: a `MemoryError` instead of an abort midway.
+fn fits_in_memory(sim: &abysslight::eval::simulate::Simulation) -> PyResult<()> {
+    let pixels = (sim.width as u64).checked_mul(sim.height as u64 * 3);
+    let bytes = pixels.and_then(|p| {
+        let photos = (sim.frames as u64 + sim.water_column as u64)
+            .checked_mul(p * (sim.bit_depth as u64 / 8))?;
+        let albedo = (sim.frames as u64).checked_mul(p * 4)?;
+        photos.checked_add(albedo)
+    });
+    let fits = bytes
+        .and_then(|b| usize::try_from(b).ok())
+        .is_some_and(|b| Vec::<u8>::new().try_reserve_exact(b).is_ok());
+    if !fits {
+        return Err(PyMemoryError::new_err(format!(
+            "simulate(frames={}, water_column={}, width={}, height={}): the dive's photos would take {} bytes, \
+             more than can be allocated",
+            sim.frames,
+            sim.water_column,
+            sim.width,
+            sim.height,
+            bytes.map_or_else(|| "more than 2^64".to_string(), |b| b.to_string())
+        )));
+    }
+    Ok(())
+}
+
 /// Score folders of corrected photos (`abysslight evaluate`): `sets` maps a label to a folder.
 #[pyfunction]
 #[pyo3(signature = (sets, truth = None, placements = None, cell = 8.0, transfer = None, mask = None))]
@@ -470,11 +674,6 @@ fn evaluate(
     transfer: Option<&str>,
     mask: Option<PathBuf>,
 ) -> PyResult<PyObject> {
-    if !(cell > 0.0 && cell.is_finite()) {
-        return Err(PyValueError::new_err(format!(
-            "cell must be above 0, got {cell}"
-        )));
-    }
     let transfer = transfer
         .map(str::parse)
         .transpose()
@@ -505,6 +704,8 @@ fn _abysslight(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Engine>()?;
     m.add_class::<Corrected>()?;
     m.add_function(wrap_pyfunction!(correct, m)?)?;
+    m.add_function(wrap_pyfunction!(correct_arrays, m)?)?;
+    #[cfg(feature = "cli")]
     m.add_function(wrap_pyfunction!(run_cli, m)?)?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;

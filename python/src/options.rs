@@ -1,16 +1,21 @@
-//! Keyword arguments to the command's options: each `name=value` becomes `--name value` and the command line's own
-//! parser reads them (abysslight::cli::correct_options), so names, defaults and messages are those of
-//! `abysslight correct`.
+//! Keyword arguments to [`abysslight::Options`] through serde: each `name=value` becomes the config file's key
+//! (`seafloor_colour` is `seafloor-colour`) with the value as JSON, over [`Options::default`] (or over a
+//! `config=` file, as `--config` is read), and `Options`' own `Deserialize` reads them: the names, defaults and
+//! value forms are those of the config file and the command; then the command's checks ([`Options::validate`],
+//! [`Options::params`]). No command-line parser is involved.
 
-use std::ffi::OsString;
+use std::path::PathBuf;
 
 use abysslight::Options;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyString};
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+use serde_json::{Map, Value};
+
+use crate::to_py;
 
 /// The options of `correct` that are the method's (the engine's); the others are about files and runs.
-const ENGINE_OPTIONS: &[&str] = &[
+const METHOD_OPTIONS: &[&str] = &[
     "window",
     "contamination",
     "risk",
@@ -23,128 +28,348 @@ const ENGINE_OPTIONS: &[&str] = &[
     "degree",
     "relative_floor",
     "level_exposures",
-    "no_level_exposures",
     "photo_gain",
-    "no_photo_gain",
     "backscatter_scale",
     "denoise",
-    "no_denoise",
     "level_by_light",
-    "no_level_by_light",
     "bright_spots",
     "overlaps",
 ];
 
-/// Flags of the command that a Python call has no use for.
-const COMMAND_ONLY: &[&str] = &["dry_run", "quiet", "help", "watch"];
+/// Fields of `Options` that a Python call has no use for: `watch` runs until stopped.
+const COMMAND_ONLY: &[&str] = &["watch"];
 
-/// On/off options the command turns off with `--no-NAME`: `NAME=False` is accepted too.
+/// On/off options the command turns off with `--no-NAME`: `no_NAME=True` is accepted too.
 const NEGATABLE: &[&str] = &["level_exposures", "photo_gain", "denoise", "level_by_light"];
 
-/// The options of an `Engine`: only the method's, with placeholders for the folders `correct` requires.
-pub fn engine_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
-    let mut args = vec!["--survey".into(), "-".into(), "--out".into(), "-".into()];
-    for (k, v) in items(kwargs)? {
-        if !ENGINE_OPTIONS.contains(&k.as_str()) {
-            return Err(PyTypeError::new_err(format!(
-                "Engine() got an unexpected option {k:?} (the method's options of `abysslight correct`: {})",
-                ENGINE_OPTIONS.join(", ")
-            )));
-        }
-        push_arg(&mut args, &k, &v)?;
-    }
-    parse(args)
+/// Options whose value is a path: set on `Options` directly (a path need not be valid UTF-8, which JSON needs).
+const PATHS: &[&str] = &["water_column", "scatter", "survey", "out", "mask", "report"];
+
+/// Keyword arguments of `correct()` that are not fields of `Options`.
+const CORRECT_EXTRAS: &[&str] = &["config", "cruise"];
+
+/// What the call takes: `Engine()` and `correct_arrays()` the method's options, `correct()` every option.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    Engine,
+    Correct,
 }
 
-/// The options of `correct()`: every option of `abysslight correct` but the command-only flags.
-pub fn correct_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
-    let mut args = Vec::new();
-    for (k, v) in items(kwargs)? {
-        if COMMAND_ONLY.contains(&k.as_str()) {
-            return Err(PyTypeError::new_err(format!(
-                "correct() got an unexpected option {k:?} (a flag of the command line only)"
-            )));
-        }
-        push_arg(&mut args, &k, &v)?;
-    }
-    parse(args)
+/// `correct()`'s options, and the cruise folder when `cruise=` was given.
+pub struct CorrectOptions {
+    pub options: Options,
+    pub cruise: Option<PathBuf>,
 }
 
-fn items<'py>(kwargs: Option<&Bound<'py, PyDict>>) -> PyResult<Vec<(String, Bound<'py, PyAny>)>> {
+/// The options of an `Engine` (or of `correct_arrays`): only the method's, checked as a run checks them.
+pub fn engine_kwargs(kwargs: Option<&Bound<'_, PyDict>>, caller: &str) -> PyResult<Options> {
+    let given = given(kwargs, Scope::Engine, caller)?;
+    let opts = build(Options::default(), &given)?;
+    opts.validate().map_err(to_py)?;
+    opts.params().map_err(to_py)?;
+    Ok(opts)
+}
+
+/// The options of `correct()`: every option of `abysslight correct` but `watch`, with `config=` read first as
+/// `--config` is and the keywords over it, and `cruise=`.
+pub fn correct_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<CorrectOptions> {
+    let mut given = given(kwargs, Scope::Correct, "correct()")?;
+    let config = take_path(&mut given, "config")?;
+    let cruise = take_path(&mut given, "cruise")?;
+    let base = match &config {
+        Some(p) => Options::from_toml_file(p).map_err(to_py)?,
+        None => Options::default(),
+    };
+    if cruise.is_some() {
+        if let Some((k, _)) = given
+            .iter()
+            .find(|(k, _)| k == "survey" || k == "water_column")
+        {
+            return Err(PyValueError::new_err(format!(
+                "give either cruise or {k}: a cruise gives each dive its survey/ and water-column/ folders"
+            )));
+        }
+    }
+    let options = build(base, &given)?;
+    if cruise.is_none() {
+        required(&options.survey, "survey")?;
+    }
+    required(&options.out, "out")?;
+    options.validate().map_err(to_py)?;
+    options.params().map_err(to_py)?;
+    // The config file is an input too: no output may overwrite or surround it (as the command checks).
+    if let Some(cfg) = &config {
+        let outs: Vec<(&str, &std::path::Path)> = [
+            ("out", options.out.as_deref()),
+            ("report", options.report.as_deref()),
+        ]
+        .into_iter()
+        .filter_map(|(f, p)| Some((f, p.filter(|p| *p != std::path::Path::new("-"))?)))
+        .collect();
+        abysslight::io::check_outputs(&outs, &[("config file", cfg)]).map_err(to_py)?;
+    }
+    Ok(CorrectOptions { options, cruise })
+}
+
+/// A folder `correct` needs, with the command's message.
+fn required(p: &Option<PathBuf>, name: &str) -> PyResult<()> {
+    match p {
+        Some(_) => Ok(()),
+        None => Err(PyValueError::new_err(format!(
+            "--{name} DIR is required (or {name} = \"DIR\" in --config)"
+        ))),
+    }
+}
+
+/// A keyword's value, converted: a path, or the JSON value of a config file's key.
+enum Given {
+    Path(PathBuf),
+    Json(Value),
+}
+
+/// The keywords as `(option name, value)`, names normalised (`seafloor_color`, `no_NAME`), `None` left out.
+fn given(
+    kwargs: Option<&Bound<'_, PyDict>>,
+    scope: Scope,
+    caller: &str,
+) -> PyResult<Vec<(String, Given)>> {
     let Some(d) = kwargs else {
         return Ok(Vec::new());
     };
-    d.iter()
-        .map(|(k, v)| Ok((k.extract::<String>()?, v)))
-        .collect()
+    let accepted = accepted(scope);
+    let mut out: Vec<(String, Given)> = Vec::new();
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        if !accepted.contains(&key) {
+            return Err(PyTypeError::new_err(format!(
+                "{caller} got an unexpected option {key:?}; accepted: {}",
+                accepted.join(", ")
+            )));
+        }
+        if v.is_none() {
+            continue;
+        }
+        let (name, value) = if let Some(base) = key.strip_prefix("no_") {
+            let Ok(b) = v.downcast::<PyBool>() else {
+                return Err(PyTypeError::new_err(format!(
+                    "{key} must be True or False, got {}",
+                    v.get_type().name()?
+                )));
+            };
+            (base.to_string(), Given::Json(Value::Bool(!b.is_true())))
+        } else {
+            let name = if key == "seafloor_color" {
+                "seafloor_colour".to_string()
+            } else {
+                key.clone()
+            };
+            let value = if PATHS.contains(&name.as_str()) || CORRECT_EXTRAS.contains(&name.as_str())
+            {
+                Given::Path(path(&key, &v)?)
+            } else {
+                Given::Json(json(&key, &name, &v)?)
+            };
+            (name, value)
+        };
+        if out.iter().any(|(n, _)| *n == name) {
+            let alias = if name == "seafloor_colour" {
+                "seafloor_color".to_string()
+            } else {
+                format!("no_{name}")
+            };
+            return Err(PyValueError::new_err(format!(
+                "give either {name} or {alias}, not both"
+            )));
+        }
+        out.push((name, value));
+    }
+    Ok(out)
 }
 
-/// `name=value` as command-line arguments: None is left out (the default), True gives the flag, False leaves it
-/// out (or gives `--no-NAME`), a sequence is joined by commas (`seafloor_colour=(0.42, 0.36, 0.28)`), a path or
-/// anything else is its string.
-fn push_arg(args: &mut Vec<OsString>, key: &str, v: &Bound<'_, PyAny>) -> PyResult<()> {
-    if key.contains('-') || key.starts_with('_') || key.is_empty() {
-        return Err(PyTypeError::new_err(format!(
-            "unexpected option {key:?}: options are the command's long names with '_' (window=9, seafloor_colour=...)"
-        )));
+/// The keyword names a call accepts: `Options`' fields (the config file's keys with `_`) of its scope, the
+/// `no_NAME` forms, `seafloor_color`, and `correct()`'s `config` and `cruise`.
+fn accepted(scope: Scope) -> Vec<String> {
+    let fields: Vec<String> = match serde_json::to_value(Options::default()) {
+        Ok(Value::Object(m)) => m.keys().map(|k| k.replace('-', "_")).collect(),
+        _ => Vec::new(),
+    };
+    let mut names: Vec<String> = fields
+        .into_iter()
+        .filter(|f| match scope {
+            Scope::Engine => METHOD_OPTIONS.contains(&f.as_str()),
+            Scope::Correct => !COMMAND_ONLY.contains(&f.as_str()),
+        })
+        .collect();
+    let negatable: Vec<String> = names
+        .iter()
+        .filter(|n| NEGATABLE.contains(&n.as_str()))
+        .map(|n| format!("no_{n}"))
+        .collect();
+    names.extend(negatable);
+    names.push("seafloor_color".into());
+    if scope == Scope::Correct {
+        names.extend(CORRECT_EXTRAS.iter().map(|s| s.to_string()));
     }
-    let flag = format!("--{}", key.replace('_', "-"));
-    if v.is_none() {
-        return Ok(());
+    names.sort();
+    names
+}
+
+fn take_path(given: &mut Vec<(String, Given)>, name: &str) -> PyResult<Option<PathBuf>> {
+    let Some(i) = given.iter().position(|(n, _)| n == name) else {
+        return Ok(None);
+    };
+    match given.remove(i).1 {
+        Given::Path(p) => Ok(Some(p)),
+        Given::Json(_) => Err(PyTypeError::new_err(format!("{name} must be a path"))),
+    }
+}
+
+/// A path: a `str` or an `os.PathLike`.
+fn path(key: &str, v: &Bound<'_, PyAny>) -> PyResult<PathBuf> {
+    if v.downcast::<PyString>().is_ok() || v.hasattr("__fspath__")? {
+        if let Ok(p) = v.extract::<PathBuf>() {
+            return Ok(p);
+        }
+    }
+    Err(PyTypeError::new_err(format!(
+        "{key} must be a path (str or os.PathLike), got {}",
+        v.get_type().name()?
+    )))
+}
+
+/// A value as the config file would hold it: bool, integer, finite number or string; a sequence of numbers for
+/// `seafloor_colour` (the file's `"r,g,b"`), an integer for `jpeg_subsampling` (`420`). Anything else (bytes, a
+/// dict, an object) is a TypeError.
+fn json(key: &str, name: &str, v: &Bound<'_, PyAny>) -> PyResult<Value> {
+    let type_error = || -> PyResult<Value> {
+        Err(PyTypeError::new_err(format!(
+            "{key} must be a number, a string or True/False as the option takes, got {}",
+            v.get_type().name()?
+        )))
+    };
+    if v.downcast::<PyBytes>().is_ok() {
+        return type_error();
     }
     if let Ok(b) = v.downcast::<PyBool>() {
-        match (b.is_true(), NEGATABLE.contains(&key)) {
-            (true, true) => {}
-            (true, false) => args.push(flag.into()),
-            (false, true) => args.push(format!("--no-{}", key.replace('_', "-")).into()),
-            (false, false) => {}
-        }
-        return Ok(());
+        return Ok(Value::Bool(b.is_true()));
     }
-    let text = if v.downcast::<PyString>().is_ok() {
-        v.extract::<String>()?
-    } else if let Ok(p) = v.extract::<std::path::PathBuf>() {
-        p.to_string_lossy().into_owned()
-    } else if let Ok(items) = v.extract::<Vec<Bound<'_, PyAny>>>() {
-        items
-            .iter()
-            .map(|i| i.str().map(|s| s.to_string()))
-            .collect::<PyResult<Vec<_>>>()?
-            .join(",")
-    } else {
-        v.str()?.to_string()
+    if v.downcast::<PyString>().is_ok() {
+        return Ok(Value::String(v.extract::<String>()?));
+    }
+    if v.downcast::<PyInt>().is_ok() || (v.hasattr("__index__")? && !v.hasattr("__len__")?) {
+        let n: i128 = v
+            .call_method0("__index__")?
+            .extract()
+            .map_err(|_| PyValueError::new_err(format!("{key} is too large")))?;
+        if name == "jpeg_subsampling" {
+            return Ok(Value::String(n.to_string()));
+        }
+        return match (i64::try_from(n), u64::try_from(n)) {
+            (Ok(i), _) => Ok(Value::from(i)),
+            (_, Ok(u)) => Ok(Value::from(u)),
+            _ => Err(PyValueError::new_err(format!(
+                "{key} is too large, got {n}"
+            ))),
+        };
+    }
+    if v.downcast::<PyFloat>().is_ok() || (v.hasattr("__float__")? && !v.hasattr("__len__")?) {
+        let f: f64 = v.call_method0("__float__")?.extract()?;
+        return serde_json::Number::from_f64(f)
+            .map(Value::Number)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!("{key} must be a finite number, got {f}"))
+            });
+    }
+    if name == "seafloor_colour"
+        && (v.downcast::<PyList>().is_ok() || v.downcast::<PyTuple>().is_ok())
+    {
+        let parts = v
+            .try_iter()?
+            .map(|i| {
+                let i = i?;
+                match i.extract::<f64>() {
+                    Ok(f) if i.downcast::<PyBool>().is_err() => Ok(f.to_string()),
+                    _ => Err(PyTypeError::new_err(format!(
+                        "{key} must be a colour (\"#8a7560\", \"grey\") or numbers (r, g, b), got an item of type {}",
+                        i.get_type().name()?
+                    ))),
+                }
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        return Ok(Value::String(parts.join(",")));
+    }
+    type_error()
+}
+
+/// `base` with the given options over it, read by `Options`' `Deserialize`. A window given undoes the base's
+/// contamination and the other way round, a water column the base's scatter image and the other way round, as
+/// the command's flags undo a config file's.
+fn build(base: Options, given: &[(String, Given)]) -> PyResult<Options> {
+    let has = |n: &str| given.iter().any(|(k, _)| k == n);
+    let mut base = base;
+    // Paths go around JSON (they need not be UTF-8) and come back afterwards.
+    let mut paths = [
+        base.water_column.take(),
+        base.scatter.take(),
+        base.survey.take(),
+        base.out.take(),
+        base.mask.take(),
+        base.report.take(),
+    ];
+    let Value::Object(mut map) =
+        serde_json::to_value(&base).map_err(|e| PyValueError::new_err(e.to_string()))?
+    else {
+        return Err(PyValueError::new_err("options are not a table"));
     };
-    if NEGATABLE.contains(&key) {
-        return Err(PyValueError::new_err(format!(
-            "{key} must be True or False, got {text:?}"
-        )));
-    }
-    // `--name=value`, so that a value starting with '-' is not taken for a flag.
-    args.push(format!("{flag}={text}").into());
-    Ok(())
-}
-
-/// Parse as `abysslight correct ARGS` would: an unknown argument is a TypeError, a bad value a ValueError.
-fn parse(args: Vec<OsString>) -> PyResult<Options> {
-    let argv = ["abysslight".into(), "correct".into()]
-        .into_iter()
-        .chain(args);
-    abysslight::cli::correct_options(argv).map_err(|(unknown, message)| {
-        let m = tidy(&message);
-        if unknown {
-            PyTypeError::new_err(m)
-        } else {
-            PyValueError::new_err(m)
+    for (a, b) in [("window", "contamination"), ("contamination", "window")] {
+        if has(a) && !has(b) {
+            map.insert(b.into(), Value::Null);
         }
-    })
-}
-
-/// The parser's message without its usage lines and `error: ` prefix, flags named as Python options.
-fn tidy(message: &str) -> String {
-    let head = message.split("\n\nUsage:").next().unwrap_or(message);
-    let head = head
-        .split("\n\nFor more information")
-        .next()
-        .unwrap_or(head);
-    head.trim().trim_start_matches("error: ").to_string()
+    }
+    let base_map = map.clone();
+    for (name, value) in given {
+        match value {
+            Given::Json(v) => {
+                map.insert(name.replace('_', "-"), v.clone());
+            }
+            Given::Path(p) => {
+                let i = PATHS.iter().position(|n| n == name).expect("a path option");
+                paths[i] = Some(p.clone());
+            }
+        }
+    }
+    if has("water_column") && !has("scatter") {
+        paths[1] = None;
+    }
+    if has("scatter") && !has("water_column") {
+        paths[0] = None;
+    }
+    let mut opts: Options = serde_json::from_value(Value::Object(map)).map_err(|e| {
+        // Name the option: the first one given that fails alone over the base.
+        let culprit = given.iter().find(|(name, value)| match value {
+            Given::Json(v) => {
+                let mut one: Map<String, Value> = base_map.clone();
+                one.insert(name.replace('_', "-"), v.clone());
+                serde_json::from_value::<Options>(Value::Object(one)).is_err()
+            }
+            Given::Path(_) => false,
+        });
+        let message = match culprit {
+            Some((name, _)) => format!("{name}: {e}"),
+            None => e.to_string(),
+        };
+        if message.contains("invalid type") {
+            PyTypeError::new_err(message)
+        } else {
+            PyValueError::new_err(message)
+        }
+    })?;
+    let [water_column, scatter, survey, out, mask, report] = paths;
+    opts.water_column = water_column;
+    opts.scatter = scatter;
+    opts.survey = survey;
+    opts.out = out;
+    opts.mask = mask;
+    opts.report = report;
+    Ok(opts)
 }

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Duration;
 
-use abysslight::{Error, Options, Progress, Report};
+use abysslight::{Error, Progress};
 use pyo3::prelude::*;
 
 use crate::to_py;
@@ -73,13 +73,14 @@ impl Progress for PyProgress {
     }
 }
 
-/// Run the mission; Ctrl-C (or an exception in the callback) stops it before the next photo, with the photos
-/// written so far complete, and is raised here.
-pub fn run_cancellable(
+/// Run `work` (a mission, or a cruise) on a thread of its own with a [`Progress`] for Python; Ctrl-C (or an
+/// exception in the callback) stops it before the next photo, with the photos written so far complete, and is
+/// raised here.
+pub fn run_cancellable<T: Send>(
     py: Python<'_>,
-    opts: &Options,
     callback: Option<PyObject>,
-) -> PyResult<Report> {
+    work: impl FnOnce(&dyn Progress) -> abysslight::Result<T> + Send,
+) -> PyResult<T> {
     let progress = PyProgress {
         callback,
         cancel: AtomicBool::new(false),
@@ -91,9 +92,7 @@ pub fn run_cancellable(
         let (tx, rx) = crossbeam_channel::bounded(1);
         let p = &progress;
         scope.spawn(move || {
-            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                abysslight::correct_mission(opts, p)
-            }));
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(p)));
             let _ = tx.send(r);
         });
         loop {

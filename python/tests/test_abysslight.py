@@ -75,7 +75,8 @@ def test_engine_defaults_equal_the_command_defaults(srgb_dive):
     # The command read the curve from the files (auto); arrays carry no file facts, so it is given explicitly.
     assert report["options"]["transfer"] == "srgb"
     engine, got = engine_outputs(root, transfer=report["options"]["transfer"])
-    assert engine.window == report["window"]["n"] == 7
+    # The default: the window chosen per photo by the survey, in the engine as in the command.
+    assert engine.window is None and report["window"]["rule"] == "auto" and report["window"]["n"] is None
     assert engine.method == "abyss"
     assert_same_pixels(got, out)
     assert got[0].image.dtype == np.uint8 and got[0].image.shape == (64, 96, 3)
@@ -177,7 +178,9 @@ def test_photo_errors_leave_the_engine_usable():
     first = dive["survey"][0]
     assert engine.push(first, 0) == []
     bad = [
-        (TypeError, "uint8 or uint16", first.astype(np.float32)),
+        (TypeError, "uint8 or uint16", first.astype(np.int32)),
+        (ValueError, "outside 0..1", first.astype(np.float32)),
+        (ValueError, "mission's photos are 32x48x3 uint8", (first / 255).astype(np.float32)),
         (TypeError, "numpy array", first.tolist()),
         (ValueError, "HxWx3", first[:, :, :2].copy()),
         (ValueError, "HxWx3", first[0, 0]),
@@ -384,7 +387,7 @@ def test_simulate_read_and_evaluate(srgb_dive, tmp_path):
     assert dive["transfer"] == "srgb" and len(dive["survey"]) == 4 and len(dive["water_column"]) == 2
     assert dive["survey"][0].dtype == np.uint16 and dive["survey"][0].shape == (30, 40, 3)
     assert dive["albedo"][0].dtype == np.float32
-    with pytest.raises(ValueError, match="bit_depth"):
+    with pytest.raises(ValueError, match="--bit-depth must be 8 or 16"):
         abysslight.simulate(bit_depth=12)
     ev = abysslight.evaluate([("raw", root / "survey"), ("abyss", out)], truth=root)
     sets = {s["label"]: s for s in ev["sets"]}

@@ -1087,12 +1087,7 @@ fn bench(a: BenchArgs) -> Result<ExitCode, Error> {
 }
 
 fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
-    #[rustfmt::skip]
-    ranges::simulate(a.frames, a.water_column, a.size, a.contamination, &[
-        ("--altitude", a.altitude, 0.1, 1000.0), ("--overlap", a.overlap, 0.0, 0.99), ("--fov", a.fov, 1.0, 170.0),
-        ("--beam", a.beam, 1.0, 180.0), ("--noise", a.noise, 0.0, 100.0),
-        ("--altitude-swing", a.altitude_swing.unwrap_or(0.0), 0.0, 1000.0),
-    ], a.white_balance)?;
+    use abysslight::eval::simulate::MAX_FRAMES;
     let sim = abysslight::eval::simulate::Simulation {
         frames: a.frames,
         water_column: a.water_column,
@@ -1114,6 +1109,10 @@ fn simulate(a: SimulateArgs) -> Result<ExitCode, Error> {
         exposure: a.exposure,
         contamination_along: None,
     };
+    // The flags' ranges (the library's, shared with the Python binding), before anything is written; the command
+    // writes at least one water-column frame.
+    sim.validate()?;
+    ranges::within("--water-column", a.water_column, 1, MAX_FRAMES)?;
     let _gate = Gate::open(&[Output::Folder("--out", &a.out)], &[])?;
     let t = std::time::Instant::now();
     if a.truth_lighting {
@@ -1151,13 +1150,11 @@ fn evaluate(a: EvaluateArgs) -> Result<ExitCode, Error> {
         transfer: a.transfer,
         register: a.register.clone(),
         save_placements: a.save_placements.clone(),
-        downsample: a.eval_downsample.max(1),
+        downsample: a.eval_downsample,
         mask: a.mask.clone(),
         ..Default::default()
     };
-    // A cell below one unit would grow the mosaic grid without bound.
-    ranges::within("--cell", a.cell, 1.0, 1e6)?;
-    ranges::within("--eval-downsample", a.eval_downsample, 1, 64)?;
+    settings.validate()?;
     let mut inputs: Vec<(&str, &std::path::Path)> = sets
         .iter()
         .map(|(_, d)| ("photo folder", d.as_path()))
@@ -1379,20 +1376,4 @@ fn parse_transfer(s: &str) -> Result<TransferArg, String> {
         return Ok(TransferArg(None));
     }
     s.parse::<Transfer>().map(|t| TransferArg(Some(t)))
-}
-
-/// `abysslight correct`'s options from its arguments (`args` starts with the program's name and `correct`), as the
-/// command would run them: the Python binding's options go through here. The error is the command's message and
-/// whether an argument was unknown (otherwise a value was bad).
-pub fn correct_options(
-    args: impl IntoIterator<Item = std::ffi::OsString>,
-) -> Result<Options, (bool, String)> {
-    let cli = Cli::try_parse_from(args).map_err(|e| {
-        let unknown = e.kind() == clap::error::ErrorKind::UnknownArgument;
-        (unknown, e.render().to_string())
-    })?;
-    match cli.command {
-        Command::Correct(a) => options_from(&a).map_err(|e| (false, e.to_string())),
-        _ => Err((false, "expected the correct command".into())),
-    }
 }

@@ -435,6 +435,16 @@ pub struct EvalSettings {
     pub mask: Option<PathBuf>,
 }
 
+impl EvalSettings {
+    /// The ranges of `abysslight evaluate`'s flags, each message naming the flag: a cell below one unit would
+    /// grow the mosaic grid without bound.
+    pub fn validate(&self) -> Result<()> {
+        crate::eval::within("--cell", self.cell, 1.0, 1e6)?;
+        crate::eval::within("--eval-downsample", self.downsample, 1, 64)?;
+        Ok(())
+    }
+}
+
 impl Default for EvalSettings {
     fn default() -> Self {
         EvalSettings {
@@ -774,6 +784,7 @@ pub fn evaluate(
     placements: Option<&Path>,
     settings: &EvalSettings,
 ) -> Result<Evaluation> {
+    settings.validate()?;
     if sets.is_empty() {
         return Err(Error::Usage(
             "give at least one folder of photos to evaluate".into(),

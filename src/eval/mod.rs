@@ -11,4 +11,21 @@ pub(crate) mod register;
 pub mod simulate;
 
 pub use crate::run::pictures::{before_after_sheet, save_png};
+
+/// `value` within `lo..=hi` (and not NaN), or a usage error naming `flag`: the range checks of the subcommands'
+/// numeric flags (`simulate`, `evaluate`, ...), the same for the command and the Python binding.
+pub fn within<T: PartialOrd + std::fmt::Display + Copy>(
+    flag: &str,
+    value: T,
+    lo: T,
+    hi: T,
+) -> crate::Result<()> {
+    // `!(a <= b)` is true for NaN, unlike `a > b`.
+    if !(lo <= value && value <= hi) {
+        return Err(crate::Error::Usage(format!(
+            "{flag} must be within {lo}..={hi}, got {value}"
+        )));
+    }
+    Ok(())
+}
 pub use bench::{machine, noisy_photo, synthetic_photo};

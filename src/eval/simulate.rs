@@ -1011,9 +1011,38 @@ fn pose_view<'a>(
     }
 }
 
+/// Largest photo side the simulator makes (pixels).
+pub const MAX_SIDE: usize = 16384;
+
+/// Most survey photos (and most water-column frames) of a simulated dive.
+pub const MAX_FRAMES: usize = 1_000_000;
+
 impl Simulation {
-    /// Refuse settings the renderer cannot use (size under 16×16, no frames, field of view outside 20–150°).
+    /// Refuse settings the renderer cannot use: the ranges of `abysslight simulate`'s flags (counts, size, physical
+    /// parameters; NaN nowhere), then what the renderer needs (size under 16×16, field of view outside 20–150°,
+    /// ...). Each message names the command's flag. [`Simulation::render`] runs it first.
     pub fn validate(&self) -> Result<()> {
+        use crate::eval::within;
+        within("--frames", self.frames, 1, MAX_FRAMES)?;
+        // No water-column frames is a dive of the library's (the command asks for at least one).
+        within("--water-column", self.water_column, 0, MAX_FRAMES)?;
+        within("--size (width)", self.width, 8, MAX_SIDE)?;
+        within("--size (height)", self.height, 8, MAX_SIDE)?;
+        within("--contamination", self.contamination, 0.0, 1.0)?;
+        within("--altitude", self.altitude, 0.1, 1000.0)?;
+        within("--overlap", self.overlap, 0.0, 0.99)?;
+        within("--fov", self.fov_deg, 1.0, 170.0)?;
+        within("--beam", self.beam_deg, 1.0, 180.0)?;
+        within("--noise", self.noise, 0.0, 100.0)?;
+        within(
+            "--altitude-swing",
+            self.altitude_swing.unwrap_or(0.0),
+            0.0,
+            1000.0,
+        )?;
+        for g in self.white_balance {
+            within("--white-balance", g, 0.01, 100.0)?;
+        }
         let bad = |m: String| Err(Error::Usage(m));
         if self.width < 16 || self.height < 16 {
             return bad(format!(

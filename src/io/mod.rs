@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 pub use crate::io::jpeg::{parse as jpeg_coding, JpegCoding, Subsampling};
 pub use crate::io::jpeg_check::check as check_jpeg;
 pub use crate::io::jpeg_check::BlockMeans;
+pub use crate::io::paths::check_outputs;
 pub use crate::io::pnm::{decode_frame, FrameSplitter};
 use crate::method::raster::{Layout, Photo, Raster, Samples};
 
@@ -201,8 +202,11 @@ pub(crate) fn find_photos_excluding(dir: &Path, exclude: &[&Path]) -> Result<Fou
 }
 
 /// Largest photo abysslight decodes, in pixels (2^28 = 268 MP, e.g. 16384 × 16384). A header declaring more is
-/// an error before anything is allocated.
-pub(crate) const MAX_PIXELS: u64 = 1 << 28;
+/// an error before anything is allocated; the Python binding refuses larger arrays the same way.
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Longest side of a photo abysslight decodes, in pixels.
+pub const MAX_SIDE: usize = 1 << 20;
 
 /// Width and height from a photo's header, reading only the header.
 pub(crate) fn header_size(path: &Path) -> Result<(usize, usize)> {
@@ -429,8 +433,8 @@ fn read_within_budget(path: &Path, len: u64, budget: u64) -> Result<Vec<u8>> {
 /// that many pixels.
 pub(crate) fn decode_limits() -> image::Limits {
     let mut limits = image::Limits::default();
-    limits.max_image_width = Some(1 << 20);
-    limits.max_image_height = Some(1 << 20);
+    limits.max_image_width = Some(MAX_SIDE as u32);
+    limits.max_image_height = Some(MAX_SIDE as u32);
     limits.max_alloc = Some(MAX_PIXELS * 8 + (64 << 20));
     limits
 }
