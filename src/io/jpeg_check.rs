@@ -551,17 +551,7 @@ fn walk(data: &[u8], mut capture: Option<&mut Capture>) -> Result<(bool, usize),
             pos += 1;
         }
         let (Some(&0xFF), Some(&m)) = (data.get(pos), data.get(pos + 1)) else {
-            return Err(if pos >= data.len() {
-                "the file ends before its end-of-image marker (truncated)".into()
-            } else if data[pos..].iter().all(|&b| b == 0) {
-                format!(
-                    "{} zero bytes where the next marker should be (a zero-filled tail: the file was not \
-                     completely written)",
-                    data.len() - pos
-                )
-            } else {
-                format!("no marker at byte {pos} (damaged)")
-            });
+            return Err(no_marker(data, pos));
         };
         pos += 2;
         match m {
@@ -622,20 +612,38 @@ fn walk(data: &[u8], mut capture: Option<&mut Capture>) -> Result<(bool, usize),
                 } else {
                     start
                 };
-                pos = next_marker(data, end).ok_or_else(|| {
-                    if data[end..].iter().rev().take(64).all(|&b| b == 0) {
-                        "the compressed data runs into a zero-filled tail without an end marker (the file was \
-                         not completely written)"
-                            .to_string()
-                    } else {
-                        "the file ends inside the compressed data (truncated)".to_string()
-                    }
-                })?;
+                pos = next_marker(data, end).ok_or_else(|| unended_scan(data, end))?;
                 continue;
             }
             _ => {}
         }
         pos += len;
+    }
+}
+
+/// Why there is no marker at `pos`, where [`walk`] expects one.
+fn no_marker(data: &[u8], pos: usize) -> Why {
+    if pos >= data.len() {
+        "the file ends before its end-of-image marker (truncated)".into()
+    } else if data[pos..].iter().all(|&b| b == 0) {
+        format!(
+            "{} zero bytes where the next marker should be (a zero-filled tail: the file was not completely \
+             written)",
+            data.len() - pos
+        )
+    } else {
+        format!("no marker at byte {pos} (damaged)")
+    }
+}
+
+/// Why the compressed data from `end` on has no marker after it.
+fn unended_scan(data: &[u8], end: usize) -> Why {
+    if data[end..].iter().rev().take(64).all(|&b| b == 0) {
+        "the compressed data runs into a zero-filled tail without an end marker (the file was not completely \
+         written)"
+            .to_string()
+    } else {
+        "the file ends inside the compressed data (truncated)".to_string()
     }
 }
 

@@ -113,9 +113,9 @@ impl fmt::Display for SeafloorColour {
 #[serde(rename_all = "kebab-case")]
 pub enum Window {
     /// With [`Method::Abyss`], per stretch of the mission by the method's first pass, the survey
-    /// ([`crate::method::survey`]): each photo's window, the quantile its `M` takes and its near window, from how
+    /// ([`Survey`](crate::Survey)): each photo's window, the quantile its `M` takes and its near window, from how
     /// much of the ground is dark and how far the camera moves. The other methods take the paper's
-    /// [`BASE_WINDOW`] photos and the median.
+    /// paper's 7 photos and the median.
     #[default]
     Auto,
     /// `n` photos (odd) for every photo.
@@ -140,7 +140,7 @@ pub const BASE_WINDOW: usize = 7;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum InvalidConfig {
-    /// The window is not an odd number of photos from 1 to [`MAX_WINDOW`].
+    /// The window is not an odd number of photos from 1 to [`limits::WINDOW`](crate::limits::WINDOW).
     #[error("--window must be an odd number of photos from 1 to {MAX_WINDOW}, got {0}")]
     Window(usize),
     /// The contamination rate is not in `[0, 0.5)`.
@@ -153,7 +153,7 @@ pub enum InvalidConfig {
     /// The breakdown probability is not in `(0, 1)`.
     #[error("--risk must be in (0, 1), got {0}")]
     Risk(f64),
-    /// No window up to [`MAX_WINDOW`] photos keeps the breakdown probability at `risk`.
+    /// No window up to [`limits::WINDOW`](crate::limits::WINDOW) photos keeps the breakdown probability at `risk`.
     #[error(
         "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}; \
          {DENSE_HINT}"
@@ -164,10 +164,11 @@ pub enum InvalidConfig {
         /// The breakdown probability asked.
         risk: f64,
     },
-    /// The block size is above [`MAX_DOWNSAMPLE`].
+    /// The block size is above [`limits::DOWNSAMPLE`](crate::limits::DOWNSAMPLE).
     #[error("--downsample must be auto or 1 to {MAX_DOWNSAMPLE}, got {0}")]
     Downsample(usize),
-    /// The near window is not off, auto or an odd number of photos up to [`MAX_WINDOW`].
+    /// The near window is not off, auto or an odd number of photos up to
+    /// [`limits::WINDOW`](crate::limits::WINDOW).
     #[error("--near-window must be auto, 0 (off) or an odd number of photos up to {MAX_WINDOW}, got {0}")]
     NearWindow(usize),
     /// The factor floor is not in `(0, 1]`.
@@ -179,7 +180,7 @@ pub enum InvalidConfig {
     /// The scale of `S` is not in `(0, 2]`.
     #[error("--backscatter-scale must be above 0 and at most 2 (or auto), got {0}")]
     BackscatterScale(f32),
-    /// The polynomial's degree is not 1 to [`MAX_DEGREE`].
+    /// The polynomial's degree is not 1 to [`limits::DEGREE`](crate::limits::DEGREE).
     #[error("--degree must be 1 to {MAX_DEGREE}, got {0}")]
     Degree(usize),
 }

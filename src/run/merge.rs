@@ -276,6 +276,28 @@ fn some_names(paths: &[String]) -> String {
     list
 }
 
+/// `" (it ran with --limit N)"` for a shard run with `--limit`, else nothing.
+fn limit_note(s: &ShardReport) -> String {
+    s.json["options"]["limit"]
+        .as_u64()
+        .map_or(String::new(), |l| format!(" (it ran with --limit {l})"))
+}
+
+/// The survey's photos as the shards' run listed them (the folder its options name, read again on this machine), when
+/// that list still has the mission's `total` photos; `None` where it cannot be read here.
+fn survey_list(first: &ShardReport, total: usize, out: &Path) -> Option<Vec<String>> {
+    first.json["options"]["survey"]
+        .as_str()
+        .and_then(|s| crate::io::find_photos_excluding(Path::new(s), &[out]).ok())
+        .map(|f| {
+            f.photos
+                .into_iter()
+                .map(|e| e.path.to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+        })
+        .filter(|v| v.len() == total)
+}
+
 /// Every photo of the survey is accounted for by the shard it belongs to: in its frames (corrected, or found
 /// corrected by `--resume`) or in its errors (failed); and each shard's counts agree with its lists. The photos
 /// of a shard are those [`Shard::range`] gives in the survey as listed now (when the survey can be listed from here
@@ -287,25 +309,14 @@ fn check_complete(shards: &[ShardReport], out: &Path) -> Result<()> {
         return Ok(());
     };
     let total = first.json["survey_photos"].as_u64().unwrap_or(0) as usize;
-    let survey: Option<Vec<String>> = first.json["options"]["survey"]
-        .as_str()
-        .and_then(|s| crate::io::find_photos_excluding(Path::new(s), &[out]).ok())
-        .map(|f| {
-            f.photos
-                .into_iter()
-                .map(|e| e.path.to_string_lossy().into_owned())
-                .collect::<Vec<_>>()
-        })
-        .filter(|v| v.len() == total);
+    let survey = survey_list(first, total, out);
     let mut problems = Vec::new();
     for s in shards {
         let frames = s.json["frames"].as_array().cloned().unwrap_or_default();
         let errors = s.json["errors"].as_array().cloned().unwrap_or_default();
         let count = |k: &str| s.json[k].as_u64().unwrap_or(0) as usize;
         let rerun = format!("rerun it (--shard {})", s.shard);
-        let limit = s.json["options"]["limit"]
-            .as_u64()
-            .map_or(String::new(), |l| format!(" (it ran with --limit {l})"));
+        let limit = limit_note(s);
         let resumed = frames
             .iter()
             .filter(|f| f["resumed"].as_bool() == Some(true))

@@ -297,40 +297,7 @@ impl Plan {
         if !self.streaming {
             line(self.describe_disk(opts, params.downsample));
         }
-        let window = if params.window_is_auto() {
-            let longest = match self.streaming {
-                true => crate::method::stretch::MAX_AUTO_WINDOW,
-                false => crate::method::stretch::longest_window(self.found.photos.len()),
-            };
-            format!(
-                "window: auto, chosen per stretch of the mission by a survey of its photos ({}: {} and the median \
-                 on sparse ground under a moving camera, up to {longest} photos and a higher quantile on dense \
-                 fields or under a slow camera; the near window with it)",
-                match self.streaming {
-                    true => format!(
-                        "as they come, each photo once the {} after it are in",
-                        crate::method::survey::Survey::LOOK_AHEAD
-                    ),
-                    false => "before the correction".into(),
-                },
-                crate::method::params::BASE_WINDOW.min(longest),
-            )
-        } else if self.window.p_half.is_nan() {
-            format!("window: n = {}", self.window.n)
-        } else {
-            format!(
-                "window: n = {} (P_half = {:.4} at contamination {})",
-                self.window.n,
-                self.window.p_half,
-                opts.contamination.unwrap_or_default()
-            )
-        };
-        line(match params.near_window() {
-            Some(k) if !params.window_is_auto() => {
-                format!("{window}, near window {k} (--near-window)")
-            }
-            _ => window,
-        });
+        line(self.describe_window(opts, &params));
         line(format!(
             "S: {}",
             match (&opts.scatter, &opts.water_column) {
@@ -367,6 +334,45 @@ impl Plan {
             line(l);
         }
         Ok(s)
+    }
+
+    /// The dry run's line on the window: auto (as the photos come or before the correction, up to the longest the
+    /// mission holds), or the window given with its breakdown probability, and the near window.
+    fn describe_window(&self, opts: &Options, params: &crate::method::params::Params) -> String {
+        let window = if params.window_is_auto() {
+            let longest = match self.streaming {
+                true => crate::method::stretch::MAX_AUTO_WINDOW,
+                false => crate::method::stretch::longest_window(self.found.photos.len()),
+            };
+            format!(
+                "window: auto, chosen per stretch of the mission by a survey of its photos ({}: {} and the median \
+                 on sparse ground under a moving camera, up to {longest} photos and a higher quantile on dense \
+                 fields or under a slow camera; the near window with it)",
+                match self.streaming {
+                    true => format!(
+                        "as they come, each photo once the {} after it are in",
+                        crate::method::survey::Survey::LOOK_AHEAD
+                    ),
+                    false => "before the correction".into(),
+                },
+                crate::method::params::BASE_WINDOW.min(longest),
+            )
+        } else if self.window.p_half.is_nan() {
+            format!("window: n = {}", self.window.n)
+        } else {
+            format!(
+                "window: n = {} (P_half = {:.4} at contamination {})",
+                self.window.n,
+                self.window.p_half,
+                opts.contamination.unwrap_or_default()
+            )
+        };
+        match params.near_window() {
+            Some(k) if !params.window_is_auto() => {
+                format!("{window}, near window {k} (--near-window)")
+            }
+            _ => window,
+        }
     }
 
     /// The warnings of [`Plan::describe`]: the plan's own and what [`Plan::checks`] finds, and a last line saying

@@ -84,7 +84,8 @@ pub struct Corrected<T> {
     pub backscatter_scale: Vec<f32>,
     /// [`Method::Abyss`] with `denoise`: the noise and texture measured on the photo.
     pub noise: Option<NoiseModel>,
-    /// With the window chosen per stretch ([`Params::auto_window`]): what the survey chose for this photo and why.
+    /// With the window chosen per stretch ([`Window::Auto`](crate::Window::Auto)): what the survey chose for this photo
+    /// and why.
     pub choice: Option<Choice>,
 }
 
@@ -126,7 +127,7 @@ pub struct Engine<T> {
     /// `S` and the mission's mean at block resolution pooled like the ring's images for the monitor, made the first
     /// time they are needed (both stay the same for the whole mission).
     judged_fixed: Option<(Option<Raster>, Option<Raster>)>,
-    /// With [`Params::auto_window`]: the survey that chooses each photo's window, quantile and near window, fed
+    /// With [`Window::Auto`](crate::Window::Auto): the survey that chooses each photo's window, quantile and near window, fed
     /// the engine's own block images as photos come ([`Survey`]) or given whole ([`Engine::set_survey`]).
     survey: Option<Survey>,
     /// [`Engine::finish`] was called: the mission is over.
@@ -190,7 +191,7 @@ impl<T> Engine<T> {
     /// The survey of the whole mission, made before its photos are pushed (a run over a folder surveys it first,
     /// from its JPEGs' block means where it can): its choices instead of the engine's own survey as photos come, so
     /// that no photo waits for the decision and the ring holds only the longest window chosen. Only with
-    /// [`Params::auto_window`] and [`Method::Abyss`] (otherwise ignored); refused once photos were pushed, or
+    /// [`Window::Auto`](crate::Window::Auto) and [`Method::Abyss`] (otherwise ignored); refused once photos were pushed, or
     /// when the survey is not finished ([`Survey::finish`]).
     pub fn set_survey(&mut self, survey: Survey) -> Result<()> {
         if self.ring.pushed() > 0 {
