@@ -485,10 +485,11 @@ fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     ];
     for (flag, path) in inputs {
         if let Some(p) = path.filter(|p| !p.exists()) {
-            return Err(Error::Usage(format!(
-                "{flag} {}: no such file or folder",
-                p.display()
-            )));
+            // A file-system error (Python: FileNotFoundError) whose "path" names the flag too.
+            return Err(Error::io(
+                format!("{flag} {}", p.display()),
+                std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or folder"),
+            ));
         }
     }
     Ok(())
