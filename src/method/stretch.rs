@@ -336,9 +336,6 @@ fn correlation(a: &[f32], b: &[f32]) -> f32 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Rule {
-    /// No survey of the mission before the correction (photos as they come, in memory): the default window 7 and
-    /// its median.
-    NoSurvey,
     /// Little dark seafloor and a camera that moves on: the default window 7 and its median.
     Sparse,
     /// A dense stretch (the `(1 + c)/2` quantile and the samples [`quantile_window`] asks) or photos that see the
@@ -373,27 +370,10 @@ pub struct Choice {
 }
 
 impl Choice {
-    /// The default window and median, for a mission without a survey.
-    pub fn without_survey() -> Self {
-        Choice {
-            window: BASE_WINDOW,
-            quantile: 0.5,
-            near: crate::method::window::near_window(BASE_WINDOW, None),
-            coverage: f32::NAN,
-            photos_per_sample: 1.0,
-            samples: BASE_WINDOW,
-            needed: BASE_WINDOW,
-            rule: Rule::NoSurvey,
-        }
-    }
-
     /// In words, for the console and the report.
     pub fn why(&self) -> String {
         let c = 100.0 * self.coverage;
         match self.rule {
-            Rule::NoSurvey => format!(
-                "no survey of the mission before the correction: the window {BASE_WINDOW} and its median"
-            ),
             Rule::Sparse => format!(
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the window {BASE_WINDOW} and its median",
                 self.photos_per_sample
