@@ -6,8 +6,7 @@
 use std::ops::Range;
 
 use crate::method::baseline::{polynomial_m, Method};
-use crate::method::factor::factor;
-use crate::method::mask::fill_missing;
+use crate::method::factor::factor_filled;
 use crate::method::median::stack_median;
 use crate::method::noise::{Blended, NoiseModel};
 use crate::method::params::Params;
@@ -77,11 +76,7 @@ impl Window<'_> {
 
     /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
     pub fn factor(&self, m: &Raster, s: Option<&Raster>) -> Raster {
-        let mut f = factor(m, s, self.colour);
-        if self.masked {
-            fill_missing(&mut f);
-        }
-        f
+        factor_filled(m, s, self.colour, self.masked)
     }
 }
 
@@ -202,10 +197,7 @@ pub(crate) fn pooled(
     let stack: Vec<&Raster> = w.seen.iter().filter_map(|e| e.judged.as_ref()).collect();
     let (s, mean) = (fixed.0.as_ref(), fixed.1.as_ref());
     let m = window_m(w.params, own, &stack, s, mean, w.quantile);
-    let mut f = factor(&m, s, w.colour);
-    if w.masked {
-        fill_missing(&mut f);
-    }
+    let f = factor_filled(&m, s, w.colour, w.masked);
     let lit = crate::method::factor::lit_seafloor(&f, w.colour);
     Some((f, lit))
 }

@@ -47,6 +47,20 @@ pub fn factor(m: &Raster, s_low: Option<&Raster>, colour: &[f32]) -> Raster {
     f
 }
 
+/// [`factor`], with the blocks a mask left without samples (`masked`) filled from their neighbours.
+pub(crate) fn factor_filled(
+    m: &Raster,
+    s_low: Option<&Raster>,
+    colour: &[f32],
+    masked: bool,
+) -> Raster {
+    let mut f = factor(m, s_low, colour);
+    if masked {
+        crate::method::mask::fill_missing(&mut f);
+    }
+    f
+}
+
 /// The product `F·C = M − S` that `--save-factors` writes: what the seafloor would look like under the lights,
 /// without backscatter. Viewable as an image, and `F` is it divided by `C`.
 pub fn lit_seafloor(f: &Raster, colour: &[f32]) -> Raster {

@@ -8,8 +8,7 @@ use super::{ms, Corrected, Engine, Waiting};
 use crate::method::baseline::Method;
 use crate::method::chain::{self, Seen};
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
-use crate::method::factor::{factor, lit_seafloor};
-use crate::method::mask::fill_missing;
+use crate::method::factor::{factor_filled, lit_seafloor};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health};
 use crate::method::raster::{Photo, Raster, Samples};
 
@@ -138,11 +137,7 @@ impl<T> Engine<T> {
 
     /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
     fn factor_of(&self, m: &Raster, s_low: Option<&Raster>) -> Raster {
-        let mut f = factor(m, s_low, &self.colour);
-        if self.mask.is_some() {
-            fill_missing(&mut f);
-        }
-        f
+        factor_filled(m, s_low, &self.colour, self.mask.is_some())
     }
 
     /// Photo `i`'s entry in the ring (it is in its own window).
