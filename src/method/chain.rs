@@ -122,12 +122,14 @@ pub(crate) fn paper(w: &Window) -> Estimate {
 /// The baselines the paper compares with: `M` the mission's mean image ([`Method::Mean`]; the window's median
 /// while none is known) or the photo's own polynomial fit ([`Method::Polynomial`]).
 pub(crate) fn baseline(w: &Window) -> Estimate {
-    let own = &w.own.low;
-    let m = match (w.params.method, w.mission_mean) {
-        (Method::Mean, Some(mean)) if mean.layout() == own.layout() => mean.clone(),
-        (Method::Polynomial, _) => polynomial_m(own, w.s_low, w.params.degree),
-        _ => stack_median(&w.stack()),
-    };
+    let m = window_m(
+        w.params,
+        &w.own.low,
+        &w.stack(),
+        w.s_low,
+        w.mission_mean,
+        w.quantile,
+    );
     Estimate::plain(w, m)
 }
 

@@ -25,7 +25,6 @@ pub(crate) const FIRST_DECIDED: usize =
 pub struct Survey {
     surveyor: Option<Surveyor>,
     choices: Vec<Choice>,
-    pushed: usize,
 }
 
 impl Survey {
@@ -43,7 +42,6 @@ impl Survey {
         Survey {
             surveyor: Some(Surveyor::new(s_low)),
             choices: Vec::new(),
-            pushed: 0,
         }
     }
 
@@ -54,7 +52,6 @@ impl Survey {
         Survey {
             surveyor: None,
             choices: choose(photos),
-            pushed: photos.len(),
         }
     }
 
@@ -65,7 +62,6 @@ impl Survey {
             return;
         };
         surveyor.push(low);
-        self.pushed += 1;
         let measured = surveyor.measured();
         while self.choices.len() < measured.len()
             && photos_read(self.choices.len()) <= measured.len()
@@ -92,11 +88,6 @@ impl Survey {
     /// Photos decided so far (photos `0..decided()`).
     pub fn decided(&self) -> usize {
         self.choices.len()
-    }
-
-    /// Photos pushed so far.
-    pub fn pushed(&self) -> usize {
-        self.pushed
     }
 
     /// Photo `i`'s choice, once decided; after the end of the mission, photos past it take the last photo's.

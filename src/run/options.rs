@@ -594,16 +594,6 @@ impl Options {
     /// Range checks of the method's options: [`Params::validate`], and `--risk` (which only counts with
     /// `--contamination`) on its own.
     fn check_estimate_ranges(&self) -> Result<(), Error> {
-        if let Some(n) = self.window {
-            if n == 0 || n % 2 == 0 || n > limits::WINDOW {
-                return Err(InvalidConfig::Window(n).into());
-            }
-        }
-        if let Some(c) = self.contamination {
-            if !(0.0..0.5).contains(&c) {
-                return Err(InvalidConfig::Contamination(c).into());
-            }
-        }
         if !(self.risk > 0.0 && self.risk < 1.0) {
             return Err(InvalidConfig::Risk(self.risk).into());
         }
