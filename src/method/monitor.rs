@@ -209,11 +209,10 @@ impl std::fmt::Display for Flag {
                 whole_mission,
             } => write!(
                 f,
-                "too few independent samples: the window of {window} photos{} sees {samples} of the {needed} \
-                 different views of the ground its quantile needs (the camera moves less than the dark objects' \
-                 size between photos{}): F may hold the scene",
+                "too few independent samples: F may hold the scene; the window of {window} photos{} sees {samples} \
+                 of the {needed} views of the ground its quantile needs (a slow camera{})",
                 if whole_mission { " (the whole mission)" } else { "" },
-                if whole_mission { ", or the mission is short" } else { "" }
+                if whole_mission { ", or a short mission" } else { "" }
             ),
         }
     }
