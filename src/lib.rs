@@ -58,11 +58,14 @@ extern crate self as abysslight;
 #[cfg(feature = "cli")]
 #[doc(hidden)]
 pub mod cli;
-mod error;
+pub mod cruise;
+pub mod error;
 pub mod eval;
 pub mod io;
 pub mod kernels;
+pub mod limits;
 pub(crate) mod method;
+pub mod report;
 pub(crate) mod run;
 mod simd;
 
@@ -77,10 +80,8 @@ pub use method::scatter::Scatter;
 pub use method::survey::Survey;
 pub use method::transfer::Transfer;
 pub use method::window::{choose_window, p_half};
-pub use run::correct_mission;
-pub use run::cruise;
-pub use run::merge::merge_shards;
-pub use run::options::{limits, Options, Shard};
-pub use run::report;
 #[doc(no_inline)]
-pub use run::report::{Progress, Report, Silent};
+pub use report::{Progress, Report, Silent};
+pub use run::correct_mission;
+pub use run::merge::merge_shards;
+pub use run::options::{Options, Shard};

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use abysslight::run::cruise::{merge_cruise, open_cruise, recorded_dives};
+use abysslight::cruise::{merge_cruise, open_cruise, recorded_dives};
 use abysslight::run::merge::{merge_shards, Merged};
 use abysslight::Error;
 use clap::Args;

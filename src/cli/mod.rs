@@ -999,7 +999,7 @@ fn correct(args: &CorrectArgs) -> Result<ExitCode, Error> {
 }
 
 fn scatter(args: ScatterArgs) -> Result<ExitCode, Error> {
-    let most = abysslight::run::options::limits::SCATTER_MEMORY_MIB;
+    let most = abysslight::limits::SCATTER_MEMORY_MIB;
     if !(1..=most).contains(&args.memory) {
         return Err(Error::Usage(format!(
             "--memory must be 1 to {most} MiB, got {}",

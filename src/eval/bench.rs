@@ -28,8 +28,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::io::{self, EncodeSettings};
 use crate::method::raster::{Layout, Photo, Samples};
+use crate::report::Silent;
 use crate::run::options::Options;
-use crate::run::report::Silent;
 use crate::run::source::Sink;
 
 /// What to benchmark.

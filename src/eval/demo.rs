@@ -14,10 +14,10 @@ use crate::io::decode;
 use crate::method::baseline::Method;
 use crate::method::raster::Raster;
 use crate::method::transfer::Transfer;
+use crate::report::Progress;
 use crate::run::draw::{self, BLACK, WHITE};
 use crate::run::options::Options;
 use crate::run::pictures::save_png;
-use crate::run::report::Progress;
 
 /// What the demo did.
 #[derive(Debug, Clone)]

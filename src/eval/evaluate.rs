@@ -32,7 +32,7 @@ use crate::method::transfer::Transfer;
 
 /// Placement of one photo in the mosaic.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Placement {
+pub(crate) struct Placement {
     /// File name of the photo (as listed in the placement file).
     pub name: String,
     /// Photo pixel → mosaic, row-major.

@@ -10,8 +10,12 @@ pub mod matrix;
 pub(crate) mod register;
 pub mod simulate;
 
+// Helpers of the project's own examples, tests, benches and Python binding: public for them, not part of the
+// documented interface.
+#[doc(hidden)]
 pub use crate::run::pictures::{before_after_sheet, save_png};
 
+#[doc(hidden)]
 /// `value` within `lo..=hi` (and not NaN), or a usage error naming `flag`: the range checks of the subcommands'
 /// numeric flags (`simulate`, `evaluate`, ...), the same for the command and the Python binding.
 pub fn within<T: PartialOrd + std::fmt::Display + Copy>(
@@ -28,4 +32,5 @@ pub fn within<T: PartialOrd + std::fmt::Display + Copy>(
     }
     Ok(())
 }
+#[doc(hidden)]
 pub use bench::{machine, noisy_photo, synthetic_photo};

@@ -344,7 +344,7 @@ pub struct Truth {
 }
 
 /// Albedo of the grey seafloor whose look `truth/lit/` records (`F·LIT_GREY`).
-pub const LIT_GREY: f32 = 0.4;
+pub(crate) const LIT_GREY: f32 = 0.4;
 /// Henyey–Greenstein asymmetry.
 const HG_G: f32 = 0.6;
 /// Water-column rays are integrated this far (metres).
@@ -552,7 +552,7 @@ fn mat_mul(a: &[f64; 9], b: &[f64; 9]) -> [f64; 9] {
 }
 
 /// Inverse of a 3×3 matrix (row-major); `None` when singular.
-pub fn invert3(m: &[f64; 9]) -> Option<[f64; 9]> {
+pub(crate) fn invert3(m: &[f64; 9]) -> Option<[f64; 9]> {
     let [a, b, c, d, e, f, g, h, i] = *m;
     let co = [
         e * i - f * h,
@@ -601,6 +601,7 @@ fn pixel_to_floor(cam: &Camera, r: &[f64; 9], c: [f64; 3]) -> [f64; 9] {
 }
 
 /// Apply a homography to a point.
+#[doc(hidden)]
 pub fn apply_h(h: &[f64; 9], x: f64, y: f64) -> (f64, f64) {
     let w = h[6] * x + h[7] * y + h[8];
     (
@@ -1015,7 +1016,7 @@ fn pose_view<'a>(
 pub const MAX_SIDE: usize = 16384;
 
 /// Most survey photos (and most water-column frames) of a simulated dive.
-pub const MAX_FRAMES: usize = 1_000_000;
+pub(crate) const MAX_FRAMES: usize = 1_000_000;
 
 impl Simulation {
     /// Refuse settings the renderer cannot use: the ranges of `abysslight simulate`'s flags (counts, size, physical
@@ -1492,7 +1493,7 @@ impl Dive {
 }
 
 /// Read `truth/dive.json`.
-pub fn load_truth(path: &Path) -> Result<Truth> {
+pub(crate) fn load_truth(path: &Path) -> Result<Truth> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     serde_json::from_str(&text).map_err(|e| Error::Config {
         path: path.to_owned(),

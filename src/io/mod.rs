@@ -21,10 +21,16 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, ImageFormat};
 
 use crate::error::{Error, Result};
-pub use crate::io::jpeg::{parse as jpeg_coding, JpegCoding, Subsampling};
-pub use crate::io::jpeg_check::check as check_jpeg;
-pub use crate::io::jpeg_check::BlockMeans;
+pub use crate::io::jpeg::Subsampling;
+// The readers' parts that the command, the Python binding and the project's tests reach: public for them, not part
+// of the documented interface (which is `decode`, `find_photos`, `encode_to` and `write_atomic`).
+#[doc(hidden)]
+pub use crate::io::jpeg::{parse as jpeg_coding, JpegCoding};
+#[doc(hidden)]
+pub use crate::io::jpeg_check::{check as check_jpeg, BlockMeans};
+#[doc(hidden)]
 pub use crate::io::paths::check_outputs;
+#[doc(hidden)]
 pub use crate::io::pnm::{decode_frame, FrameSplitter};
 use crate::method::raster::{Layout, Photo, Raster, Samples};
 
@@ -246,6 +252,7 @@ fn check_size(width: usize, height: usize) -> std::result::Result<(), String> {
     Ok(())
 }
 
+#[doc(hidden)]
 /// The mission's photo size chosen robustly: the size most of the first `sample` photos (header only) have; ties
 /// go to the earlier photo. Photos whose header cannot be read do not vote. `None` when no header could be read.
 /// One odd photo (a thumbnail sorting first) is then the only one of its size, and the only one skipped.
@@ -264,6 +271,7 @@ pub fn majority_size(photos: &[Entry], sample: usize) -> Option<(usize, usize)> 
     votes.iter().rev().max_by_key(|(_, n)| *n).map(|(s, _)| *s)
 }
 
+#[doc(hidden)]
 /// [`decode`], after checking the header against the size the mission's photos have (`expected`, when known):
 /// a photo of another size is a mismatch error before it is decoded.
 pub fn decode_expecting(path: &Path, expected: Option<(usize, usize)>) -> Result<Photo> {
@@ -287,6 +295,7 @@ fn size_mismatch(path: &Path, got: (usize, usize), expected: (usize, usize)) -> 
     }
 }
 
+#[doc(hidden)]
 /// The survey's look at a photo without decoding it: a baseline JPEG's 8×8 block means from its DC coefficients
 /// ([`crate::io::jpeg_check::block_means`]), after the same header checks as [`decode_expecting`] and the same
 /// completeness check as the decoder (whose verdict the decode of these bytes later in the run takes). `Ok(None)`:
@@ -536,6 +545,7 @@ fn split_alpha<T: Copy>(v: Vec<T>, colour: usize) -> (Vec<T>, Vec<T>) {
     (c, a)
 }
 
+#[doc(hidden)]
 /// Convert an `image` buffer into a [`Photo`] (colour samples plus optional alpha).
 pub fn photo_from_dynamic(img: DynamicImage) -> std::result::Result<Photo, String> {
     let (width, height) = (img.width() as usize, img.height() as usize);

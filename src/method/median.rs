@@ -525,7 +525,7 @@ fn per_sample(frames: &[&Raster], out: &mut Raster, of: impl Fn(&mut [f32]) -> f
 /// Per-sample median over a stack of rasters of the same layout (the temporal median).
 ///
 /// A sorting network over the frames, applied to many samples at once (no per-sample sort call). NaN is treated
-/// as larger than every number, as in [`median_of_f32`].
+/// as larger than every number, as in the median of a list of numbers.
 pub fn stack_median(frames: &[&Raster]) -> Raster {
     assert!(!frames.is_empty(), "median of an empty stack");
     let first = frames[0];

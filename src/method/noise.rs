@@ -578,7 +578,7 @@ pub const MIN_LIT_F: f32 = 1e-3;
 /// Smallest block level `A_low` the blend divides by.
 pub const LEVEL_MIN: f32 = 1e-3;
 
-/// What the correction kernel needs for the noise-aware blend of one photo (from [`NoiseModel::blend`]).
+/// What the correction kernel needs for the noise-aware blend of one photo.
 ///
 /// Per pixel, with `Â_c = (I − S)/F` per channel and `A_low`, `w` upsampled like `F`: the relative detail
 /// `ρ_c = Â_c/A_low_c` is estimated once for all channels, as the precision-weighted mean

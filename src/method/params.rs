@@ -402,9 +402,9 @@ impl Params {
     }
 
     /// The window of every photo the survey does not choose: the window given, the paper's rule's window for a
-    /// contamination rate, [`BASE_WINDOW`] for [`Window::Auto`] (the survey's starting point, and the window of the
+    /// contamination rate, 7 for [`Window::Auto`] (the survey's starting point, and the window of the
     /// other methods). A contamination rate that no window serves ([`Params::validate`] refuses it) gives
-    /// [`MAX_WINDOW`].
+    /// [`limits::WINDOW`](crate::limits::WINDOW).
     pub fn window_length(&self) -> usize {
         self.window_choice().map_or(MAX_WINDOW, |w| w.n)
     }

@@ -29,7 +29,7 @@ pub struct Survey {
 
 impl Survey {
     /// Photos a stream waits for after a photo before the survey decides it: the photos after it that its longest
-    /// window holds, and the [`REFERENCE_HALF`] after those that their measures need (25). The first photos wait
+    /// window holds, and the 10 photos after those that their measures need (25). The first photos wait
     /// longer, for the longest window from the mission's start: they are decided once photo
     /// [`Survey::FIRST_DECIDED`] is pushed.
     pub const LOOK_AHEAD: usize = LOOK_AHEAD;
@@ -45,7 +45,7 @@ impl Survey {
         }
     }
 
-    /// The finished survey of a mission whose photos were all measured first ([`Surveyor::finish`]; a run over a
+    /// The finished survey of a mission whose photos were all measured first (a run over a
     /// folder measures them before the correction, in batches on every worker): the choices [`Survey::push`] and
     /// [`Survey::finish`] make of the same block images.
     pub fn of_mission(photos: &[PhotoSurvey]) -> Self {

@@ -58,7 +58,7 @@ pub struct WindowChoice {
 }
 
 /// The smallest odd `n` whose breakdown probability `P_half(n, c)` is at most `risk`; `c` must be in `[0, 0.5)`,
-/// `risk` in `(0, 1)`, and a window up to [`MAX_WINDOW`] photos must do.
+/// `risk` in `(0, 1)`, and a window up to [`limits::WINDOW`](crate::limits::WINDOW) photos must do.
 pub fn choose_window(contamination: f64, risk: f64) -> Result<WindowChoice, InvalidConfig> {
     if !(0.0..0.5).contains(&contamination) {
         return Err(InvalidConfig::Contamination(contamination));

@@ -23,9 +23,9 @@ use crate::error::{Error, Result};
 use crate::io::WORK_DIR;
 use crate::method::monitor::{Flag, Health, Summary, Thresholds};
 use crate::method::raster::Raster;
+use crate::report::FrameReport;
 use crate::run::guard::fingerprint;
 use crate::run::options::{Options, Shard};
-use crate::run::report::FrameReport;
 
 /// What [`merge_shards`] wrote.
 #[derive(Debug, Clone)]

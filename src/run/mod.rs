@@ -9,7 +9,6 @@
 //! Sources of photos: a folder ([`source`]), a folder watched during a dive ([`watch`]) or frames on stdin
 //! ([`stdin`]). [`options`] holds every setting, shared by the library, the TOML config file and the CLI.
 
-pub mod cruise;
 pub mod draw;
 pub mod guard;
 pub mod merge;
@@ -17,7 +16,6 @@ pub mod options;
 pub mod pictures;
 pub mod plan;
 pub mod prepare;
-pub mod report;
 pub mod source;
 pub mod stdin;
 pub mod threads;
@@ -30,10 +28,10 @@ use crate::error::{Error, Result};
 use crate::io::find_photos;
 use crate::method::monitor::{Summary, Thresholds};
 use crate::method::scatter::Scatter;
+use crate::report::{FileError, FrameReport, Progress, Report, ScatterInfo, WindowSummary};
 use crate::run::options::Options;
 use crate::run::plan::Plan;
 use crate::run::prepare::{prepare, spread_indices, Setup};
-use crate::run::report::{FileError, FrameReport, Progress, Report, ScatterInfo, WindowSummary};
 use crate::run::threads::{stream, Outcome};
 
 /// Run `abysslight correct` as described by `opts`.

@@ -6,6 +6,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
+use crate::limits;
 pub use crate::method::baseline::Method;
 pub use crate::method::params::SeafloorColour;
 use crate::method::params::{InvalidConfig, Params, Steps, Window};
@@ -455,27 +456,6 @@ impl Options {
             },
         }
     }
-}
-
-/// Upper limits of the numeric options, checked by [`Options::validate`] before anything is created on disk.
-/// Each is far above any real use and far below what would overflow a size computation or a `Duration`.
-pub mod limits {
-    /// `--window` (also the largest window `--contamination` may choose).
-    pub const WINDOW: usize = crate::method::window::MAX_WINDOW;
-    /// `--downsample` block size K.
-    pub const DOWNSAMPLE: usize = crate::method::params::MAX_DOWNSAMPLE;
-    /// `--threads`.
-    pub const THREADS: usize = 1024;
-    /// `--degree` of `--method polynomial`.
-    pub const DEGREE: usize = crate::method::params::MAX_DEGREE;
-    /// `--idle-timeout`, seconds (a year).
-    pub const IDLE_TIMEOUT_S: f64 = 365.0 * 24.0 * 3600.0;
-    /// `--poll-interval`, milliseconds (an hour).
-    pub const POLL_INTERVAL_MS: u64 = 3_600_000;
-    /// `scatter-memory-mib` (1 TiB).
-    pub const SCATTER_MEMORY_MIB: usize = 1 << 20;
-    /// Shard count N of `--shard K/N`.
-    pub const SHARDS: usize = 1_000_000;
 }
 
 impl Options {

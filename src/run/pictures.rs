@@ -9,8 +9,8 @@ use image::RgbImage;
 use crate::error::{Error, Result};
 use crate::method::monitor::Thresholds;
 use crate::method::raster::Raster;
+use crate::report::FrameReport;
 use crate::run::draw::{self, BLACK, BLUE, GREY, RED, WHITE};
-use crate::run::report::FrameReport;
 
 /// One plotted series.
 struct Series<'a> {

@@ -14,8 +14,8 @@ use crate::method::baseline::Method;
 use crate::method::params::{BlockRule, Facts, Params};
 use crate::method::transfer::Transfer;
 use crate::method::window::WindowChoice;
+use crate::report::Progress;
 use crate::run::options::Options;
-use crate::run::report::Progress;
 use crate::run::source::{Item, Role};
 
 pub(crate) mod checks;

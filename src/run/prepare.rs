@@ -20,9 +20,9 @@ use crate::method::stretch::{
 };
 use crate::method::survey::Survey;
 use crate::method::transfer::Transfer;
+use crate::report::{FileError, Progress, ScatterInfo};
 use crate::run::options::Options;
 use crate::run::plan::Plan;
-use crate::run::report::{FileError, Progress, ScatterInfo};
 use crate::run::source::Item;
 
 /// The engine of a run and what setting it up found.

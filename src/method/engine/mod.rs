@@ -253,7 +253,7 @@ impl<T> Engine<T> {
     }
 
     /// Whether a photo's block image from block means sees the dark blocks its block image from block medians sees
-    /// ([`crate::method::stretch::means_stand_for_medians`], against this engine's `S`).
+    /// (the survey's test, against this engine's `S`).
     pub fn means_stand_for_medians(&self, means: &Raster, medians: &Raster) -> bool {
         crate::method::stretch::means_stand_for_medians(means, medians, self.scatter_low.as_ref())
     }

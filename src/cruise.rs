@@ -18,9 +18,9 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::io::gate::{Gate, Output};
+use crate::report::{Progress, Report};
 use crate::run::merge::{merge_shards, Merged};
 use crate::run::options::{Options, Shard};
-use crate::run::report::{Progress, Report};
 
 /// Folder of a dive's survey photos, below the dive's folder.
 pub const SURVEY: &str = "survey";
@@ -107,7 +107,7 @@ fn dive_inputs(dives: &[Dive]) -> Vec<(String, PathBuf)> {
 /// A cruise about to be corrected: its dives, and the write gate that protects every dive's inputs from every
 /// dive's writes for as long as it is held.
 #[derive(Debug)]
-pub struct CruiseRun {
+pub(crate) struct CruiseRun {
     /// The dives, in natural name order.
     pub dives: Vec<Dive>,
     _gate: Gate,
@@ -122,7 +122,7 @@ fn dives_file(shard: Shard) -> String {
 /// Before the first write of a cruise: find its dives, check every output path (`out` and each `out/<dive>`)
 /// against every dive's inputs ([`dive_inputs`]) and hold them in a write gate; with `--shard K/N`, record the
 /// dives this task was given in `out/_abysslight/cruise-shard-K-of-N.json` (for [`merge_cruise`]).
-pub fn open_cruise(cruise: &Path, out: &Path, shard: Option<Shard>) -> Result<CruiseRun> {
+pub(crate) fn open_cruise(cruise: &Path, out: &Path, shard: Option<Shard>) -> Result<CruiseRun> {
     let dives = find_dives(cruise)?;
     let outs: Vec<PathBuf> = dives.iter().map(|d| out.join(&d.name)).collect();
     let mut outputs = vec![Output::Folder("--out", out)];
@@ -156,7 +156,7 @@ pub fn open_cruise(cruise: &Path, out: &Path, shard: Option<Shard>) -> Result<Cr
 
 /// The dives the tasks of a sharded cruise into `out` were given (from the files [`open_cruise`] leaves), in
 /// natural name order; `None` when `out` is not the output of a sharded cruise.
-pub fn recorded_dives(out: &Path) -> Option<Vec<String>> {
+pub(crate) fn recorded_dives(out: &Path) -> Option<Vec<String>> {
     let work = out.join(crate::io::WORK_DIR);
     let mut names: Vec<String> = Vec::new();
     let mut found = false;
@@ -219,7 +219,7 @@ pub fn correct_cruise(
 }
 
 /// `merge-shards` over the output of a sharded cruise: every `out/<dive>/` that has an `_abysslight/` folder and
-/// every dive the tasks were given ([`recorded_dives`]), in natural name order, each merged on its own; a dive
+/// every dive the tasks were given (recorded in the output folder), in natural name order, each merged on its own; a dive
 /// the tasks were given that has no reports is an error naming it.
 pub fn merge_cruise(out: &Path) -> Result<Vec<(String, Result<Merged>)>> {
     let rd = std::fs::read_dir(out).map_err(|e| Error::io(out, e))?;
