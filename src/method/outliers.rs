@@ -191,6 +191,10 @@ pub const PATH_CHANCE: f64 = 0.01;
 /// (a simulated nodule field without lasers: 1–2 blocks of 4800).
 pub const LASER_MIN_BLOCKS: usize = (2 * SPOT_GROW + 1) * (2 * SPOT_GROW + 1);
 
+/// The fewest photos [`LaserPaths::of`] decides on: in fewer, a block needs to hold a spot in only 2 or 3 of them to
+/// beat chance, and a slow camera over one red animal does that (MBARI's 12 benthic frames: 0.2 % of the frame).
+pub const LASER_MIN_PHOTOS: usize = 20;
+
 /// Where bright spots come back to through a mission: the path of laser dots that wander with the altitude
 /// (`--mask-auto`). Counts, per block, the photos whose [`laser_spots`] held it; [`SpotPath::blocks`] keeps the
 /// blocks held in more of them than chance explains ([`PATH_CHANCE`]). Left out of every median like a fixed
@@ -306,8 +310,12 @@ pub struct LaserPaths {
 }
 
 impl LaserPaths {
-    /// The paths `path` found, if it found laser paths ([`SpotPath::laser_blocks`]).
+    /// The paths `path` found, if it found laser paths ([`SpotPath::laser_blocks`]) in at least
+    /// [`LASER_MIN_PHOTOS`] photos.
     pub fn of(path: &SpotPath) -> Option<LaserPaths> {
+        if path.photos < LASER_MIN_PHOTOS {
+            return None;
+        }
         Some(LaserPaths {
             width: path.width,
             height: path.height,

@@ -236,6 +236,9 @@ impl<T> Engine<T> {
             ));
         }
         if self.params.window_is_auto() && self.params.steps.laser_paths {
+            if let Some(p) = &paths {
+                self.blend_off_near(p);
+            }
             self.lasers = Lasers::Decided(paths);
         }
         Ok(())
@@ -255,10 +258,7 @@ impl<T> Engine<T> {
         }
         let paths = LaserPaths::of(path);
         if let Some(p) = &paths {
-            self.masked_blocks = Some(match self.masked_blocks.take() {
-                Some(m) => m.iter().zip(p.near()).map(|(&a, b)| a || b).collect(),
-                None => p.near(),
-            });
+            self.blend_off_near(p);
             // Photos held are seen again without the paths, in order (the overlaps' steps chain them).
             self.previous_texture = None;
             let mut held = std::mem::replace(&mut self.ring, Ring::new(0));
@@ -270,6 +270,14 @@ impl<T> Engine<T> {
             self.ring = held;
         }
         self.lasers = Lasers::Decided(paths);
+    }
+
+    /// No noise-aware blend on the paths of laser dots and next to them, as next to a mask.
+    fn blend_off_near(&mut self, p: &LaserPaths) {
+        self.masked_blocks = Some(match self.masked_blocks.take() {
+            Some(m) => m.iter().zip(p.near()).map(|(&a, b)| a || b).collect(),
+            None => p.near(),
+        });
     }
 
     /// What the window keeps of a photo's block image: the image, pooled for the monitor, its bright spots and the
