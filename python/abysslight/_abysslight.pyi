@@ -75,7 +75,8 @@ class Engine:
     Options are the method's options of `abysslight correct` (the config file's keys with '_'): window,
     contamination, risk, downsample, near_window, seafloor_colour (or seafloor_color), factor_floor, transfer,
     method, degree, relative_floor, level_exposures, photo_gain, backscatter_scale, denoise, level_by_light,
-    bright_spots, overlaps (and no_level_exposures, no_photo_gain, no_denoise, no_level_by_light). None given: the
+    bright_spots, overlaps, laser_paths (and no_level_exposures, no_photo_gain, no_denoise, no_level_by_light,
+    no_laser_paths). None given: the
     command's defaults. transfer="auto" (the default) means what the command assumes for a file that declares no
     colour information: linear; give transfer="srgb" for arrays from JPEGs or sRGB-encoded cameras.
 

@@ -34,13 +34,20 @@ const METHOD_OPTIONS: &[&str] = &[
     "level_by_light",
     "bright_spots",
     "overlaps",
+    "laser_paths",
 ];
 
 /// Fields of `Options` that a Python call has no use for: `watch` runs until stopped.
 const COMMAND_ONLY: &[&str] = &["watch"];
 
 /// On/off options the command turns off with `--no-NAME`: `no_NAME=True` is accepted too.
-const NEGATABLE: &[&str] = &["level_exposures", "photo_gain", "denoise", "level_by_light"];
+const NEGATABLE: &[&str] = &[
+    "level_exposures",
+    "photo_gain",
+    "denoise",
+    "level_by_light",
+    "laser_paths",
+];
 
 /// Options whose value is a path: set on `Options` directly (a path need not be valid UTF-8, which JSON needs).
 const PATHS: &[&str] = &["water_column", "scatter", "survey", "out", "mask", "report"];

@@ -572,6 +572,17 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_METHOD)]
     no_level_by_light: bool,
 
+    /// --method abyss, --window auto: do not leave the paths of laser dots out of F (on by default).
+    ///
+    /// By default the survey looks at the mission's first 41 photos for blocks where a red or green bright spot
+    /// comes back more often than chance would bring anything there: the paths of laser dots, which wander with the
+    /// altitude. Those blocks are left out of every window's median, F beneath them is filled from the seafloor
+    /// around, and the dots are corrected like it: they stay red and leave no teal stain in the photos where they
+    /// are not. The run says what it masked. With this flag the median may take the dots into F, as it did before.
+    /// Grey photos get no laser paths; --mask-auto finds the paths over the whole mission instead.
+    #[arg(long, help_heading = H_METHOD)]
+    no_laser_paths: bool,
+
     /// --method abyss: fill F where laser dots or highlights that move held the window's median (off by default).
     ///
     /// Laser dots move in the frame with the altitude, so over a window they can sit on the same few blocks in
@@ -826,6 +837,7 @@ fn set_method_flags(args: &CorrectArgs, o: &mut Options) {
     o.photo_gain &= !args.no_photo_gain;
     o.denoise &= !args.no_denoise;
     o.level_by_light &= !args.no_level_by_light;
+    o.laser_paths &= !args.no_laser_paths;
     o.bright_spots |= args.bright_spots;
     o.overlaps |= args.overlaps;
     if let Some(WindowArg(n)) = args.window {

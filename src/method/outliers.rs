@@ -142,7 +142,7 @@ fn compact_groups(bright: &[bool], w: usize, h: usize, keep: impl Fn(usize) -> b
 }
 
 /// The `spots` (of a `w`×`h` grid) with every block within `g` of them (a square).
-fn grow(spots: &[bool], w: usize, h: usize, g: usize) -> Vec<bool> {
+pub(crate) fn grow(spots: &[bool], w: usize, h: usize, g: usize) -> Vec<bool> {
     let mut out = vec![false; w * h];
     for b in (0..w * h).filter(|&b| spots[b]) {
         let (x, y) = (b % w, b / w);
@@ -185,6 +185,15 @@ pub fn laser_spots(low: &Raster) -> Vec<bool> {
 /// seafloor pass through the frame, so a block holds them in a photo now and then, by chance; a laser dot moves
 /// only with the altitude and comes back to the same few blocks all mission long.
 pub const PATH_CHANCE: f64 = 0.01;
+
+/// The fewest blocks on spot paths ([`SpotPath::blocks`]) that are taken for the paths of laser dots: one spot with
+/// its glare, `(2·SPOT_GROW + 1)²`. Fewer blocks held more often than chance are a coincidence of neighbouring spots
+/// (a simulated nodule field without lasers: 1–2 blocks of 4800).
+pub const LASER_MIN_BLOCKS: usize = (2 * SPOT_GROW + 1) * (2 * SPOT_GROW + 1);
+
+/// The fewest photos [`LaserPaths::of`] decides on: in fewer, a block needs to hold a spot in only 2 or 3 of them to
+/// beat chance, and a slow camera over one red animal does that (MBARI's 12 benthic frames: 0.2 % of the frame).
+pub const LASER_MIN_PHOTOS: usize = 20;
 
 /// Where bright spots come back to through a mission: the path of laser dots that wander with the altitude
 /// (`--mask-auto`). Counts, per block, the photos whose [`laser_spots`] held it; [`SpotPath::blocks`] keeps the
@@ -275,6 +284,72 @@ impl SpotPath {
     pub fn blocks(&self) -> Vec<bool> {
         let least = self.least();
         self.count.iter().map(|&n| n as usize >= least).collect()
+    }
+
+    /// The blocks on a spot path when there are at least [`LASER_MIN_BLOCKS`] of them: the paths of laser dots
+    /// (`None`: fewer, or none).
+    pub fn laser_blocks(&self) -> Option<Vec<bool>> {
+        let blocks = self.blocks();
+        (blocks.iter().filter(|&&b| b).count() >= LASER_MIN_BLOCKS).then_some(blocks)
+    }
+}
+
+/// The paths of laser dots an [`Engine`](crate::method::engine::Engine) leaves out of every window's `M`
+/// ([`Steps::laser_paths`](crate::method::params::Steps::laser_paths)): the blocks a [`SpotPath`] counted over the
+/// mission's first photos holds ([`SpotPath::laser_blocks`]), on the grid of the engine's block images.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LaserPaths {
+    /// Blocks across.
+    pub width: usize,
+    /// Blocks down.
+    pub height: usize,
+    /// One flag per block, row by row: on a path.
+    pub blocks: Vec<bool>,
+    /// The photos they were found in.
+    pub photos: usize,
+}
+
+impl LaserPaths {
+    /// The paths `path` found, if it found laser paths ([`SpotPath::laser_blocks`]) in at least
+    /// [`LASER_MIN_PHOTOS`] photos.
+    pub fn of(path: &SpotPath) -> Option<LaserPaths> {
+        if path.photos < LASER_MIN_PHOTOS {
+            return None;
+        }
+        Some(LaserPaths {
+            width: path.width,
+            height: path.height,
+            blocks: path.laser_blocks()?,
+            photos: path.photos,
+        })
+    }
+
+    /// The share of the frame's blocks on a path.
+    pub fn share(&self) -> f64 {
+        self.blocks.iter().filter(|&&b| b).count() as f64 / self.blocks.len().max(1) as f64
+    }
+
+    /// Leave the blocks on a path out of `low`, a block image of the same grid (NaN in every channel, as a mask
+    /// that covers the whole block leaves it); one of another size is left as it is.
+    pub fn clear(&self, low: &mut Raster) {
+        if (low.width, low.height) != (self.width, self.height) {
+            return;
+        }
+        let c = low.channels;
+        for (b, _) in self.blocks.iter().enumerate().filter(|(_, &on)| on) {
+            low.data[b * c..(b + 1) * c].fill(f32::NAN);
+        }
+    }
+
+    /// The blocks on a path or next to one (8-connected): as [`crate::method::blocks`]' flags of blocks near a
+    /// masked pixel, where the blend stays off.
+    pub fn near(&self) -> Vec<bool> {
+        grow(&self.blocks, self.width, self.height, 1)
+    }
+
+    /// The paths as a pixel mask of a `width`×`height` photo cut into blocks of `k` (white on a path).
+    pub fn to_mask(&self, k: usize, width: usize, height: usize) -> crate::method::mask::Mask {
+        crate::method::mask::Mask::from_blocks(&self.blocks, k, width, height)
     }
 }
 

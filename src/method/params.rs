@@ -268,6 +268,11 @@ pub struct Steps {
     /// With `denoise`: even out the blend's block levels across light levels
     /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
+    /// With the window chosen per stretch ([`Window::Auto`]): where red or green bright spots come back to the same
+    /// blocks in the first photos of the mission (the paths of laser dots; [`crate::method::outliers::SpotPath`]),
+    /// leave those blocks out of every window's `M`, as a mask does, so the dots are not taken into `F` and leave
+    /// no stain. Default: true.
+    pub laser_paths: bool,
 }
 
 impl Default for Steps {
@@ -282,6 +287,7 @@ impl Default for Steps {
             relative_floor: 0.001,
             denoise: true,
             level_by_light: true,
+            laser_paths: true,
         }
     }
 }

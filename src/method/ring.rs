@@ -96,6 +96,14 @@ impl<E, W> Ring<E, W> {
             .map(|(_, e)| e)
     }
 
+    /// Every block image held, in order, replaced by `f` of it.
+    pub(crate) fn map_entries(&mut self, mut f: impl FnMut(E) -> E) {
+        self.entries = std::mem::take(&mut self.entries)
+            .into_iter()
+            .map(|(s, e)| (s, f(e)))
+            .collect();
+    }
+
     /// The block image of photo `seq`, while the ring holds it.
     pub(crate) fn get(&self, seq: usize) -> Option<&E> {
         self.entries.iter().find(|(s, _)| *s == seq).map(|(_, e)| e)

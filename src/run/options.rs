@@ -195,6 +195,11 @@ pub struct Options {
     /// fauna cancel (`method::overlap`). Default: false (docs/overlaps.md).
     #[serde(default)]
     pub overlaps: bool,
+    /// `method = abyss` with the window chosen per stretch (no `window`, no `contamination`): where red or green
+    /// bright spots come back to the same blocks in the mission's first photos (the paths of laser dots), leave those
+    /// blocks out of `F` as `mask_auto` does, so the dots keep their colour and leave no stain
+    /// (`laser_paths`). Not with `mask_auto`, which finds the paths itself. Default: true.
+    pub laser_paths: bool,
 }
 
 /// A TOML value that is a number (a whole one for a whole-number option), or the string `"auto"` (`None`); in
@@ -298,6 +303,7 @@ impl Default for Options {
             level_by_light: p.steps.level_by_light,
             bright_spots: p.steps.bright_spots,
             overlaps: p.steps.overlaps,
+            laser_paths: p.steps.laser_paths,
         }
     }
 }
@@ -306,7 +312,13 @@ impl Default for Options {
 pub const DEFAULT_RISK: f64 = 0.01;
 
 /// The switches the command line turns off with `--no-…`, by their config-file keys.
-const SWITCHES: [&str; 4] = ["level-exposures", "photo-gain", "denoise", "level-by-light"];
+const SWITCHES: [&str; 5] = [
+    "level-exposures",
+    "photo-gain",
+    "denoise",
+    "level-by-light",
+    "laser-paths",
+];
 
 /// Turn a config file's `no-denoise = true` (and the other `--no-…` switches) into `denoise = false`; whether any
 /// was there. An error where the value is not true or false, or where `denoise` says otherwise.
@@ -496,6 +508,7 @@ impl Options {
             level_by_light,
             bright_spots,
             overlaps,
+            laser_paths,
             // The run's: where photos come from and go to, and how the run goes.
             water_column: _,
             scatter: _,
@@ -549,6 +562,7 @@ impl Options {
                 denoise,
                 level_by_light,
                 overlaps,
+                laser_paths,
             },
         })
     }

@@ -9,9 +9,10 @@ use crate::error::{Error, Result};
 use crate::io::{decode_expecting, Entry};
 use crate::method::baseline::{block_mean, Method};
 use crate::method::blocks::{linear_block_medians, median_linear_table};
+use crate::method::engine::LASER_PHOTOS;
 use crate::method::engine::{Engine, Params};
 use crate::method::mask::{detect_static, DetectSettings, Mask};
-use crate::method::outliers::{laser_spots, SpotPath, SPOT_GROW};
+use crate::method::outliers::{laser_spots, LaserPaths, SpotPath};
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
 use crate::method::stretch::{
@@ -81,13 +82,25 @@ pub fn prepare<T: Sync>(
     // Photos as they come (`--watch`, standard input) are surveyed by the engine as it takes them; a folder is
     // surveyed first, from its JPEGs' block means where they stand for the block medians.
     if params.window_is_auto() && !plan.streaming {
-        // Without a mask, the survey also looks for laser dots' paths (a warning that names the fix).
-        let lasers = opts.mask.is_none() && !opts.mask_auto;
+        // With the paths of laser dots not left out (`--no-laser-paths`) and no mask, the survey looks for them
+        // (a warning that names the fix).
+        let lasers = opts.mask.is_none() && !opts.mask_auto && !params.steps.laser_paths;
         let (survey, path) = survey(&engine, plan, progress, lasers);
         progress.stage(&stretches_line(survey.choices()));
         engine.set_survey(survey)?;
         if let Some(w) = lasers_warning(&path) {
             warnings.warn(w);
+        }
+        // `--mask-auto` finds the paths over the whole mission itself.
+        if params.steps.laser_paths && !opts.mask_auto {
+            let paths = laser_paths(&engine, plan, progress);
+            if let Some(p) = &paths {
+                let saved = plan
+                    .photo_size
+                    .and_then(|size| save_laser_paths(p, params.downsample, size, plan));
+                warnings.warn(laser_note(p, saved));
+            }
+            engine.set_laser_paths(paths)?;
         }
     }
     if opts.method == Method::Mean {
@@ -159,21 +172,87 @@ fn survey<T: Sync>(
     (Survey::of_mission(&photos), path)
 }
 
-/// The warning for laser dots' paths the survey found ([`SpotPath`]), if it found one at least as large as a spot
-/// with its glare ((2·[`SPOT_GROW`] + 1)² blocks): fewer blocks held more often than chance are a coincidence of
-/// neighbouring spots (a simulated nodule field without lasers: 1–2 blocks of 4800).
+/// The warning for laser dots' paths the survey found ([`SpotPath`]) when they are not left out of `F`
+/// (`--no-laser-paths`), if it found at least [`LASER_MIN_BLOCKS`](crate::method::outliers::LASER_MIN_BLOCKS).
 fn lasers_warning(path: &SpotPath) -> Option<String> {
     let (on, share) = path.on_path();
-    (on >= (2 * SPOT_GROW + 1).pow(2)).then(|| {
+    (on >= crate::method::outliers::LASER_MIN_BLOCKS).then(|| {
         format!(
             "laser dots: red or green bright spots came back to the same blocks ({:.1} % of the frame) in the {} \
              photos looked at, the paths of laser dots (or of something coloured that stays in view); where most \
              photos of a window had a dot, F takes it, and photos whose own dot is elsewhere get a stain there \
-             (teal beside a red laser): --mask-auto leaves those paths out of F (docs/guide.md)",
+             (teal beside a red laser): leave out --no-laser-paths, or give --mask-auto, to keep those paths out of F \
+             (docs/guide.md)",
             100.0 * share,
             path.photos()
         )
     })
+}
+
+/// The paths of laser dots in the mission's first [`LASER_PHOTOS`] photos that decode at its size, as the engine
+/// finds them when it surveys the photos as they come (its block images: the blocks, mask and curve it takes), so
+/// that a run over a folder, `--watch`, `--survey -` and the `Engine` leave the same blocks out of `F`. Every shard
+/// of a mission looks at the same photos. One more decode of these photos.
+fn laser_paths<T: Sync>(
+    engine: &Engine<T>,
+    plan: &Plan,
+    progress: &dyn Progress,
+) -> Option<LaserPaths> {
+    let photos = &plan.found.photos;
+    progress.stage(&format!(
+        "looking for the paths of laser dots in the first {} photos",
+        LASER_PHOTOS.min(photos.len())
+    ));
+    let mut path = SpotPath::new();
+    let mut next = 0;
+    // In order, a batch at a time: a photo that does not decode is passed over as the engine passes it over.
+    while path.photos() < LASER_PHOTOS && next < photos.len() {
+        let end = (next + LASER_PHOTOS - path.photos()).min(photos.len());
+        let lows: Vec<Option<crate::method::raster::Raster>> = photos[next..end]
+            .par_iter()
+            .map(|e| {
+                let p = decode_expecting(&e.path, plan.photo_size).ok()?;
+                let low = engine.block_image(&p);
+                crate::io::buffers::recycle(p);
+                low
+            })
+            .collect();
+        for low in lows.iter().flatten() {
+            path.add(low);
+        }
+        next = end;
+    }
+    LaserPaths::of(&path)
+}
+
+/// The run's words on the paths of laser dots it leaves out of `F`, with where their mask was written.
+pub(crate) fn laser_note(paths: &LaserPaths, saved: Option<PathBuf>) -> String {
+    format!(
+        "laser dots: red or green bright spots came back to the same blocks in the first {} photos, the paths of \
+         laser dots ({:.1} % of the frame{}); they are left out of F, which is filled in from the seafloor around, \
+         so the dots keep their colour and leave no stain (teal beside a red laser); --no-laser-paths keeps them \
+         in F, --mask-auto looks over the whole mission",
+        paths.photos,
+        100.0 * paths.share(),
+        saved
+            .map(|p| format!("; mask written to {}", p.display()))
+            .unwrap_or_default()
+    )
+}
+
+/// `_abysslight/laser-paths.png`: the paths as a mask of the photos' size (`k`: the blocks), to look at and to reuse
+/// with `--mask`; `None` when there is no work folder or it cannot be written (the note says nothing then).
+pub(crate) fn save_laser_paths(
+    paths: &LaserPaths,
+    k: usize,
+    (w, h): (usize, usize),
+    plan: &Plan,
+) -> Option<PathBuf> {
+    let p = plan.work_dir.as_deref()?.join("laser-paths.png");
+    (k > 0 && paths.blocks.len() == w.div_ceil(k) * h.div_ceil(k))
+        .then(|| paths.to_mask(k, w, h).save(&p).ok())
+        .flatten()
+        .map(|_| p)
 }
 
 /// One pass of [`survey`] over `items`, baseline JPEGs read by their block means when `by_means`, the laser spots

@@ -194,6 +194,8 @@ struct Feed<'a> {
     outcome: Outcome,
     resumed: Vec<FrameReport>,
     flagged: FlaggedSample,
+    /// The paths of laser dots the engine found in the stream were said (a run over a folder says them before).
+    lasers_said: bool,
 }
 
 impl Feed<'_> {
@@ -241,6 +243,7 @@ impl Feed<'_> {
     fn finish(mut self, engine: &mut Engine<Tag>, reached_end: bool, n: usize) -> Result<Outcome> {
         if reached_end {
             let out = engine.finish();
+            self.say_lasers(engine);
             self.emit(out)?;
             let seen = engine.accepted();
             // Under auto the windows fit the mission (the photos short of samples are flagged).
@@ -283,6 +286,7 @@ impl Feed<'_> {
         match engine.push_as(photo, tag, use_) {
             Ok(out) => {
                 self.pending += usize::from(role != Role::Halo);
+                self.say_lasers(engine);
                 self.emit(out)
             }
             // The first photo does not fit S or the mask: nothing of this mission can be corrected.
@@ -301,6 +305,27 @@ impl Feed<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// Photos as they come (`--watch`, `--survey -`): once the engine found the paths of laser dots in the first
+    /// photos, say so, and write their mask beside the report.
+    fn say_lasers(&mut self, engine: &Engine<Tag>) {
+        if self.lasers_said || !self.plan.streaming {
+            return;
+        }
+        let (Some(p), Some(l)) = (engine.laser_paths(), engine.layout()) else {
+            return;
+        };
+        self.lasers_said = true;
+        let saved = crate::run::prepare::save_laser_paths(
+            p,
+            engine.params().downsample,
+            (l.width, l.height),
+            self.plan,
+        );
+        let m = crate::run::prepare::laser_note(p, saved);
+        self.progress.warn(&m);
+        self.outcome.warnings.push(m);
     }
 
     /// Hand corrected photos to the writers; record the ones `--resume` found written.
@@ -437,6 +462,7 @@ pub fn stream(
             outcome: Outcome::default(),
             resumed: Vec::new(),
             flagged: FlaggedSample::default(),
+            lasers_said: false,
         };
         let reached_end = feed.drain(&mut engine, dec_rx, last_needed, total_items)?;
         feed.finish(&mut engine, reached_end, n)

@@ -195,7 +195,8 @@ fn masked_overlays_leave_no_halo_and_stay_recognisable() {
     assert!(red_none < 0.3, "{red_none}");
 }
 
-/// Without a mask, the survey of `--window auto` warns of a laser dot's path and names `--mask-auto`: a red dot 6
+/// Under `--window auto` a laser dot's path is left out of `F` and said (with `--no-laser-paths`, the survey warns of
+/// it and names the fix instead): a red dot 6
 /// pixels across (as small against the frame as the Nephrops runs' are against theirs, within a few blocks) at A in
 /// three photos of every five and 20 pixels to the right in the others. The same dive without the dot gets no
 /// such warning (bright spots that pass through the frame are not a path).
@@ -222,23 +223,31 @@ fn the_survey_warns_of_a_laser_dot_s_path_and_names_the_fix() {
             }
         }
         write_dive(&dive, d.path(), "png");
-        let out = d.path().join("out");
-        correct_mission(
-            &Options {
-                water_column: Some(d.path().join("water")),
-                survey: Some(d.path().join("survey")),
-                out: Some(out.clone()),
-                ..Options::default()
-            },
-            &Silent,
-        )
-        .unwrap();
-        let report = std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap();
-        assert_eq!(
-            report.contains("laser dots:") && report.contains("--mask-auto leaves those paths out"),
-            laser,
-            "laser {laser}: {report}"
-        );
+        // At default options the paths are left out of F and said; with --no-laser-paths the survey warns of them
+        // and names the fix.
+        for (laser_paths, said) in [
+            (true, "--no-laser-paths keeps them in F"),
+            (false, "to keep those paths out of F"),
+        ] {
+            let out = d.path().join(format!("out-{laser_paths}"));
+            correct_mission(
+                &Options {
+                    water_column: Some(d.path().join("water")),
+                    survey: Some(d.path().join("survey")),
+                    out: Some(out.clone()),
+                    laser_paths,
+                    ..Options::default()
+                },
+                &Silent,
+            )
+            .unwrap();
+            let report = std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap();
+            assert_eq!(
+                report.contains("laser dots:") && report.contains(said),
+                laser,
+                "laser {laser}, paths {laser_paths}: {report}"
+            );
+        }
     }
 }
 

@@ -22,6 +22,7 @@ mod honest_results;
 mod jpeg_encoder_differential;
 mod jpeg_like_input;
 mod jpeg_reference;
+mod lasers;
 mod live;
 mod merge_shards;
 mod metadata;

@@ -128,7 +128,7 @@ impl<T> Engine<T> {
             // The per-photo gain at the window's quantile where the window is chosen per stretch (the median
             // elsewhere: docs/nodules.md).
             gain_quantile: self.choice(i).map_or(0.5, |c| c.quantile as f64),
-            masked: self.mask.is_some(),
+            masked: self.mask.is_some() || self.laser_paths().is_some(),
             masked_blocks: self.masked_blocks.as_deref(),
             mission_mean: self.mission_mean.as_ref(),
             curves: (&self.curves.0, &self.curves.1),
@@ -137,7 +137,12 @@ impl<T> Engine<T> {
 
     /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
     fn factor_of(&self, m: &Raster, s_low: Option<&Raster>) -> Raster {
-        factor_filled(m, s_low, &self.colour, self.mask.is_some())
+        factor_filled(
+            m,
+            s_low,
+            &self.colour,
+            self.mask.is_some() || self.laser_paths().is_some(),
+        )
     }
 
     /// Photo `i`'s entry in the ring (it is in its own window).

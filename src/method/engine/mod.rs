@@ -33,7 +33,7 @@ use crate::method::correct::CorrectStats;
 use crate::method::mask::Mask;
 use crate::method::monitor::{pool_factor, pooled, Health, Monitor, Thresholds};
 use crate::method::noise::NoiseModel;
-use crate::method::outliers::bright_spots;
+use crate::method::outliers::{bright_spots, LaserPaths, SpotPath};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster};
@@ -134,7 +134,23 @@ pub struct Engine<T> {
     finished: bool,
     /// With `steps.overlaps`: the texture of the last photo's block medians, to match the next one against.
     previous_texture: Option<crate::method::matching::Texture>,
+    /// The paths of laser dots left out of every window's `M` ([`Steps::laser_paths`](crate::Steps::laser_paths)).
+    lasers: Lasers,
 }
+
+/// Where an engine stands on the paths of laser dots.
+enum Lasers {
+    /// Not looked for: off, or the window is not chosen per stretch.
+    Off,
+    /// The engine's own survey: counting the laser spots of the mission's first [`LASER_PHOTOS`] photos.
+    Looking(SpotPath),
+    /// Found (`None`: none), or given ([`Engine::set_laser_paths`]).
+    Decided(Option<LaserPaths>),
+}
+
+/// The photos whose laser spots decide the paths of laser dots: those the engine's own survey holds when it makes
+/// its first decision ([`Survey::FIRST_DECIDED`]), so that no photo waits longer for them (41).
+pub const LASER_PHOTOS: usize = FIRST_DECIDED + 1;
 
 impl<T> Engine<T> {
     /// An engine for one mission. `scatter` is `S` (`None`: no backscatter removal); `mask` marks static pixels
@@ -173,6 +189,7 @@ impl<T> Engine<T> {
             survey: None,
             finished: false,
             previous_texture: None,
+            lasers: Lasers::Off,
         }
         .with_own_survey())
     }
@@ -184,8 +201,103 @@ impl<T> Engine<T> {
         if self.params.window_is_auto() {
             self.survey = Some(Survey::new(self.scatter_low.as_ref()));
             self.ring = Ring::new(FIRST_DECIDED + 1);
+            if self.params.steps.laser_paths {
+                self.lasers = Lasers::Looking(SpotPath::new());
+            }
         }
         self
+    }
+
+    /// The paths of laser dots found in the mission's first photos (or given: [`Engine::set_laser_paths`]), once
+    /// decided; `None` before, and when there are none. Their blocks are left out of every window's `M` and `F` is
+    /// filled beneath them, as beneath a mask.
+    pub fn laser_paths(&self) -> Option<&LaserPaths> {
+        match &self.lasers {
+            Lasers::Decided(p) => p.as_ref(),
+            _ => None,
+        }
+    }
+
+    /// Whether the paths of laser dots are decided (found, found to be none, or given): always true when the
+    /// engine does not look for them.
+    pub fn laser_paths_decided(&self) -> bool {
+        !matches!(self.lasers, Lasers::Looking(_))
+    }
+
+    /// The paths of laser dots found before the photos are pushed (a run over a folder finds them in the mission's
+    /// first [`LASER_PHOTOS`] photos, as the engine would): instead of the engine's own look at its first photos.
+    /// Only with [`Window::Auto`](crate::Window::Auto), [`Method::Abyss`] and
+    /// [`Steps::laser_paths`](crate::Steps::laser_paths) (otherwise ignored); `None`: no paths. Refused once photos
+    /// were pushed.
+    pub fn set_laser_paths(&mut self, paths: Option<LaserPaths>) -> Result<()> {
+        if self.ring.pushed() > 0 {
+            return Err(Error::Usage(
+                "the paths of laser dots are set before the mission's first photo".into(),
+            ));
+        }
+        if self.params.window_is_auto() && self.params.steps.laser_paths {
+            if let Some(p) = &paths {
+                self.blend_off_near(p);
+            }
+            self.lasers = Lasers::Decided(paths);
+        }
+        Ok(())
+    }
+
+    /// Count `low`'s laser spots while looking for the paths; decide at the last of [`LASER_PHOTOS`] (or with
+    /// `end`, at the end of a shorter mission), and then leave the paths out of the block images already held.
+    fn look_for_lasers(&mut self, low: Option<&Raster>, end: bool) {
+        let Lasers::Looking(path) = &mut self.lasers else {
+            return;
+        };
+        if let Some(low) = low {
+            path.add(low);
+        }
+        if !end && path.photos() < LASER_PHOTOS {
+            return;
+        }
+        let paths = LaserPaths::of(path);
+        if let Some(p) = &paths {
+            self.blend_off_near(p);
+            // Photos held are seen again without the paths, in order (the overlaps' steps chain them).
+            self.previous_texture = None;
+            let mut held = std::mem::replace(&mut self.ring, Ring::new(0));
+            held.map_entries(|seen| {
+                let mut low = seen.low;
+                p.clear(&mut low);
+                self.seen(low)
+            });
+            self.ring = held;
+        }
+        self.lasers = Lasers::Decided(paths);
+    }
+
+    /// No noise-aware blend on the paths of laser dots and next to them, as next to a mask.
+    fn blend_off_near(&mut self, p: &LaserPaths) {
+        self.masked_blocks = Some(match self.masked_blocks.take() {
+            Some(m) => m.iter().zip(p.near()).map(|(&a, b)| a || b).collect(),
+            None => p.near(),
+        });
+    }
+
+    /// What the window keeps of a photo's block image: the image, pooled for the monitor, its bright spots and the
+    /// step from the photo before.
+    fn seen(&mut self, low: Raster) -> Seen {
+        let judged = match pool_factor(self.params.downsample) {
+            1 => None,
+            p => Some(pooled(&low, p)),
+        };
+        // With `--bright-spots`: this photo's blocks of bright spots that move (laser dots, highlights).
+        let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
+            .then(|| bright_spots(&low))
+            .filter(|s| !s.is_empty());
+        let step = self.step_from_previous(&low);
+        Seen {
+            low,
+            judged,
+            spots,
+            step,
+        }
     }
 
     /// The survey of the whole mission, made before its photos are pushed (a run over a folder surveys it first,
@@ -334,39 +446,29 @@ impl<T> Engine<T> {
         }
         self.accept(&photo)?;
         let t = Instant::now();
-        let low = self.block_medians(&photo);
+        let mut low = self.block_medians(&photo);
         if let Some(s) = self.survey.as_mut().filter(|s| !s.finished()) {
             s.push(&low);
         }
-        let judged = match pool_factor(self.params.downsample) {
-            1 => None,
-            p => Some(pooled(&low, p)),
-        };
-        // With `--bright-spots`: this photo's blocks of bright spots that move (laser dots, highlights).
-        let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
-            .then(|| bright_spots(&low))
-            .filter(|s| !s.is_empty());
-        let step = self.step_from_previous(&low);
+        // The survey sees the photo whole; the windows without the paths of laser dots.
+        self.look_for_lasers(Some(&low), false);
+        if let Some(p) = self.laser_paths() {
+            p.clear(&mut low);
+        }
+        let seen = self.seen(low);
         let waiting = Waiting {
             tag,
             photo: (use_ == Use::Correct).then_some(photo),
             use_,
             downsample_ms: ms(t),
         };
-        self.ring.push(
-            Seen {
-                low,
-                judged,
-                spots,
-                step,
-            },
-            waiting,
-        );
+        self.ring.push(seen, waiting);
         Ok(self.flush(false))
     }
 
     /// The end of the mission: every photo still waiting, corrected with the window shifted back from the end.
     pub fn finish(&mut self) -> Vec<Corrected<T>> {
+        self.look_for_lasers(None, true);
         if let Some(s) = self.survey.as_mut() {
             s.finish();
         }
