@@ -276,7 +276,13 @@ fn the_container_build_context_holds_the_whole_workspace() {
     let o = std::process::Command::new(cargo)
         // `--no-deps`: the members are what the context must hold, and a
         // resolve would need every platform's crates in the local registry.
-        .args(["metadata", "--offline", "--no-deps", "--format-version", "1"])
+        .args([
+            "metadata",
+            "--offline",
+            "--no-deps",
+            "--format-version",
+            "1",
+        ])
         .current_dir(d.path().join("src"))
         .env("CARGO_TARGET_DIR", d.path().join("target"))
         .output()
