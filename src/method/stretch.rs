@@ -37,7 +37,7 @@ pub const STRETCH_HALF: usize = 10;
 /// The stretch's coverage: this quantile of its photos' dark shares (a stretch is as dense as its denser photos).
 pub const STRETCH_QUANTILE: f64 = 0.75;
 /// Coverage below which a stretch on which the camera moves on keeps the default window and its median.
-pub const ACT_COVERAGE: f32 = 0.25;
+pub const ACT_COVERAGE: f32 = 0.2;
 /// The longest window chosen (the engine's ring holds it; `n/2 + 1` full photos wait for it).
 pub const MAX_AUTO_WINDOW: usize = 31;
 /// The window of a stretch where nothing calls for more: the paper's 7.
@@ -674,8 +674,8 @@ mod tests {
     fn a_slow_camera_takes_more_photos_per_independent_sample() {
         // Patches of 6 blocks: moving 8 blocks a photo, consecutive photos see other ground at each block; moving
         // 1 block a photo, the same patch stays several photos: the window grows until it holds 7 samples.
-        let fast = choose(&survey(&mission(60, 0.2, 6, 8)));
-        let slow = choose(&survey(&mission(60, 0.2, 6, 1)));
+        let fast = choose(&survey(&mission(60, 0.12, 6, 8)));
+        let slow = choose(&survey(&mission(60, 0.12, 6, 1)));
         let (f, s) = (fast[30], slow[30]);
         assert_eq!(
             (f.window, f.quantile, f.rule),
