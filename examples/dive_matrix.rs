@@ -2,7 +2,7 @@
 //! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
 //!
 //! ```sh
-//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] [--held-out]
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] [--held-out] [--nodules [--told] | --swings]
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
@@ -14,12 +14,17 @@
 //! `--columns NAME[,NAME]` keeps only those of the columns above (the oracle and the window's floor are always
 //! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
 //! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead (`--told`: with their
-//! true coverage, as the twelve are scored).
+//! true coverage, as the twelve are scored). `--swings` scores the altitude-swing dives (`matrix::SWINGS`, with
+//! `--held-out` `matrix::SWINGS_HELD_OUT`) at default options.
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
 //! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
 //! held-out dives (`matrix::HELD_OUT`, h01 … h08: outside the twelve's ranges, never used to choose a default)
 //! instead of the twelve.
+//!
+//! The monitor as a classifier: per dive, which of the default's photos it flagged and which are wrong (the photo's
+//! own albedo error or residual pattern above 1.5× the dive's with the true lighting, or above 1.5× the larger of
+//! that and the window floor's); precision, recall and each flag's precision over the dives at the end of the table.
 //!
 //! Scores (lower is better): albedo error and residual pattern of `evaluate`, and the consistency and overlap
 //! difference over overlapping photos (placements from the simulator's poses), on every pixel and where the lights
@@ -135,7 +140,7 @@ fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
 /// What `--help` prints: the options of the module's docs.
 const USAGE: &str = "usage: cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] \
 [--only NAME[,NAME]] [--columns NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] \
-[--held-out] [--nodules [--told]]
+[--held-out] [--nodules [--told] | --swings]
 Scores every method on simulated dives against their truth (the overlaps on every pixel and where the lights
 reach); DM_KEEP=1 keeps each dive's folder.
 Columns: raw, mean, polynomial, paper, paper-f0.001, default, numpy (the oracle and the window's floor always).
@@ -152,6 +157,7 @@ fn main() {
     let mut size = (320usize, 240usize);
     let mut held_out = false;
     let mut nodules = false;
+    let mut swings = false;
     let mut told_all = false;
     let mut columns: Option<Vec<String>> = None;
     let mut args = std::env::args().skip(1);
@@ -176,6 +182,7 @@ fn main() {
             "--ablation" => ablation = true,
             "--held-out" => held_out = true,
             "--nodules" => nodules = true,
+            "--swings" => swings = true,
             "--told" => told_all = true,
             "--columns" => {
                 columns = Some(
@@ -283,12 +290,18 @@ fn main() {
             .is_none_or(|c| c.iter().any(|l| l == "numpy"))
     });
     let mut rows: Vec<(String, Vec<(String, Score)>)> = Vec::new();
+    let mut monitors = [Monitor::default(), Monitor::default()];
     let started = Instant::now();
     let (dives, seed): (&[matrix::DiveSpec], SeedOf) = match (nodules, held_out) {
         (false, false) => (DIVES, matrix::seed),
         (false, true) => (HELD_OUT, matrix::held_out_seed),
         (true, false) => (NODULES, matrix::nodule_seed),
         (true, true) => (NODULES_HELD_OUT, matrix::nodule_held_out_seed),
+    };
+    let (dives, seed): (&[matrix::DiveSpec], SeedOf) = match (swings, held_out) {
+        (false, _) => (dives, seed),
+        (true, false) => (matrix::SWINGS, matrix::swing_seed),
+        (true, true) => (matrix::SWINGS_HELD_OUT, matrix::swing_held_out_seed),
     };
     // The coverage each column is told: the twelve's, or none (a nodule field corrected as a user would).
     // `--told`: every dive's true coverage, the nodule fields' too.
@@ -336,6 +349,7 @@ fn main() {
         let lit = lit_mask(&dive);
         let raw = load_set(&survey, &names, t_enc);
         let mut scores = vec![("raw".to_string(), score(&raw, &dive, &signal, &lit))];
+        let (mut default_flags, mut default_photos) = (None, None);
         for (label, make) in &methods {
             let o = make(Options {
                 water_column: Some(water.clone()),
@@ -353,6 +367,7 @@ fn main() {
                     spec.name,
                     flag_summary(&report)
                 );
+                default_flags = Some(flags_by_name(&report, &names));
             }
             if label == "abyss-scale-auto" {
                 // The backscatter scale the default estimated (median over photos, per channel).
@@ -373,23 +388,17 @@ fn main() {
                     k.join(", ")
                 );
             }
-            scores.push((
-                label.clone(),
-                score(
-                    &load_set(&dir.join(label), &names, t_enc),
-                    &dive,
-                    &signal,
-                    &lit,
-                ),
-            ));
+            let photos = load_set(&dir.join(label), &names, t_enc);
+            scores.push((label.clone(), score(&photos, &dive, &signal, &lit)));
+            if label == "default" {
+                default_photos = Some(photos);
+            }
             if std::env::var_os("DM_KEEP").is_none() {
                 let _ = std::fs::remove_dir_all(dir.join(label));
             }
         }
-        scores.push((
-            "oracle".into(),
-            score(&oracle(&raw, &dive), &dive, &signal, &lit),
-        ));
+        let truth_lit = score(&oracle(&raw, &dive), &dive, &signal, &lit);
+        scores.push(("oracle".into(), truth_lit));
         // The default's window and quantile (the paper's column and the numpy peer take the same window).
         let default = Options {
             contamination: told(spec),
@@ -402,7 +411,24 @@ fn main() {
             default.window_quantile(),
             auto_block(sim.width, sim.height),
         );
-        scores.push(("window-floor".into(), score(&floor, &dive, &signal, &lit)));
+        let floor_score = score(&floor, &dive, &signal, &lit);
+        scores.push(("window-floor".into(), floor_score));
+        if let (Some(flags), Some(photos)) = (&default_flags, &default_photos) {
+            // Wrong against the true lighting's figures, and against the larger of those and the window floor's
+            // (what a window over this track can reach).
+            let bars = [
+                (truth_lit.albedo, truth_lit.pattern),
+                (
+                    truth_lit.albedo.max(floor_score.albedo),
+                    truth_lit.pattern.max(floor_score.pattern),
+                ),
+            ];
+            for (m, bar) in monitors.iter_mut().zip(bars) {
+                let judged = judge(photos, flags, &dive, &signal, bar);
+                eprintln!("dive_matrix: {} monitor: {}", spec.name, judged.line());
+                m.add(&judged);
+            }
+        }
         if let Some(script) = &peer {
             let o = dir.join("numpy");
             let ok = Command::new(&peer_python)
@@ -459,7 +485,11 @@ fn main() {
             let _ = std::fs::remove_dir_all(&dir);
         }
     }
-    let md = table(&rows);
+    let mut md = table(&rows);
+    if monitors[0].photos > 0 {
+        md.push_str(&monitors[0].table("the true lighting's"));
+        md.push_str(&monitors[1].table("the larger of the true lighting's and the window floor's"));
+    }
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("matrix.md"), &md).unwrap();
     println!("{md}");
@@ -469,6 +499,120 @@ fn main() {
         started.elapsed().as_secs_f64(),
         out.join("matrix.md").display()
     );
+}
+
+/// Each photo's flags (their kinds) in the order of `names`, matched by the output's file name.
+fn flags_by_name(report: &abysslight::Report, names: &[String]) -> Vec<Vec<&'static str>> {
+    names
+        .iter()
+        .map(|n| {
+            report
+                .frames
+                .iter()
+                .find(|f| {
+                    f.output
+                        .file_name()
+                        .is_some_and(|o| o.to_string_lossy() == *n)
+                })
+                .map_or_else(Vec::new, |f| {
+                    f.health.flags.iter().map(|k| k.kind()).collect()
+                })
+        })
+        .collect()
+}
+
+/// The monitor as a classifier on one dive: a photo is wrong where its own albedo error or residual pattern is
+/// above 1.5× a bar of its dive (the true lighting's figures, or the larger of those and the window floor's);
+/// flagged where the monitor raised any flag.
+#[derive(Default)]
+struct Monitor {
+    photos: usize,
+    wrong: usize,
+    flagged: usize,
+    /// Flagged and wrong.
+    caught: usize,
+    /// Per flag kind: photos flagged with it, and of those the wrong ones.
+    kinds: std::collections::BTreeMap<&'static str, (usize, usize)>,
+}
+
+impl Monitor {
+    fn add(&mut self, o: &Monitor) {
+        self.photos += o.photos;
+        self.wrong += o.wrong;
+        self.flagged += o.flagged;
+        self.caught += o.caught;
+        for (k, (n, w)) in &o.kinds {
+            let e = self.kinds.entry(k).or_default();
+            e.0 += n;
+            e.1 += w;
+        }
+    }
+
+    fn line(&self) -> String {
+        format!(
+            "{} wrong, {} flagged, {} of them wrong (of {} photos); {:?}",
+            self.wrong, self.flagged, self.caught, self.photos, self.kinds
+        )
+    }
+
+    /// Precision, recall and the share of good photos flagged, then each kind's precision.
+    fn table(&self, bar: &str) -> String {
+        let ratio = |a: usize, b: usize| {
+            if b == 0 {
+                "-".to_string()
+            } else {
+                format!("{:.2}", a as f64 / b as f64)
+            }
+        };
+        let good = self.photos - self.wrong;
+        let mut md = format!(
+            "\n**the monitor as a classifier** (wrong: the photo's albedo error or residual pattern above 1.5x \
+             {bar} on its dive)\n\n| photos | wrong | flagged | precision | recall | good photos flagged |\n\
+             |---:|---:|---:|---:|---:|---:|\n| {} | {} | {} | {} | {} | {} |\n\n| flag | photos | of them wrong | precision |\n|---|---:|---:|---:|\n",
+            self.photos,
+            self.wrong,
+            self.flagged,
+            ratio(self.caught, self.flagged),
+            ratio(self.caught, self.wrong),
+            ratio(self.flagged - self.caught, good),
+        );
+        for (k, (n, w)) in &self.kinds {
+            md.push_str(&format!("| {k} | {n} | {w} | {} |\n", ratio(*w, *n)));
+        }
+        md
+    }
+}
+
+/// [`Monitor`] of one dive's default output.
+fn judge(
+    photos: &[Raster],
+    flags: &[Vec<&'static str>],
+    dive: &Dive,
+    signal: &[Vec<bool>],
+    (bar_albedo, bar_pattern): (f64, f64),
+) -> Monitor {
+    let mut m = Monitor::default();
+    for (i, (p, f)) in photos.iter().zip(flags).enumerate() {
+        let one = std::slice::from_ref(p);
+        let albedo = std::slice::from_ref(&dive.albedo[i]);
+        let mask = std::slice::from_ref(&signal[i]);
+        let a = albedo_error_where(one, albedo, Some(mask));
+        let r = residual_pattern_where(one, albedo, (8, 6), Some(mask));
+        let wrong = a > 1.5 * bar_albedo || r > 1.5 * bar_pattern;
+        m.photos += 1;
+        m.wrong += usize::from(wrong);
+        m.flagged += usize::from(!f.is_empty());
+        m.caught += usize::from(wrong && !f.is_empty());
+        let mut kinds = f.clone();
+        kinds.sort_unstable();
+        kinds.dedup();
+        for k in kinds {
+            let e = m.kinds.entry(k).or_default();
+            e.0 += 1;
+            e.1 += usize::from(wrong);
+        }
+    }
+    m
 }
 
 /// Photos flagged by the monitor (share and the count of each kind) and the windows used.

@@ -146,6 +146,40 @@ pub const NODULES_HELD_OUT: &[DiveSpec] = &[
 ];
 
 #[rustfmt::skip]
+/// Dives whose altitude swings (a towed sledge, an ROV over rough ground): ± 20–40 % of the altitude, 0–50 % nodule
+/// cover, every rig, 40 photos each at default options (the coverage not given). `dive_matrix --swings` scores
+/// them; with `--held-out` [`SWINGS_HELD_OUT`]. Measured, not tuned on (docs/results.md).
+pub const SWINGS: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     along   bits srgb   jpeg   overlap
+    n("s01", Rig::Two,   36.0, "oceanic-i",   4.0, 1.6, 0.25, None,   8,  true,  false, 0.6),
+    n("s02", Rig::Three, 30.0, "oceanic-iii", 5.0, 1.5, 0.00, None,   8,  true,  true,  0.6),
+    n("s03", Rig::Four,  36.0, "oceanic-i",   4.5, 1.0, 0.45, None,   16, false, false, 0.9),
+    n("s04", Rig::Aft,   36.0, "coastal",     5.0, 2.0, 0.15, None,   8,  true,  false, 0.6),
+    n("s05", Rig::Two,   28.0, "oceanic-i",   6.0, 1.8, 0.35, None,   8,  true,  true,  0.9),
+    n("s06", Rig::Three, 36.0, "oceanic-i",   4.0, 1.2, 0.50, None,   8,  true,  false, 0.6),
+];
+
+#[rustfmt::skip]
+/// Held-out altitude-swing dives: other rigs, covers and swings than [`SWINGS`], their own seeds.
+pub const SWINGS_HELD_OUT: &[DiveSpec] = &[
+    //  name     rig        beam  water          alt  swing  c     along   bits srgb   jpeg   overlap
+    n("t01", Rig::Four,  30.0, "oceanic-iii", 5.5, 2.2, 0.20, None,   8,  true,  false, 0.6),
+    n("t02", Rig::Aft,   32.0, "oceanic-i",   4.0, 1.4, 0.40, None,   16, true,  false, 0.9),
+    n("t03", Rig::Two,   36.0, "oceanic-i",   5.0, 1.0, 0.05, None,   8,  true,  true,  0.6),
+    n("t04", Rig::Three, 25.0, "coastal",     4.5, 1.8, 0.30, PATCHY, 8,  true,  false, 0.6),
+];
+
+/// The seed of the `index`-th altitude-swing dive ([`SWINGS`]) in seed set `offset`.
+pub fn swing_seed(index: usize, offset: u64) -> u64 {
+    9000 + offset * 100 + index as u64
+}
+
+/// The seed of the `index`-th held-out altitude-swing dive ([`SWINGS_HELD_OUT`]) in seed set `offset`.
+pub fn swing_held_out_seed(index: usize, offset: u64) -> u64 {
+    9500 + offset * 100 + index as u64
+}
+
+#[rustfmt::skip]
 /// The twelve dives (docs/evaluation.md, "The dive matrix").
 pub const DIVES: &[DiveSpec] = &[
     //  name     rig        beam  water          alt  swing  c     bits srgb   jpeg   fov
@@ -252,6 +286,8 @@ pub fn dive_and_seed(name: &str, offset: u64) -> Option<(&'static DiveSpec, u64)
         .or_else(|| find(HELD_OUT).map(|(i, d)| (d, held_out_seed(i, offset))))
         .or_else(|| find(NODULES).map(|(i, d)| (d, nodule_seed(i, offset))))
         .or_else(|| find(NODULES_HELD_OUT).map(|(i, d)| (d, nodule_held_out_seed(i, offset))))
+        .or_else(|| find(SWINGS).map(|(i, d)| (d, swing_seed(i, offset))))
+        .or_else(|| find(SWINGS_HELD_OUT).map(|(i, d)| (d, swing_held_out_seed(i, offset))))
 }
 
 /// The seed of the `index`-th nodule field ([`NODULES`]) in seed set `offset`.
@@ -512,6 +548,17 @@ mod tests {
             for o in 0..10 {
                 assert!((0..NODULES.len()).all(|j| nodule_seed(j, o) != nodule_held_out_seed(i, o)));
             }
+        }
+        // Altitude swings: their own names and seeds.
+        for (i, d) in SWINGS.iter().enumerate() {
+            assert_eq!(dive_and_seed(d.name, 1), Some((d, swing_seed(i, 1))));
+        }
+        for (i, d) in SWINGS_HELD_OUT.iter().enumerate() {
+            assert_eq!(
+                dive_and_seed(d.name, 0),
+                Some((d, swing_held_out_seed(i, 0)))
+            );
+            assert!(SWINGS.iter().all(|t| t.name != d.name));
         }
         assert_eq!(dive_and_seed("a03", 1), Some((&DIVES[2], seed(2, 1))));
         assert_eq!(dive_and_seed("x01", 0), None);
