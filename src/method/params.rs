@@ -269,9 +269,9 @@ pub struct Steps {
     /// (`level_by_light`), so dim regions are not left darker than lit ones. Default: true.
     pub level_by_light: bool,
     /// With the window chosen per stretch ([`Window::Auto`]): where red or green bright spots come back to the same
-    /// blocks in the first photos of the mission (the paths of laser dots; [`crate::method::outliers::SpotPath`]),
-    /// leave those blocks out of every window's `M`, as a mask does, so the dots are not taken into `F` and leave
-    /// no stain. Default: true.
+    /// blocks in the mission's first 41 photos more often than chance explains (the paths of laser dots), leave
+    /// those blocks out of every window's `M`, as a mask does, so the dots are not taken into `F` and leave no
+    /// stain. Default: true.
     pub laser_paths: bool,
 }
 

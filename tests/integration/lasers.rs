@@ -198,12 +198,10 @@ fn at_default_options_laser_dots_stay_red_leave_no_stain_and_are_reported() {
         }
     }
     out.extend(engine.finish());
-    let paths = engine.laser_paths().expect("the engine finds the paths");
-    assert!(
-        paths.share() > 0.005 && paths.share() < 0.1,
-        "{}",
-        paths.share()
-    );
+    let share = engine
+        .laser_paths_share()
+        .expect("the engine finds the paths");
+    assert!(share > 0.005 && share < 0.1, "{share}");
     assert_eq!(out.len(), FRAMES);
     for (c, batch) in out.iter().zip(&default_outs) {
         assert_eq!(
@@ -241,9 +239,9 @@ fn dives_without_lasers_get_no_laser_paths() {
         engine.finish();
         assert!(engine.laser_paths_decided(), "{name}");
         assert!(
-            engine.laser_paths().is_none(),
+            engine.laser_paths_share().is_none(),
             "{name}: paths on {:.2} % of the frame",
-            100.0 * engine.laser_paths().unwrap().share()
+            100.0 * engine.laser_paths_share().unwrap()
         );
     }
 }

@@ -23,10 +23,15 @@ pub(super) enum Lasers {
 pub const LASER_PHOTOS: usize = FIRST_DECIDED + 1;
 
 impl<T> Engine<T> {
-    /// The paths of laser dots found in the mission's first photos (or given: [`Engine::set_laser_paths`]), once
-    /// decided; `None` before, and when there are none. Their blocks are left out of every window's `M` and `F` is
-    /// filled beneath them, as beneath a mask.
-    pub fn laser_paths(&self) -> Option<&LaserPaths> {
+    /// The share of the frame's blocks on the paths of laser dots found in the mission's first 41 photos (a run
+    /// over a folder finds them before the photos are pushed), once decided; `None` before, and when there are
+    /// none. Their blocks are left out of every window's `M` and `F` is filled beneath them, as beneath a mask.
+    pub fn laser_paths_share(&self) -> Option<f64> {
+        self.laser_paths().map(LaserPaths::share)
+    }
+
+    /// The paths of laser dots, once decided ([`Engine::laser_paths_share`]).
+    pub(crate) fn laser_paths(&self) -> Option<&LaserPaths> {
         match &self.lasers {
             Lasers::Decided(p) => p.as_ref(),
             _ => None,
@@ -41,10 +46,10 @@ impl<T> Engine<T> {
 
     /// The paths of laser dots found before the photos are pushed (a run over a folder finds them in the mission's
     /// first [`LASER_PHOTOS`] photos, as the engine would): instead of the engine's own look at its first photos.
-    /// Only with [`Window::Auto`](crate::Window::Auto), [`Method::Abyss`] and
+    /// Only with [`Window::Auto`](crate::Window::Auto), [`Method::Abyss`](crate::Method::Abyss) and
     /// [`Steps::laser_paths`](crate::Steps::laser_paths) (otherwise ignored); `None`: no paths. Refused once photos
     /// were pushed.
-    pub fn set_laser_paths(&mut self, paths: Option<LaserPaths>) -> Result<()> {
+    pub(crate) fn set_laser_paths(&mut self, paths: Option<LaserPaths>) -> Result<()> {
         if self.ring.pushed() > 0 {
             return Err(Error::Usage(
                 "the paths of laser dots are set before the mission's first photo".into(),

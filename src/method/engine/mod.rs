@@ -27,7 +27,7 @@ mod estimate;
 mod lasers;
 
 use lasers::Lasers;
-pub use lasers::LASER_PHOTOS;
+pub(crate) use lasers::LASER_PHOTOS;
 
 use crate::error::{Error, Result};
 use crate::method::baseline::Method;
