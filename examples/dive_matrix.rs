@@ -2,7 +2,7 @@
 //! 8/16-bit × linear/sRGB × PNG/JPEG), each corrected with every method and scored against the simulator's truth.
 //!
 //! ```sh
-//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] [--held-out] [--nodules [--told] | --swings]
+//! cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] [--only NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] [--held-out] [--nodules [--told] | --swings] [--untold]
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
@@ -15,7 +15,8 @@
 //! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
 //! `--held-out` `matrix::NODULES_HELD_OUT`; docs/nodules.md) at default options instead (`--told`: with their
 //! true coverage, as the twelve are scored). `--swings` scores the altitude-swing dives (`matrix::SWINGS`, with
-//! `--held-out` `matrix::SWINGS_HELD_OUT`) at default options.
+//! `--held-out` `matrix::SWINGS_HELD_OUT`) at default options. `--untold` corrects every dive, the twelve and the
+//! held-out ones too, at default options without its coverage (`--window auto` chooses, as for a user).
 //! `--seed-offset K` renders the same matrix with other seeds (data the method was not tuned on). `--size WxH`
 //! renders other photo sizes (default 320x240: the 8-pixel blocks are then 1/40 of the frame's width, where a 12 MP
 //! camera's are 1/500; larger photos show how much of a score comes from that). `--held-out` scores the eight
@@ -140,7 +141,7 @@ fn true_scale(dive: &Dive, t: Transfer) -> Vec<f64> {
 /// What `--help` prints: the options of the module's docs.
 const USAGE: &str = "usage: cargo run --release --example dive_matrix -- [--out DIR] [--seed-offset K] \
 [--only NAME[,NAME]] [--columns NAME[,NAME]] [--ablation | --ablation-only COLUMN[,COLUMN]] [--size WxH] \
-[--held-out] [--nodules [--told] | --swings]
+[--held-out] [--nodules [--told] | --swings] [--untold]
 Scores every method on simulated dives against their truth (the overlaps on every pixel and where the lights
 reach); DM_KEEP=1 keeps each dive's folder.
 Columns: raw, mean, polynomial, paper, paper-f0.001, default, numpy (the oracle and the window's floor always).
@@ -159,6 +160,7 @@ fn main() {
     let mut nodules = false;
     let mut swings = false;
     let mut told_all = false;
+    let mut untold = false;
     let mut columns: Option<Vec<String>> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -184,6 +186,7 @@ fn main() {
             "--nodules" => nodules = true,
             "--swings" => swings = true,
             "--told" => told_all = true,
+            "--untold" => untold = true,
             "--columns" => {
                 columns = Some(
                     args.next()
@@ -305,7 +308,10 @@ fn main() {
     };
     // The coverage each column is told: the twelve's, or none (a nodule field corrected as a user would).
     // `--told`: every dive's true coverage, the nodule fields' too.
-    let told = |spec: &matrix::DiveSpec| (spec.told || told_all).then_some(spec.contamination);
+    // `--untold`: no dive's coverage, not even the twelve's (every dive at default options, `--window auto` choosing).
+    let told = |spec: &matrix::DiveSpec| {
+        (!untold && (spec.told || told_all)).then_some(spec.contamination)
+    };
     for (i, spec) in dives.iter().enumerate() {
         if only
             .as_ref()

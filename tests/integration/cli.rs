@@ -704,3 +704,55 @@ fn transfer_auto_is_the_default_and_reads_what_the_files_declare() {
         stdout(&o)
     );
 }
+
+/// README's demo scores are what `abysslight demo` prints: each figure of its table is the demo's `scores.md`
+/// figure rounded to three decimals.
+#[test]
+fn readme_demo_scores_are_the_demos() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let d = tempfile::tempdir().unwrap();
+    let o = abysslight_in(&["demo", "--out", "demo"], d.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scores = std::fs::read_to_string(d.path().join("demo/scores.md")).unwrap();
+    // scores.md: method | photos | albedo error | residual pattern | consistency | overlap difference | clipped.
+    let demo = |method: &str| -> [f64; 3] {
+        let cells: Vec<&str> = scores
+            .lines()
+            .find(|l| l.starts_with(&format!("| {method} |")))
+            .unwrap_or_else(|| panic!("{method} in scores.md: {scores}"))
+            .split('|')
+            .map(str::trim)
+            .collect();
+        [cells[3], cells[4], cells[6]].map(|c| c.parse().unwrap())
+    };
+    // README: method | albedo error | residual pattern | overlap difference.
+    let rows = [
+        ("raw photos", "raw"),
+        ("`--method mean`", "mean"),
+        ("`--method polynomial`", "polynomial"),
+        ("`--method paper`", "paper"),
+        ("`--method abyss` (default)", "abyss"),
+    ];
+    for (label, method) in rows {
+        let line = readme
+            .lines()
+            .find(|l| l.starts_with(&format!("| {label}")))
+            .unwrap_or_else(|| panic!("README's demo table has no row {label}"));
+        let said: Vec<f64> = line
+            .split('|')
+            .map(str::trim)
+            .skip(2)
+            .filter(|c| !c.is_empty())
+            .map(|c| c.parse().unwrap())
+            .collect();
+        let done = demo(method);
+        for (s, v) in said.iter().zip(done) {
+            assert!(
+                (s - v).abs() <= 0.0005 + 1e-9,
+                "README says {s} for {label}, the demo prints {v}"
+            );
+        }
+        assert_eq!(said.len(), 3, "{line}");
+    }
+}
