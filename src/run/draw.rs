@@ -82,9 +82,22 @@ pub fn line(img: &mut RgbImage, (x0, y0): (i64, i64), (x1, y1): (i64, i64), colo
     }
 }
 
-/// `img` resized to `width` (aspect kept), for a contact sheet tile.
+/// Tallest tile, as a multiple of the tile's width: a photo taller than that (a 7×4000 line-scan strip) is fitted
+/// into `width × TALLEST · width` instead of being drawn hundreds of thousands of pixels tall.
+pub const TALLEST: u32 = 2;
+
+/// `img` resized to `width` (aspect kept; a photo more than [`TALLEST`] times as tall as wide to that height and
+/// narrower), for a contact sheet tile.
 pub fn tile(img: &RgbImage, width: u32, smooth: bool) -> RgbImage {
-    let h = ((img.height() as u64 * width as u64) / img.width().max(1) as u64).max(1) as u32;
+    let (iw, ih) = (img.width().max(1) as u64, img.height() as u64);
+    let h = ((ih * width as u64) / iw).max(1);
+    let most = width as u64 * TALLEST as u64;
+    let (width, h) = if h > most {
+        (((iw * most) / ih.max(1)).max(1) as u32, most)
+    } else {
+        (width, h)
+    };
+    let h = h as u32;
     let filter = if smooth {
         imageops::FilterType::Triangle
     } else {
@@ -150,6 +163,25 @@ mod tests {
             }
         }
         assert_eq!(text_width("abc", 2), 48);
+    }
+
+    #[test]
+    fn tiles_keep_the_aspect_and_a_strip_fits_in_twice_the_width() {
+        let photo = RgbImage::new(400, 300);
+        assert_eq!(tile(&photo, 120, true).dimensions(), (120, 90));
+        // A 7×4000 strip at width 120 would be 68571 pixels tall: fitted to 240, 0 pixels wide rounded up to 1.
+        assert_eq!(
+            tile(&RgbImage::new(7, 4000), 120, false).dimensions(),
+            (1, 240)
+        );
+        assert_eq!(
+            tile(&RgbImage::new(100, 400), 120, false).dimensions(),
+            (60, 240)
+        );
+        assert_eq!(
+            tile(&RgbImage::new(4000, 7), 120, false).dimensions(),
+            (120, 1)
+        );
     }
 
     #[test]
