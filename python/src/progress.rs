@@ -22,6 +22,10 @@ struct PyProgress {
     done: AtomicUsize,
     total: AtomicUsize,
     raised: Mutex<Option<PyErr>>,
+    /// With a callback: after each call, the calling thread is asked to look for Ctrl-C (a signal raised in the
+    /// callback, e.g. `os.kill(os.getpid(), SIGINT)`, is handled on that thread only) and the run waits for it,
+    /// so that the photo after it is never started, however fast the photos go.
+    asks: Option<crossbeam_channel::Sender<crossbeam_channel::Sender<()>>>,
 }
 
 impl PyProgress {
@@ -66,11 +70,27 @@ impl Progress for PyProgress {
                 self.stop(e);
             }
         });
+        if let Some(asks) = &self.asks {
+            let (ack, looked) = crossbeam_channel::bounded(1);
+            if asks.send(ack).is_ok() {
+                let _ = looked.recv();
+            }
+        }
     }
     fn finish(&self) {}
     fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::SeqCst)
     }
+}
+
+/// What the calling thread waits for while a run goes on.
+enum Event<R> {
+    /// The run's result (`None`: its thread ended without one).
+    Ended(Option<R>),
+    /// A photo's callback returned: look for Ctrl-C, then let the run go on.
+    Asked(Option<crossbeam_channel::Sender<()>>),
+    /// Nothing for [`POLL`]: look for Ctrl-C.
+    Poll,
 }
 
 /// Run `work` (a mission, or a cruise) on a thread of its own with a [`Progress`] for Python; Ctrl-C (or an
@@ -81,12 +101,20 @@ pub fn run_cancellable<T: Send>(
     callback: Option<PyObject>,
     work: impl FnOnce(&dyn Progress) -> abysslight::Result<T> + Send,
 ) -> PyResult<T> {
+    let (ask, asked) = crossbeam_channel::unbounded();
     let progress = PyProgress {
+        asks: callback.is_some().then_some(ask),
         callback,
         cancel: AtomicBool::new(false),
         done: AtomicUsize::new(0),
         total: AtomicUsize::new(0),
         raised: Mutex::new(None),
+    };
+    // KeyboardInterrupt (Ctrl-C) or another signal handler's exception: stop the run.
+    let look = |py: Python<'_>| {
+        if let Err(e) = py.check_signals() {
+            progress.stop(e);
+        }
     };
     let result = std::thread::scope(|scope| {
         let (tx, rx) = crossbeam_channel::bounded(1);
@@ -96,17 +124,25 @@ pub fn run_cancellable<T: Send>(
             let _ = tx.send(r);
         });
         loop {
-            match py.allow_threads(|| rx.recv_timeout(POLL)) {
-                Ok(r) => break r,
-                Err(crossbeam_channel::RecvTimeoutError::Timeout) => {
-                    // KeyboardInterrupt (Ctrl-C) or another signal handler's exception: stop the run.
-                    if let Err(e) = py.check_signals() {
-                        progress.stop(e);
-                    }
+            let event = py.allow_threads(|| {
+                crossbeam_channel::select! {
+                    recv(rx) -> r => Event::Ended(r.ok()),
+                    recv(asked) -> ack => Event::Asked(ack.ok()),
+                    default(POLL) => Event::Poll,
                 }
-                Err(crossbeam_channel::RecvTimeoutError::Disconnected) => {
+            });
+            match event {
+                Event::Ended(Some(r)) => break r,
+                Event::Ended(None) => {
                     break Ok(Err(Error::Usage("the run ended without a result".into())))
                 }
+                Event::Asked(ack) => {
+                    look(py);
+                    if let Some(ack) = ack {
+                        let _ = ack.send(());
+                    }
+                }
+                Event::Poll => look(py),
             }
         }
     });
