@@ -10,6 +10,8 @@ use crate::simd::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+mod sse2;
 mod unrolled;
 
 /// Median of integer samples, reordering `v`. Returns the value in sample units. `v` must not be empty.

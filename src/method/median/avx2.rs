@@ -1,12 +1,13 @@
 //! The median kernels' AVX2 builds. Each entry takes an [`Avx2`] token (made only by runtime detection,
-//! [`crate::simd`]): the sorting networks are the portable code compiled with AVX2 enabled (twice the lanes per
-//! instruction), the gather of 8-bit RGB blocks is written with intrinsics. Same results as the portable code
-//! (tested bit for bit in the parent module and in `unrolled`).
+//! [`crate::simd`]): the generic sorting network is the portable code compiled with AVX2 enabled, the unrolled
+//! networks run on AVX2 registers ([`U8x32`], [`U16x16`]: twice the lanes of SSE2 per instruction), and the gather
+//! of 8-bit RGB blocks is written with intrinsics. Same results as the portable code (tested bit for bit in the
+//! parent module and in `unrolled`).
 
 use std::arch::x86_64::*;
 
 use super::apply_network_portable;
-use super::unrolled::columns_of;
+use super::unrolled::{columns_of, NetworkSample, Vector};
 use crate::simd::Avx2;
 
 /// The parent's `apply_network` compiled with AVX2 enabled.
@@ -25,26 +26,59 @@ fn apply_network_in<T: Copy + PartialOrd>(_t: Avx2, net: &[(u16, u16)], v: &mut 
     apply_network_portable(net, v, lanes)
 }
 
-/// `unrolled::columns_of` with `W`-byte lanes, compiled with AVX2 enabled.
-pub(super) fn columns<T: Copy + Ord + Default, const W: usize>(
-    t: Avx2,
-    v: &mut [T],
-    kk: usize,
-    lanes: usize,
-) -> bool {
+/// `unrolled::columns_of` on AVX2 registers (`T::Wide`).
+pub(super) fn columns<T: NetworkSample>(t: Avx2, v: &mut [T], kk: usize, lanes: usize) -> bool {
     // SAFETY: `t` proves the CPU has AVX2, the one feature `columns_in` is compiled for.
-    unsafe { columns_in::<T, W>(t, v, kk, lanes) }
+    unsafe { columns_in::<T>(t, v, kk, lanes) }
 }
 
 #[target_feature(enable = "avx2")]
-fn columns_in<T: Copy + Ord + Default, const W: usize>(
-    _t: Avx2,
-    v: &mut [T],
-    kk: usize,
-    lanes: usize,
-) -> bool {
-    columns_of::<T, W>(v, kk, lanes)
+fn columns_in<T: NetworkSample>(_t: Avx2, v: &mut [T], kk: usize, lanes: usize) -> bool {
+    columns_of::<T, T::Wide>(v, kk, lanes)
 }
+
+/// 32 8-bit lanes in an AVX2 register. Its operations are AVX2 instructions: values of it are made only in the
+/// networks that `columns_in` runs, compiled for AVX2 and reached only through an [`Avx2`] token.
+#[derive(Clone, Copy)]
+pub(in crate::method::median) struct U8x32(__m256i);
+
+/// 16 16-bit lanes in an AVX2 register, made and used as [`U8x32`] is.
+#[derive(Clone, Copy)]
+pub(in crate::method::median) struct U16x16(__m256i);
+
+/// [`Vector`] for an AVX2 register type `$v` of `$w` lanes of `$t`, with `min`/`max` the intrinsics `$min`/`$max`.
+macro_rules! avx2_vector {
+    ($v:ident, $t:ty, $w:expr, $min:ident, $max:ident) => {
+        impl Vector<$t> for $v {
+            const W: usize = $w;
+            #[inline(always)]
+            fn load(v: &[$t]) -> Self {
+                let v = &v[..$w];
+                // SAFETY: `v` holds 32 bytes; the load needs no alignment; the CPU has AVX (see the type).
+                $v(unsafe { _mm256_loadu_si256(v.as_ptr().cast()) })
+            }
+            #[inline(always)]
+            fn store(self, out: &mut [$t]) {
+                let out = &mut out[..$w];
+                // SAFETY: `out` holds 32 bytes; the store needs no alignment; the CPU has AVX (see the type).
+                unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), self.0) }
+            }
+            #[inline(always)]
+            fn min(self, o: Self) -> Self {
+                // SAFETY: the CPU has AVX2 (see the type).
+                $v(unsafe { $min(self.0, o.0) })
+            }
+            #[inline(always)]
+            fn max(self, o: Self) -> Self {
+                // SAFETY: the CPU has AVX2 (see the type).
+                $v(unsafe { $max(self.0, o.0) })
+            }
+        }
+    };
+}
+
+avx2_vector!(U8x32, u8, 32, _mm256_min_epu8, _mm256_max_epu8);
+avx2_vector!(U16x16, u16, 16, _mm256_min_epu16, _mm256_max_epu16);
 
 /// The parent's `gather_rgb8_k8` eight blocks at a time: an 8×8 transpose of pixels held in 32-bit lanes.
 pub(super) fn gather_rgb8_k8(t: Avx2, rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, lane0: usize) {

@@ -1,9 +1,15 @@
 //! The block medians of the common block sizes (4×4 to 8×8, so 16 to 64 samples) by a sorting network unrolled
-//! at compile time: each comparator a `min`/`max` of whole lane vectors (32 bytes: AVX2 registers, or two SSE2
-//! ones) held in local variables, so the compiler keeps them in registers, with no loop over the comparator list
-//! and no bookkeeping per comparator. The comparators are Batcher's odd–even merge sort in its recursive order
-//! (a sort of 8 finishes before the next starts, which keeps few values live at once), pruned to those that can
-//! change the middle values, and of those only the half (`min` or `max`) that is used.
+//! at compile time: each comparator a `min`/`max` of whole lane vectors held in local variables, so the compiler
+//! keeps them in registers, with no loop over the comparator list and no bookkeeping per comparator. The
+//! comparators are Batcher's odd–even merge sort in its recursive order (a sort of 8 finishes before the next
+//! starts, which keeps few values live at once), pruned to those that can change the middle values, and of those
+//! only the half (`min` or `max`) that is used.
+//!
+//! The lane vectors are a [`Vector`]: on x86-64 one register, its `min`/`max` one instruction (AVX2 in
+//! `avx2.rs` where the CPU has it, SSE2, the baseline, in `sse2.rs` otherwise); elsewhere [`Lanes`], an array
+//! the compiler vectorizes. The registers are written out rather than left to the vectorizer because the
+//! vectorizer pays for every comparator of every network at each build: the unrolled networks over arrays made
+//! up a quarter of the library's compile time.
 //!
 //! The values are integer samples, so any network that finds the middle values finds the same ones as the
 //! generic network and as a selection: the medians are bit for bit the same (tested against sorting).
@@ -116,12 +122,38 @@ impl<const KK: usize> Network<KK> {
     const NET: Net = median_net(KK);
 }
 
-/// `W` samples, one of each of `W` columns: `min` and `max` lane by lane, which the compiler turns into one vector
-/// instruction per register.
-#[derive(Clone, Copy)]
-struct Lanes<T, const W: usize>([T; W]);
+/// Most lanes a [`Vector`] holds (32 bytes of 8-bit samples).
+pub(super) const MAX_LANES: usize = 32;
 
-impl<T: Copy + Ord, const W: usize> Lanes<T, W> {
+/// `W` samples of type `T`, one of each of `W` columns, with lane-by-lane `min` and `max`.
+pub(super) trait Vector<T>: Copy {
+    /// Lanes (at most [`MAX_LANES`]).
+    const W: usize;
+    /// The first `W` values of `v` (panics on fewer).
+    fn load(v: &[T]) -> Self;
+    /// Into the first `W` values of `out` (panics on fewer).
+    fn store(self, out: &mut [T]);
+    fn min(self, o: Self) -> Self;
+    fn max(self, o: Self) -> Self;
+}
+
+/// `W` samples as an array, `min` and `max` lane by lane: the portable [`Vector`], which the compiler turns into
+/// vector instructions where the target has them. Off x86-64 only (and in the tests, which hold it to the others).
+#[cfg(any(test, not(target_arch = "x86_64")))]
+#[derive(Clone, Copy)]
+pub(super) struct Lanes<T, const W: usize>([T; W]);
+
+#[cfg(any(test, not(target_arch = "x86_64")))]
+impl<T: Copy + Ord, const W: usize> Vector<T> for Lanes<T, W> {
+    const W: usize = W;
+    #[inline(always)]
+    fn load(v: &[T]) -> Self {
+        Lanes(v[..W].try_into().unwrap())
+    }
+    #[inline(always)]
+    fn store(self, out: &mut [T]) {
+        out[..W].copy_from_slice(&self.0);
+    }
     #[inline(always)]
     fn min(mut self, o: Self) -> Self {
         for i in 0..W {
@@ -182,9 +214,7 @@ macro_rules! step64 {
 
 /// The middle values (positions `(KK − 1)/2` and `KK/2` of the sorted values) of each lane of `v`.
 #[inline(always)]
-fn middle<T: Copy + Ord, const W: usize, const KK: usize>(
-    mut v: [Lanes<T, W>; KK],
-) -> (Lanes<T, W>, Lanes<T, W>) {
+fn middle<T, V: Vector<T>, const KK: usize>(mut v: [V; KK]) -> (V, V) {
     // 9 × 64 = MAX_COMPARATORS steps, unrolled; those past the network's length vanish.
     step64!(v, KK, 0);
     step64!(v, KK, 64);
@@ -198,52 +228,52 @@ fn middle<T: Copy + Ord, const W: usize, const KK: usize>(
     (v[(KK - 1) / 2], v[KK / 2])
 }
 
-/// [`middle`] on every group of `W` columns of `v` (value `e` of column `l` at `e·lanes + l`, `KK` values a
+/// [`middle`] on every group of `V::W` columns of `v` (value `e` of column `l` at `e·lanes + l`, `KK` values a
 /// column): the middle values land in value rows `(KK − 1)/2` and `KK/2`; the other rows are left as they were.
 #[inline(always)]
-fn columns<T: Copy + Ord + Default, const W: usize, const KK: usize>(v: &mut [T], lanes: usize) {
+fn columns<T: Copy + Default, V: Vector<T>, const KK: usize>(v: &mut [T], lanes: usize) {
     debug_assert_eq!(v.len(), KK * lanes);
+    debug_assert!(V::W <= MAX_LANES);
     let (lo_row, hi_row) = ((KK - 1) / 2 * lanes, KK / 2 * lanes);
     let mut l0 = 0;
-    // Whole groups: fixed-size loads and stores.
-    while l0 + W <= lanes {
-        let rows: [Lanes<T, W>; KK] = std::array::from_fn(|e| {
-            Lanes(v[e * lanes + l0..e * lanes + l0 + W].try_into().unwrap())
-        });
-        let (lo, hi) = middle(rows);
-        let lo_at: &mut [T; W] = (&mut v[lo_row + l0..lo_row + l0 + W]).try_into().unwrap();
-        *lo_at = lo.0;
-        let hi_at: &mut [T; W] = (&mut v[hi_row + l0..hi_row + l0 + W]).try_into().unwrap();
-        *hi_at = hi.0;
-        l0 += W;
+    // Whole groups: loads and stores straight from and to `v`.
+    while l0 + V::W <= lanes {
+        let rows: [V; KK] = std::array::from_fn(|e| V::load(&v[e * lanes + l0..]));
+        let (lo, hi) = middle::<T, V, KK>(rows);
+        lo.store(&mut v[lo_row + l0..]);
+        hi.store(&mut v[hi_row + l0..]);
+        l0 += V::W;
     }
     if l0 < lanes {
         // The columns left over, padded.
         let n = lanes - l0;
-        let rows: [Lanes<T, W>; KK] = std::array::from_fn(|e| {
-            let mut r = Lanes([T::default(); W]);
-            r.0[..n].copy_from_slice(&v[e * lanes + l0..e * lanes + lanes]);
-            r
+        let rows: [V; KK] = std::array::from_fn(|e| {
+            let mut r = [T::default(); MAX_LANES];
+            r[..n].copy_from_slice(&v[e * lanes + l0..e * lanes + lanes]);
+            V::load(&r)
         });
-        let (lo, hi) = middle(rows);
-        v[lo_row + l0..lo_row + lanes].copy_from_slice(&lo.0[..n]);
-        v[hi_row + l0..hi_row + lanes].copy_from_slice(&hi.0[..n]);
+        let (lo, hi) = middle::<T, V, KK>(rows);
+        let mut r = [T::default(); MAX_LANES];
+        lo.store(&mut r);
+        v[lo_row + l0..lo_row + lanes].copy_from_slice(&r[..n]);
+        hi.store(&mut r);
+        v[hi_row + l0..hi_row + lanes].copy_from_slice(&r[..n]);
     }
 }
 
 /// [`columns`] for the `kk` the kernel has a network for (`false`: none, `v` untouched).
 #[inline(always)]
-pub(super) fn columns_of<T: Copy + Ord + Default, const W: usize>(
+pub(super) fn columns_of<T: Copy + Default, V: Vector<T>>(
     v: &mut [T],
     kk: usize,
     lanes: usize,
 ) -> bool {
     match kk {
-        16 => columns::<T, W, 16>(v, lanes),
-        25 => columns::<T, W, 25>(v, lanes),
-        36 => columns::<T, W, 36>(v, lanes),
-        49 => columns::<T, W, 49>(v, lanes),
-        64 => columns::<T, W, 64>(v, lanes),
+        16 => columns::<T, V, 16>(v, lanes),
+        25 => columns::<T, V, 25>(v, lanes),
+        36 => columns::<T, V, 36>(v, lanes),
+        49 => columns::<T, V, 49>(v, lanes),
+        64 => columns::<T, V, 64>(v, lanes),
         _ => return false,
     }
     true
@@ -262,28 +292,54 @@ pub(super) fn middle_values<T: Sample>(v: &mut [T], kk: usize, lanes: usize) -> 
         return false;
     }
     if let Some(bytes) = T::as_bytes_mut(v) {
-        return dispatch::<u8, 32, 16>(bytes, kk, lanes);
+        return dispatch(bytes, kk, lanes);
     }
     if std::any::TypeId::of::<T>() == std::any::TypeId::of::<u16>() {
         // SAFETY: `T` is `u16` (same type id), so the slice is one of `u16`.
         let words = unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr() as *mut u16, v.len()) };
-        return dispatch::<u16, 16, 8>(words, kk, lanes);
+        return dispatch(words, kk, lanes);
     }
     false
 }
 
-/// [`columns_of`] with 32-byte lanes (`WIDE`) compiled for AVX2 where the CPU has it, else 16-byte lanes
-/// (`NARROW`, one SSE2 register) on any CPU.
-fn dispatch<T: Copy + Ord + Default, const WIDE: usize, const NARROW: usize>(
-    v: &mut [T],
-    kk: usize,
-    lanes: usize,
-) -> bool {
+/// A sample type the networks run on, with its vectors.
+pub(super) trait NetworkSample: Copy + Ord + Default {
+    /// 16 bytes of lanes: one SSE2 register on x86-64, an array elsewhere.
+    type Narrow: Vector<Self>;
+    /// One AVX2 register (32 bytes), used only behind an [`crate::simd::Avx2`] token.
+    #[cfg(target_arch = "x86_64")]
+    type Wide: Vector<Self>;
+}
+
+#[cfg(target_arch = "x86_64")]
+impl NetworkSample for u8 {
+    type Narrow = super::sse2::U8x16;
+    type Wide = super::avx2::U8x32;
+}
+
+#[cfg(target_arch = "x86_64")]
+impl NetworkSample for u16 {
+    type Narrow = super::sse2::U16x8;
+    type Wide = super::avx2::U16x16;
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl NetworkSample for u8 {
+    type Narrow = Lanes<u8, 16>;
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl NetworkSample for u16 {
+    type Narrow = Lanes<u16, 8>;
+}
+
+/// [`columns_of`] on 32-byte registers where the CPU has AVX2, else on 16-byte vectors (`T::Narrow`).
+fn dispatch<T: NetworkSample>(v: &mut [T], kk: usize, lanes: usize) -> bool {
     #[cfg(target_arch = "x86_64")]
     if let Some(t) = crate::simd::Avx2::detect() {
-        return super::avx2::columns::<T, WIDE>(t, v, kk, lanes);
+        return super::avx2::columns(t, v, kk, lanes);
     }
-    columns_of::<T, NARROW>(v, kk, lanes)
+    columns_of::<T, T::Narrow>(v, kk, lanes)
 }
 
 #[cfg(test)]
@@ -319,26 +375,57 @@ mod tests {
             .collect()
     }
 
-    /// The middle values of every column against sorting the column, for both sample types, both paths (AVX2
-    /// where the CPU has it, and the portable one), every block size with a kernel, lane counts around the
+    /// The middle values of every column against sorting the column, for both sample types, every vector a CPU
+    /// may run (the CPU's own path: AVX2 where it has it; the 16-byte vectors; the portable arrays, here with 4
+    /// and 2 lanes, whose code is the same for any width), every block size with a kernel, lane counts around the
     /// vector widths, and values with many ties (ranges 2 and 5) and few (the full range).
     #[test]
     fn middle_values_match_sorting() {
         let mut state = 0x2545_F491_4F6C_DD1Du64;
         for kk in [16usize, 25, 36, 49, 64] {
-            for lanes in [1usize, 7, 8, 15, 16, 17, 31, 32, 33, 96, 192, 200] {
+            for lanes in [1usize, 3, 7, 8, 15, 16, 17, 31, 32, 33, 96, 192, 200] {
                 for range in [2u64, 5, 256, 65536] {
                     let vals = random(&mut state, kk * lanes, range);
                     if range <= 256 {
                         let v: Vec<u8> = vals.iter().map(|&x| x as u8).collect();
                         check(&v, kk, lanes, |v| middle_values(v, kk, lanes));
-                        check(&v, kk, lanes, |v| dispatch::<u8, 16, 16>(v, kk, lanes));
-                        check(&v, kk, lanes, |v| columns_of::<u8, 16>(v, kk, lanes));
+                        check(&v, kk, lanes, |v| {
+                            columns_of::<u8, <u8 as NetworkSample>::Narrow>(v, kk, lanes)
+                        });
+                        check(&v, kk, lanes, |v| {
+                            columns_of::<u8, Lanes<u8, 4>>(v, kk, lanes)
+                        });
                     }
                     let v: Vec<u16> = vals.iter().map(|&x| x as u16).collect();
                     check(&v, kk, lanes, |v| middle_values(v, kk, lanes));
-                    check(&v, kk, lanes, |v| columns_of::<u16, 8>(v, kk, lanes));
+                    check(&v, kk, lanes, |v| {
+                        columns_of::<u16, <u16 as NetworkSample>::Narrow>(v, kk, lanes)
+                    });
+                    check(&v, kk, lanes, |v| {
+                        columns_of::<u16, Lanes<u16, 2>>(v, kk, lanes)
+                    });
                 }
+            }
+        }
+    }
+
+    /// The 16-bit SSE2 `min`/`max` (built from a saturating subtraction) against the scalar ones, on the values
+    /// where such tricks go wrong: 0, 1, the top of the range and its neighbours, and pairs across 32768.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn sixteen_bit_min_and_max_hold_over_the_whole_range() {
+        let edges = [
+            0u16, 1, 2, 32766, 32767, 32768, 32769, 65533, 65534, 65535, 12345, 54321,
+        ];
+        for &a in &edges {
+            let b: Vec<u16> = edges.iter().copied().cycle().skip(3).take(8).collect();
+            let x = <u16 as NetworkSample>::Narrow::load(&[a; 8]);
+            let y = <u16 as NetworkSample>::Narrow::load(&b);
+            let (mut lo, mut hi) = ([0u16; 8], [0u16; 8]);
+            x.min(y).store(&mut lo);
+            x.max(y).store(&mut hi);
+            for i in 0..8 {
+                assert_eq!((lo[i], hi[i]), (a.min(b[i]), a.max(b[i])), "{a} {}", b[i]);
             }
         }
     }
