@@ -1053,7 +1053,7 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
 }
 
 /// Count of flagged photos per kind of reason, for the end-of-run summary.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct Summary {
     /// Photos with at least one flag (a photo with several flags counts once here).
     pub flagged: usize,
@@ -1101,33 +1101,50 @@ impl Summary {
         }
     }
 
-    /// One line for the user.
+    /// One line for the user, naming every kind of flag raised (all fields taken apart, so that a kind added to
+    /// the summary cannot be left out of the line).
     pub fn line(&self, photos: usize) -> String {
-        let absorbed = match self.exposure_absorbed {
+        let Summary {
+            flagged,
+            contamination,
+            factor_change,
+            colour_shift,
+            roughness,
+            exposure_jump,
+            camera_still,
+            short_mission,
+            few_samples,
+            structure_added,
+            exposure_absorbed,
+        } = *self;
+        let absorbed = match exposure_absorbed {
             0 => String::new(),
             n => format!("; {n} exposure change(s) absorbed by the per-photo gain"),
         };
-        if self.flagged == 0 {
+        if flagged == 0 {
             return format!("no photo of {photos} flagged: the estimates look sound{absorbed}");
         }
         let mut parts = Vec::new();
         for (n, what) in [
-            (self.contamination, "contamination near 50 %"),
-            (self.factor_change, "sudden change of F"),
-            (self.colour_shift, "colour change of F"),
-            (self.roughness, "scene left in F"),
-            (self.exposure_jump, "exposure jump"),
-            (self.camera_still, "camera hardly moving"),
-            (self.short_mission, "too few photos for the window"),
-            (self.structure_added, "structure added (ghosts)"),
+            (contamination, "contamination near 50 %"),
+            (factor_change, "sudden change of F"),
+            (colour_shift, "colour change of F"),
+            (roughness, "scene left in F"),
+            (exposure_jump, "exposure jump"),
+            (camera_still, "camera hardly moving"),
+            (short_mission, "too few photos for the window"),
+            (
+                few_samples,
+                "too few independent samples (F may hold the scene)",
+            ),
+            (structure_added, "structure added (ghosts)"),
         ] {
             if n > 0 {
                 parts.push(format!("{n} {what}"));
             }
         }
         format!(
-            "{} of {photos} photos flagged as likely wrong ({}); see the report and _abysslight/overview.png{absorbed}",
-            self.flagged,
+            "{flagged} of {photos} photos flagged as likely wrong ({}); see the report and _abysslight/overview.png{absorbed}",
             parts.join(", ")
         )
     }
@@ -1272,6 +1289,26 @@ mod tests {
         s.add(&[]);
         assert_eq!(s.flagged, 1);
         assert!(s.line(2).contains("1 of 2"));
+    }
+
+    #[test]
+    fn the_summary_line_names_a_slow_cameras_few_samples() {
+        // Every photo of a slow camera's mission flagged for few samples and nothing else: the line names them
+        // (it once read "40 of 40 photos flagged as likely wrong ()").
+        let few = Flag::FewSamples {
+            samples: 1,
+            needed: 15,
+            window: 31,
+            whole_mission: false,
+        };
+        let mut s = Summary::default();
+        for _ in 0..40 {
+            s.add(std::slice::from_ref(&few));
+        }
+        let line = s.line(40);
+        assert!(line.contains("40 of 40"), "{line}");
+        assert!(line.contains("40 too few independent samples"), "{line}");
+        assert!(!line.contains("()"), "{line}");
     }
 
     /// Brute force: each pixel's mean over the clamped square, summed directly in two dimensions.

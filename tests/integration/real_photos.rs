@@ -231,3 +231,30 @@ fn nephrops_burrow_ghosts_stay_out_of_the_factors() {
         "the ghosts: {unlevelled:?} vs {default:?}"
     );
 }
+
+/// AQUALOC's frames (a slow ROV over amphorae, 40 photos): at default options the survey finds the camera hardly
+/// moving, and the monitor must say so on (nearly) every photo with that cause, not "the estimates look sound".
+#[test]
+#[ignore = "needs ../shared/data/real beside the project (real photos are not shipped); .ci/run runs it where they are"]
+fn a_slow_rov_over_amphorae_is_flagged_for_too_few_samples() {
+    use abysslight::{correct_mission, Options, Silent};
+    let d = tempfile::tempdir().unwrap();
+    let report = correct_mission(
+        &Options {
+            survey: Some(real_data().join("mosaic-library-video-snippets/aqualoc_frames")),
+            out: Some(d.path().join("out")),
+            ..Options::default()
+        },
+        &Silent,
+    )
+    .unwrap();
+    let frames = report.frames.len();
+    assert_eq!(frames, 40);
+    let few = report
+        .frames
+        .iter()
+        .filter(|f| f.health.flags.iter().any(|g| g.kind() == "few-samples"))
+        .count();
+    eprintln!("AQUALOC: {few} of {frames} photos flagged few-samples");
+    assert!(few * 10 >= frames * 9, "{few} of {frames}");
+}
