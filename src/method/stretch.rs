@@ -48,6 +48,9 @@ pub const RISK: f64 = 0.01;
 pub const SAME_SCENE: f32 = 0.45;
 /// Longest lag, in photos, at which the scenes are correlated (photos per sample beyond it: capped).
 pub const MAX_LAG: usize = 16;
+/// The correlation a scene keeps at every lag before the one where [`SAME_SCENE`] finds it again
+/// ([`independent`]).
+pub const PERSISTS: f32 = 0.2;
 
 /// What the survey measured on one photo.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -493,15 +496,22 @@ fn grow(
 }
 
 /// Independent samples among `photos[range]`: the photos whose scene is not the scene of an earlier photo of the
-/// range (correlation at least [`SAME_SCENE`], within [`MAX_LAG`] photos).
+/// range ([`seen_again`], within [`MAX_LAG`] photos).
 pub fn independent(photos: &[PhotoSurvey], range: std::ops::Range<usize>) -> usize {
     range
         .clone()
         .filter(|&j| {
-            !(range.start.max(j.saturating_sub(MAX_LAG))..j)
-                .any(|e| photos[e].same_scene[j - e - 1] >= SAME_SCENE)
+            !(range.start.max(j.saturating_sub(MAX_LAG))..j).any(|e| seen_again(&photos[e], j - e))
         })
         .count()
+}
+
+/// Whether a photo's scene is seen again `lag` photos later: its correlation there at least [`SAME_SCENE`], and at
+/// every shorter lag at least [`PERSISTS`]. A scene that stays in view of a slow camera is seen in every photo
+/// between; a lighting pattern that comes back with the altitude (a swinging sledge: the light cone's edge where it
+/// was a swing ago) is not, and the photos between, lit from another height, correlate little or negatively.
+fn seen_again(p: &PhotoSurvey, lag: usize) -> bool {
+    p.same_scene[lag - 1] >= SAME_SCENE && p.same_scene[..lag - 1].iter().all(|&c| c >= PERSISTS)
 }
 
 #[cfg(test)]
@@ -690,9 +700,46 @@ mod tests {
         assert_eq!(s.quantile, 0.5);
     }
 
+    /// Scenes whose correlation comes back with a swing of the altitude every 5 photos (0.6 at lags 5, 10 and 15,
+    /// negative between: the light cone's edge where it was a swing ago, as measured on the swing dive s02) are not
+    /// a slow camera: the window stays 7 (with any correlation at any lag counted, photos 5 apart were one sample
+    /// and the window grew to 31, capped). A slow camera's scene, whose correlation decays from 0.9 lag by lag,
+    /// still grows the window.
+    #[test]
+    fn a_light_that_swings_with_the_altitude_is_not_a_slow_camera() {
+        let with_lags = |corr: &dyn Fn(usize) -> f32| {
+            let mut same_scene = [0.0; MAX_LAG];
+            for (k, c) in same_scene.iter_mut().enumerate() {
+                *c = corr(k + 1);
+            }
+            vec![
+                PhotoSurvey {
+                    coverage: 0.01,
+                    same_scene,
+                };
+                60
+            ]
+        };
+        let swing = with_lags(&|lag| 0.6 * (std::f32::consts::TAU * lag as f32 / 5.0).cos());
+        assert!(swing[0].same_scene[4] >= SAME_SCENE && swing[0].same_scene[0] < PERSISTS);
+        let c = choose_one(&swing, 30);
+        assert_eq!(
+            (c.window, c.samples, c.rule),
+            (BASE_WINDOW, 7, Rule::Sparse),
+            "{c:?}"
+        );
+        let slow = with_lags(&|lag| (0.9 - 0.1 * lag as f32).max(0.0));
+        let c = choose_one(&slow, 30);
+        assert!(
+            c.window > BASE_WINDOW && c.photos_per_sample >= 2.0,
+            "{c:?}"
+        );
+    }
+
     #[test]
     fn independent_samples_are_counted_by_brute_force() {
-        // Photos 0..10; photo 3 repeats 2 and photo 4 repeats 3 (a chain: one scene), photo 9 repeats 5.
+        // Photos 0..10; photo 3 repeats 2 and photo 4 repeats 3 (a chain: one scene), photo 9 repeats 5 (its scene
+        // kept through photos 6–8). Photo 8 correlates with photo 1 but not through photos 2–7: no repeat.
         let mut photos = vec![
             PhotoSurvey {
                 coverage: 0.0,
@@ -702,8 +749,13 @@ mod tests {
         ];
         photos[2].same_scene[0] = 0.9;
         photos[3].same_scene[0] = 0.9;
-        photos[5].same_scene[3] = 0.9;
+        photos[5].same_scene[..4].copy_from_slice(&[0.4, 0.3, 0.25, 0.9]);
+        photos[1].same_scene[6] = 0.9;
         assert_eq!(independent(&photos, 0..10), 7);
+        // Broken persistence anywhere before the lag: no repeat.
+        let mut broken = photos.clone();
+        broken[5].same_scene[1] = 0.1;
+        assert_eq!(independent(&broken, 0..10), 8);
         assert_eq!(
             independent(&photos, 3..10),
             5,
