@@ -21,8 +21,9 @@ pub(crate) enum Avx2 {}
 
 #[cfg(not(target_arch = "x86_64"))]
 impl Avx2 {
-    /// Never: this is not an x86-64 CPU.
+    /// Never: this is not an x86-64 CPU. (Its callers are x86-64 code and the tests.)
     #[inline]
+    #[allow(dead_code)]
     pub(crate) fn detect() -> Option<Self> {
         None
     }

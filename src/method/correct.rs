@@ -561,6 +561,8 @@ fn blend_row_portable<T: Sample>(
 /// (the formula of [`Blended`]) before the result is coded. `lx` and `wx` hold the blend's level and weight upsampled to the
 /// row.
 #[allow(clippy::too_many_arguments)]
+// `ax` is the AVX2 passes' buffer: unused where there is no AVX2.
+#[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
 #[inline(always)]
 fn correct_row_blend<T: Sample>(
     row: &mut [T],
@@ -724,6 +726,7 @@ fn blend_row<T: Sample, const C: usize>(
 
 /// Pass 2 of `avx2::blend_row_passes`: per pixel, `r` from its samples' precision weights `g` (in `f`) and `Â` (in
 /// `ax`), written over its `g`s.
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn pixel_ratios<const C: usize>(f: &mut [f32], ax: &[f32], lx: &[f32], prior: f32) {
     for ((g, a), l) in f
@@ -1086,7 +1089,8 @@ mod tests {
     }
 
     /// A random row of `n` samples for the blend: codes with black and top ones, F near 0 and NaN, levels below
-    /// LEVEL_MIN and NaN, weights 0 to 1, S's grid indices.
+    /// LEVEL_MIN and NaN, weights 0 to 1, S's grid indices (for the tests of the AVX2 passes).
+    #[cfg(target_arch = "x86_64")]
     #[allow(clippy::type_complexity)]
     fn random_blend_row<T: Sample>(
         next: &mut dyn FnMut() -> u32,

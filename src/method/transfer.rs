@@ -123,14 +123,17 @@ pub struct Curve {
     shift: u32,
     base: u32,
     /// `start` widened to `i32`, for the AVX2 gather of [`Curve::codes_avx2`] (only when `packed` is empty).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     start32: Vec<i32>,
     /// Most steps up the threshold table any bucket needs (so the vector search can run a fixed number).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     max_steps: usize,
     /// When no bucket holds more than one threshold above its smallest float (`max_steps ≤ 1`: sRGB and the usual
     /// gammas at 8 and 16 bits), bucket `b` packed into one `i32` for a single gather: `start[b] << 16 | low`,
     /// where `low` is the bits below `shift` of the threshold inside the bucket, or `1 << shift` (above every such
     /// value) when there is none. Two positive floats of one bucket compare as their low bits do, so
     /// `l ≥ threshold ⇔ low(l) ≥ low`. Empty otherwise.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     packed: Vec<i32>,
 }
 
