@@ -104,6 +104,11 @@ pub enum Flag {
         /// A longer window to try, one the mission holds (`None`: none; the engine leaves out what it does not
         /// hold).
         longer: Option<usize>,
+        /// The photo's level against its window's where it jumped by more than
+        /// [`Thresholds::exposure_jump`]: the structure came in with the jump, not with a slow camera.
+        exposure: Option<f32>,
+        /// Whether exposure levelling ran (`false`: turned off, and turning it on is the advice for a jump).
+        levelled: bool,
     },
     /// Fewer photos in the mission than the window: every `F` is the median of all of them.
     ShortMission {
@@ -188,14 +193,25 @@ impl std::fmt::Display for Flag {
                 texture_kept,
                 window,
                 longer,
+                exposure,
+                levelled,
             } => write!(
                 f,
                 "the correction added structure ({:.0} % of the photo's texture): F holds objects its {window} \
-                 photos saw at the same place (a slow camera){}",
+                 photos saw at the same place ({}){}",
                 100.0 * texture_kept,
-                match longer {
-                    Some(n) => format!("; try --window {n}"),
-                    None => String::new(),
+                match exposure {
+                    Some(l) => format!(
+                        "taken in with this photo's exposure jump: {l:.2}× its window's level"
+                    ),
+                    None => "a slow camera".to_string(),
+                },
+                match (exposure, levelled, longer) {
+                    (Some(_), false, _) => {
+                        "; exposure levelling keeps such jumps out of F (drop --no-level-exposures)".into()
+                    }
+                    (_, _, Some(n)) => format!("; try --window {n}"),
+                    _ => String::new(),
                 }
             ),
             Flag::ShortMission { photos, window } => write!(
@@ -728,6 +744,8 @@ pub struct Monitor {
     quantile: f32,
     /// A per-photo gain absorbs exposure changes ([`Monitor::with_gain`]).
     gain: bool,
+    /// Exposure levelling runs ([`Monitor::with_levelling`]).
+    levelling: bool,
 }
 
 /// Consecutive matches whose medians decide whether the camera hardly moves.
@@ -826,6 +844,12 @@ impl Monitor {
         self
     }
 
+    /// Tell the monitor whether exposure levelling runs (the advice of [`Flag::StructureAdded`] after a jump).
+    pub fn with_levelling(mut self, levelling: bool) -> Self {
+        self.levelling = levelling;
+        self
+    }
+
     /// The next photo's window `n` and the quantile its `M` takes: the level and contamination share are taken at
     /// that quantile, and the contamination flag's threshold moves with the quantile's breakdown (`q` instead of
     /// the median's 0.5).
@@ -869,6 +893,8 @@ impl Monitor {
                 window,
                 longer: Some((2 * window + 1).min(crate::method::stretch::MAX_AUTO_WINDOW))
                     .filter(|&n| n > window),
+                exposure: ((fit.level - 1.0).abs() > t.exposure_jump).then_some(fit.level),
+                levelled: self.levelling,
             });
         }
         if fit.texture_kept < t.texture_kept {
@@ -1289,6 +1315,34 @@ mod tests {
         s.add(&[]);
         assert_eq!(s.flagged, 1);
         assert!(s.line(2).contains("1 of 2"));
+    }
+
+    #[test]
+    fn added_structure_names_an_exposure_jump_as_its_cause() {
+        let flag = |exposure, levelled| Flag::StructureAdded {
+            texture_kept: 1.17,
+            window: 11,
+            longer: Some(23),
+            exposure,
+            levelled,
+        };
+        let slow = flag(None, true).to_string();
+        assert!(
+            slow.contains("a slow camera") && slow.contains("--window 23"),
+            "{slow}"
+        );
+        let jump = flag(Some(1.54), false).to_string();
+        assert!(jump.contains("exposure jump: 1.54×"), "{jump}");
+        assert!(
+            jump.contains("--no-level-exposures") && !jump.contains("--window"),
+            "{jump}"
+        );
+        // Levelling ran and the jump still left structure: the longer window is the advice left.
+        let levelled = flag(Some(1.54), true).to_string();
+        assert!(
+            levelled.contains("exposure jump") && levelled.contains("--window 23"),
+            "{levelled}"
+        );
     }
 
     #[test]

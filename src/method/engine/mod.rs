@@ -173,7 +173,8 @@ impl<T> Engine<T> {
             layout: None,
             monitor: Monitor::new(Thresholds::default())
                 .with_window(n)
-                .with_gain(params.method == Method::Abyss && params.steps.photo_gain),
+                .with_gain(params.method == Method::Abyss && params.steps.photo_gain)
+                .with_levelling(params.method == Method::Abyss && params.steps.level_exposures),
             ring: Ring::new(n),
             judged_fixed: None,
             survey: None,
