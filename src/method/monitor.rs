@@ -880,7 +880,8 @@ impl Monitor {
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
         self.observe_stillness(own, &mut h);
-        if (fit.level - 1.0).abs() > t.exposure_jump {
+        let jumped = (fit.level - 1.0).abs() > t.exposure_jump;
+        if jumped {
             match self.gain {
                 true => h.exposure_absorbed = true,
                 false => h.flags.push(Flag::ExposureJump { level: fit.level }),
@@ -893,7 +894,7 @@ impl Monitor {
                 window,
                 longer: Some((2 * window + 1).min(crate::method::stretch::MAX_AUTO_WINDOW))
                     .filter(|&n| n > window),
-                exposure: ((fit.level - 1.0).abs() > t.exposure_jump).then_some(fit.level),
+                exposure: jumped.then_some(fit.level),
                 levelled: self.levelling,
             });
         }
