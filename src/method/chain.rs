@@ -3,8 +3,6 @@
 //! [`crate::method::steps`], one file each). The [`Engine`](crate::method::engine::Engine) keeps the stream (the
 //! ring of block images, the photos waiting, the survey) and gives each photo's [`Window`] to one of them.
 
-use std::ops::Range;
-
 use crate::method::baseline::{polynomial_m, Method};
 use crate::method::factor::factor_filled;
 use crate::method::median::stack_median;
@@ -29,14 +27,16 @@ pub(crate) struct Seen {
     pub spots: Option<Vec<bool>>,
     /// With `steps.overlaps`: the shift of the ground from the photo before, in blocks (`None`: no match).
     pub step: Option<(f64, f64)>,
+    /// The photo's altitude, where known ([`crate::method::altitude`]).
+    pub altitude: Option<f32>,
 }
 
 /// One photo's window, as the steps read it.
 pub(crate) struct Window<'a> {
     /// The photo's number in the mission.
     pub i: usize,
-    /// The photos of its window.
-    pub range: Range<usize>,
+    /// The photos of its window, in order (contiguous unless chosen by altitude: [`crate::method::altitude`]).
+    pub members: Vec<usize>,
     /// What the engine kept of them, in order.
     pub seen: Vec<&'a Seen>,
     /// The photo's own.

@@ -20,6 +20,7 @@
 //!
 //! Nothing here reads or writes files; [`crate::io`] does, and [`crate::run`] streams whole missions.
 
+pub mod altitude;
 pub mod baseline;
 pub(crate) mod blocks;
 pub(crate) mod chain;

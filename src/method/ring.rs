@@ -89,6 +89,7 @@ impl<E, W> Ring<E, W> {
     }
 
     /// The block images of the photos in `range`, in order.
+    #[cfg(test)]
     pub(crate) fn in_range(&self, range: Range<usize>) -> impl Iterator<Item = &E> {
         self.entries
             .iter()

@@ -5,12 +5,14 @@ use std::ops::Range;
 use std::time::Instant;
 
 use super::{ms, Corrected, Engine, Waiting};
+use crate::method::altitude::choose;
 use crate::method::baseline::Method;
 use crate::method::chain::{self, Seen};
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
 use crate::method::factor::{factor_filled, lit_seafloor};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health};
 use crate::method::raster::{Photo, Raster, Samples};
+use crate::method::window::window_range;
 
 impl<T> Engine<T> {
     /// One photo's estimate and correction: its window's estimate ([`chain`]: the paper's, a baseline's or the
@@ -25,8 +27,9 @@ impl<T> Engine<T> {
     ) -> Corrected<T> {
         let t = Instant::now();
         let mut photo = w.photo;
+        let members = self.members(i, &range);
         let estimate = {
-            let window = self.window(i, &range);
+            let window = self.window(i, &members);
             match self.params.method {
                 Method::Abyss => chain::abyss(&window, photo.as_ref()),
                 Method::Paper => chain::paper(&window),
@@ -39,7 +42,7 @@ impl<T> Engine<T> {
         };
         let lit = lit_seafloor(&window_f, &self.colour);
         let estimate_ms = w.downsample_ms + ms(t);
-        let pooled = self.pooled_estimate(i, &range);
+        let pooled = self.pooled_estimate(i, &members);
         let mut monitor = std::mem::take(&mut self.monitor);
         monitor.set_window(self.window_of(i), self.quantile_of(i));
         let mut health = Health::default();
@@ -66,10 +69,13 @@ impl<T> Engine<T> {
         if self.scatter_low.is_none() {
             scale.clear();
         }
+        let chosen = self.by_altitude && !members.iter().copied().eq(self.by_time(i));
         Corrected {
             tag: w.tag,
             index: i,
-            window: range,
+            window: members[0]..members[members.len() - 1] + 1,
+            altitude: self.own(i).altitude,
+            by_altitude: chosen.then_some(members),
             photo,
             factor: f,
             lit,
@@ -111,13 +117,35 @@ impl<T> Engine<T> {
         }
     }
 
-    /// Photo `i`'s window over the photos in `range`, as the chain's steps read it.
-    fn window(&self, i: usize, range: &Range<usize>) -> chain::Window<'_> {
-        let seen: Vec<&Seen> = self.ring.in_range(range.clone()).collect();
-        debug_assert_eq!(seen.len(), range.len(), "ring lost a photo of the window");
+    /// The photos of photo `i`'s window, once `range` is complete: its window, or where windows are chosen by
+    /// altitude, the pool it is chosen among ([`crate::method::altitude::choose`]).
+    fn members(&self, i: usize, range: &Range<usize>) -> Vec<usize> {
+        if !self.by_altitude {
+            return range.clone().collect();
+        }
+        choose(i, self.window_of(i), range.clone(), self.by_time(i), |j| {
+            self.ring.get(j).and_then(|e| e.altitude)
+        })
+    }
+
+    /// Photo `i`'s window over time, once it is complete: the photos nearest to it in time.
+    fn by_time(&self, i: usize) -> Range<usize> {
+        window_range(i, self.window_of(i), self.ring.pushed())
+    }
+
+    /// Photo `i`'s window over the photos `members` ([`Engine::members`]), as the chain's steps read it.
+    fn window(&self, i: usize, members: &[usize]) -> chain::Window<'_> {
+        let seen: Vec<&Seen> = members
+            .iter()
+            .map(|&j| {
+                self.ring
+                    .get(j)
+                    .expect("the ring holds the photos of a window")
+            })
+            .collect();
         chain::Window {
             i,
-            range: range.clone(),
+            members: members.to_vec(),
             seen,
             own: self.own(i),
             s_low: self.scatter_low.as_ref(),
@@ -154,7 +182,7 @@ impl<T> Engine<T> {
 
     /// The monitor's `F` and `F·C` of photo `i` when it judges pooled blocks ([`chain::pooled`]; `None` when it
     /// judges the window's own), with `S` and the mission's mean pooled once for the mission.
-    fn pooled_estimate(&mut self, i: usize, range: &Range<usize>) -> Option<(Raster, Raster)> {
+    fn pooled_estimate(&mut self, i: usize, members: &[usize]) -> Option<(Raster, Raster)> {
         let p = pool_factor(self.params.downsample);
         if p > 1 && self.judged_fixed.is_none() {
             self.judged_fixed = Some((
@@ -162,7 +190,7 @@ impl<T> Engine<T> {
                 self.mission_mean.as_ref().map(|m| pooled(m, p)),
             ));
         }
-        chain::pooled(&self.window(i, range), self.judged_fixed.as_ref()?)
+        chain::pooled(&self.window(i, members), self.judged_fixed.as_ref()?)
     }
 
     /// The rasters for [`Monitor::observe_photo`] of photo `i`: its block medians, `F·C`, `S` and `F`, the

@@ -85,7 +85,7 @@ impl<T> Engine<T> {
             held.map_entries(|seen| {
                 let mut low = seen.low;
                 p.clear(&mut low);
-                self.seen(low)
+                self.seen(low, seen.altitude)
             });
             self.ring = held;
         }

@@ -66,8 +66,13 @@ pub struct Corrected<T> {
     pub tag: T,
     /// Position among the photos the engine accepted (0-based).
     pub index: usize,
-    /// Photos (by `index`) whose median gave this photo's `F`.
+    /// Photos (by `index`) whose median gave this photo's `F`: the window, or where it was chosen by altitude
+    /// (`by_altitude`), the span of the photos chosen.
     pub window: Range<usize>,
+    /// Where the window was chosen by altitude ([`crate::method::altitude`]): its photos (by `index`, in order).
+    pub by_altitude: Option<Vec<usize>>,
+    /// The altitude the photo was pushed with ([`Engine::push_at`]).
+    pub altitude: Option<f32>,
     /// The corrected photo (`None` for photos pushed with [`Use::Estimate`]).
     pub photo: Option<Photo>,
     /// `F` at block resolution, in linear light.
@@ -140,6 +145,9 @@ pub struct Engine<T> {
     previous_texture: Option<crate::method::matching::Texture>,
     /// The paths of laser dots left out of every window's `M` ([`Steps::laser_paths`](crate::Steps::laser_paths)).
     lasers: Lasers,
+    /// Windows are chosen by altitude ([`Engine::expect_altitudes`], or the first photo came with one): a photo
+    /// waits for the pool of photos its window is chosen among.
+    by_altitude: bool,
 }
 
 impl<T> Engine<T> {
@@ -181,6 +189,7 @@ impl<T> Engine<T> {
             finished: false,
             previous_texture: None,
             lasers: Lasers::Off,
+            by_altitude: false,
         }
         .with_own_survey())
     }
@@ -191,7 +200,7 @@ impl<T> Engine<T> {
     fn with_own_survey(mut self) -> Self {
         if self.params.window_is_auto() {
             self.survey = Some(Survey::new(self.scatter_low.as_ref()));
-            self.ring = Ring::new(FIRST_DECIDED + 1);
+            self.ring = Ring::new(self.ring_length());
             if self.params.steps.laser_paths {
                 self.lasers = Lasers::Looking(SpotPath::new());
             }
@@ -201,7 +210,7 @@ impl<T> Engine<T> {
 
     /// What the window keeps of a photo's block image: the image, pooled for the monitor, its bright spots and the
     /// step from the photo before.
-    fn seen(&mut self, low: Raster) -> Seen {
+    fn seen(&mut self, low: Raster, altitude: Option<f32>) -> Seen {
         let judged = match pool_factor(self.params.downsample) {
             1 => None,
             p => Some(pooled(&low, p)),
@@ -216,6 +225,7 @@ impl<T> Engine<T> {
             judged,
             spots,
             step,
+            altitude,
         }
     }
 
@@ -238,10 +248,43 @@ impl<T> Engine<T> {
                 "a survey given to the engine is finished and holds at least one photo".into(),
             ));
         }
-        let longest = survey.choices().iter().map(|c| c.window).max().unwrap_or(1);
-        self.ring = Ring::new(longest);
         self.survey = Some(survey);
+        self.ring = Ring::new(self.ring_length());
         Ok(())
+    }
+
+    /// Choose windows by altitude ([`Engine::push_at`]) from the mission's first photo on, whether or not it has an
+    /// altitude (a navigation log that starts late). Only with [`Method::Abyss`] (otherwise ignored); refused once
+    /// photos were pushed.
+    pub fn expect_altitudes(&mut self) -> Result<()> {
+        if self.ring.pushed() > 0 {
+            return Err(Error::Usage(
+                "windows by altitude are chosen from the mission's first photo on".into(),
+            ));
+        }
+        if self.params.method == Method::Abyss && !self.by_altitude {
+            self.by_altitude = true;
+            self.ring = Ring::new(self.ring_length());
+        }
+        Ok(())
+    }
+
+    /// The block images the ring holds: the longest window's (with windows by altitude, the pool it is chosen
+    /// among), and with the engine's own survey those of the photos waiting for its decision.
+    fn ring_length(&self) -> usize {
+        let longest = match (&self.survey, self.params.window_is_auto()) {
+            (Some(s), _) if s.finished() => s.choices().iter().map(|c| c.window).max().unwrap_or(1),
+            (_, true) => crate::method::stretch::MAX_AUTO_WINDOW,
+            _ => self.params.window_length(),
+        };
+        let longest = match self.by_altitude {
+            true => crate::method::altitude::pool_length(longest),
+            false => longest,
+        };
+        match &self.survey {
+            Some(s) if !s.finished() => longest.max(FIRST_DECIDED + 1),
+            _ => longest,
+        }
     }
 
     /// `S` at block resolution in linear light, as the engine and its survey take it (`None`: no `S`).
@@ -356,6 +399,31 @@ impl<T> Engine<T> {
 
     /// [`push`](Self::push), saying what to do with the photo.
     pub fn push_as(&mut self, photo: Photo, tag: T, use_: Use) -> Result<Vec<Corrected<T>>> {
+        self.push_at(photo, tag, use_, None)
+    }
+
+    /// [`push_as`](Self::push_as), with the photo's altitude above the seafloor in metres where it is known (a
+    /// navigation log). With [`Method::Abyss`], where the altitude swings along the track, a photo's window is then
+    /// chosen among the photos around it lit from the nearest heights ([`crate::method::altitude`]); a photo then
+    /// waits for its window's length of photos after it, not half. Windows are chosen by altitude when the
+    /// mission's first photo comes with an altitude, or after [`Engine::expect_altitudes`]; photos without one
+    /// keep the window over time and are not chosen into others'. An altitude that is not a positive number is
+    /// refused with [`Error::Usage`].
+    pub fn push_at(
+        &mut self,
+        photo: Photo,
+        tag: T,
+        use_: Use,
+        altitude: Option<f32>,
+    ) -> Result<Vec<Corrected<T>>> {
+        if let Some(a) = altitude.filter(|a| !(a.is_finite() && *a > 0.0)) {
+            return Err(Error::Usage(format!(
+                "a photo's altitude is a positive number of metres, got {a}"
+            )));
+        }
+        if self.ring.pushed() == 0 && altitude.is_some() {
+            self.expect_altitudes()?;
+        }
         if self.finished {
             return Err(Error::Usage(
                 "this engine's mission is over (finish() was called): an engine corrects one mission; make a new \
@@ -374,7 +442,7 @@ impl<T> Engine<T> {
         if let Some(p) = self.laser_paths() {
             p.clear(&mut low);
         }
-        let seen = self.seen(low);
+        let seen = self.seen(low, altitude);
         let waiting = Waiting {
             tag,
             photo: (use_ == Use::Correct).then_some(photo),
@@ -483,11 +551,17 @@ impl<T> Engine<T> {
                 break;
             }
             let (survey, window) = (&self.survey, self.params.window_length());
+            let pool = |n: usize| match self.by_altitude {
+                true => crate::method::altitude::pool_length(n),
+                false => n,
+            };
             let ready = self.ring.next_ready_by(eof, |i| {
-                survey
-                    .as_ref()
-                    .and_then(|s| s.choice(i))
-                    .map_or(window, |c| c.window)
+                pool(
+                    survey
+                        .as_ref()
+                        .and_then(|s| s.choice(i))
+                        .map_or(window, |c| c.window),
+                )
             });
             let Some((i, w, range)) = ready else { break };
             if w.use_ != Use::Context {

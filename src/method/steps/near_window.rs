@@ -12,11 +12,12 @@ use crate::method::window::near_range;
 /// window alone sees a jump is one where the light's swing turns, which the shape is there to follow
 /// (docs/method.md).
 pub(crate) fn shape(w: &Window, m: Raster, levelled: bool) -> Raster {
-    let Some(near) = w.near.filter(|&k| k < w.range.len()) else {
+    let Some(near) = w.near.filter(|&k| k < w.members.len()) else {
         return m;
     };
-    let r = near_range(w.i, near, &w.range);
-    let seen = &w.seen[r.start - w.range.start..r.end - w.range.start];
+    // The photos of the window nearest to the photo in time (in a window chosen by altitude, the nearest of those).
+    let own = w.members.iter().position(|&j| j == w.i).unwrap_or(0);
+    let seen = &w.seen[near_range(own, near, &(0..w.members.len()))];
     let stack: Vec<&Raster> = seen.iter().map(|e| &e.low).collect();
     let steps = &w.params.steps;
     let m_near = quantile::of(&stack, w.quantile);
