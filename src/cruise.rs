@@ -4,12 +4,14 @@
 //! Layout: every folder `CRUISE/<dive>/` that holds a `survey/` folder is a dive; its water-column frames are in
 //! `CRUISE/<dive>/water-column/` (without it, and without `--scatter`, the dive gets `S = 0` and a warning, as a
 //! single `correct` run without `--water-column` does). Dive `<dive>` is written to `OUT/<dive>/`, with its own
-//! `_abysslight/` report. Dives run in natural name order (dive2 before dive10). Other folders and files in
-//! `CRUISE` are passed over.
+//! `_abysslight/` report. A dive's navigation log, where it has one, is `CRUISE/<dive>/navigation.csv` (each
+//! photo's altitude: `--navigation`). Dives run in natural name order (dive2 before dive10). Other folders and files
+//! in `CRUISE` are passed over.
 //!
 //! ```text
 //! CRUISE/dive042/water-column/*.jpg   ->  OUT/dive042/...
 //! CRUISE/dive042/survey/*.jpg
+//! CRUISE/dive042/navigation.csv       (optional)
 //! CRUISE/dive043/water-column/*.jpg   ->  OUT/dive043/...
 //! CRUISE/dive043/survey/*.jpg
 //! ```
@@ -26,6 +28,8 @@ use crate::run::options::{Options, Shard};
 pub const SURVEY: &str = "survey";
 /// Folder of a dive's water-column frames, below the dive's folder.
 pub const WATER_COLUMN: &str = "water-column";
+/// A dive's navigation log (each photo's altitude), in the dive's folder.
+pub const NAVIGATION: &str = "navigation.csv";
 
 /// One dive of a cruise.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -36,11 +40,13 @@ pub struct Dive {
     pub survey: PathBuf,
     /// `CRUISE/<dive>/water-column`, where it exists.
     pub water_column: Option<PathBuf>,
+    /// `CRUISE/<dive>/navigation.csv`, where it exists.
+    pub navigation: Option<PathBuf>,
 }
 
 impl Dive {
     /// The options of this dive's run: `base` with the dive's survey, water column (unless `base` gives a
-    /// `scatter` image for every dive) and `out_root/<dive>` as output.
+    /// `scatter` image for every dive), navigation log (its own or none) and `out_root/<dive>` as output.
     pub fn options(&self, base: &Options, out_root: &Path) -> Options {
         Options {
             survey: Some(self.survey.clone()),
@@ -49,6 +55,7 @@ impl Dive {
             } else {
                 self.water_column.clone()
             },
+            navigation: self.navigation.clone(),
             out: Some(out_root.join(&self.name)),
             report: None,
             ..base.clone()
@@ -77,11 +84,12 @@ pub fn find_dives(cruise: &Path) -> Result<Vec<Dive>> {
         .into_iter()
         .map(|name| {
             let dir = cruise.join(&name);
-            let wc = dir.join(WATER_COLUMN);
+            let (wc, nav) = (dir.join(WATER_COLUMN), dir.join(NAVIGATION));
             Dive {
                 name,
                 survey: dir.join(SURVEY),
                 water_column: wc.is_dir().then_some(wc),
+                navigation: nav.is_file().then_some(nav),
             }
         })
         .collect())
@@ -100,6 +108,9 @@ fn dive_inputs(dives: &[Dive]) -> Vec<(String, PathBuf)> {
                 .map_or_else(|| PathBuf::from(WATER_COLUMN), |p| p.join(WATER_COLUMN))
         });
         inputs.push((format!("water column of dive {}", d.name), wc));
+        if let Some(nav) = &d.navigation {
+            inputs.push((format!("navigation log of dive {}", d.name), nav.clone()));
+        }
     }
     inputs
 }

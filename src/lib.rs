@@ -71,6 +71,7 @@ mod simd;
 
 pub use error::{Error, Result};
 pub use io::metadata::Metadata;
+pub use io::navigation::Navigation;
 pub use method::baseline::Method;
 pub use method::engine::{Corrected, Engine, Use};
 pub use method::mask::Mask;

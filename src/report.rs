@@ -75,8 +75,15 @@ pub struct FrameReport {
     pub output: PathBuf,
     /// Position among the usable photos of the mission.
     pub index: usize,
-    /// Usable photos `[first, last]` whose median gave this photo's `F`.
+    /// Usable photos `[first, last]` whose median gave this photo's `F` (where its window was chosen by
+    /// altitude, the first and last of `window_by_altitude`).
     pub window: [usize; 2],
+    /// The photo's altitude in the navigation log (`--navigation`), metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub altitude: Option<f32>,
+    /// Where its window was chosen by altitude (`--navigation`): the usable photos it took, in order.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window_by_altitude: Option<Vec<usize>>,
     /// Milliseconds spent decoding the photo.
     pub decode_ms: f64,
     /// Block median, temporal median and `F`.
@@ -124,6 +131,8 @@ impl FrameReport {
             output,
             index,
             window: [0, 0],
+            altitude: None,
+            window_by_altitude: None,
             decode_ms: 0.0,
             estimate_ms: 0.0,
             correct_ms: 0.0,

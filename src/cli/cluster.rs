@@ -114,6 +114,12 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
             "--cruise writes one folder per dive: --out - cannot be used".into(),
         ));
     }
+    if args.navigation.is_some() {
+        return Err(Error::Usage(format!(
+            "--navigation names one dive's log; with --cruise each dive reads its own,              CRUISE/<dive>/{}",
+            abysslight::cruise::NAVIGATION
+        )));
+    }
     // Every output path against every dive's inputs before the first write; held until every dive has run.
     // A dry run writes nothing, not even the record of the dives a sharded cruise's task was given.
     let run = open_cruise(cruise, &out, args.shard.filter(|_| !args.dry_run))?;
@@ -128,6 +134,7 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
         }
         args.survey = Some(d.survey.clone());
         args.water_column = d.water_column.clone();
+        args.navigation = d.navigation.clone();
         args.dive_of_cruise = true;
         args.out = Some(out.join(&d.name));
         // One report file per dive (FILE-<dive>.json beside FILE): one file for all would keep the last dive's.

@@ -427,6 +427,19 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_IN)]
     mask_auto: bool,
 
+    /// Navigation log (CSV) of each photo's altitude: windows are chosen among photos lit from similar heights.
+    ///
+    /// A header row, then a row per photo; the photo's column is named file, filename, image, photo,
+    /// relative_path or path, the altitude's starts with "altitude" (metres; oplab's "altitude [m]" reads as it
+    /// is). Photos are matched by file name (else by name without the extension). Where the altitude swings along
+    /// the track (more than 15 % over a window), each photo's window is taken among the photos around it lit from
+    /// the nearest heights, half before and half after it, instead of the photos nearest in time: a towed sledge
+    /// or an ROV over rough ground. Photos not in the log keep the window over time. --method abyss; each photo
+    /// waits for a whole window of photos after it. The report lists each photo's altitude and the photos its
+    /// window took.
+    #[arg(long, value_name = "FILE.csv", help_heading = H_IN)]
+    navigation: Option<PathBuf>,
+
     /// How stored values relate to light: auto, srgb (most JPEGs), linear or gamma:G [default: auto].
     ///
     /// auto reads what the first survey photo's file declares (PNG cICP/sRGB/gAMA, an ICC profile, EXIF
@@ -743,6 +756,8 @@ fn options_from(args: &CorrectArgs) -> Result<Options, Error> {
         } else {
             args.water_column.clone()
         };
+        // Its own navigation log, or none: a --config log is another dive's.
+        o.navigation = args.navigation.clone();
     }
     if o.survey.is_none() {
         return Err(Error::Usage(
@@ -781,6 +796,7 @@ fn set_run_flags(args: &CorrectArgs, o: &mut Options) {
         out,
         threads,
         mask,
+        navigation,
         idle_timeout,
         report,
         jpeg_quality,

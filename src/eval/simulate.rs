@@ -12,7 +12,8 @@
 //!
 //! Output layout (documented in `docs/evaluation.md`):
 //! `water/0001.png…`, `survey/0001.png…`, `truth/albedo/0001.png…` (16-bit, linear albedo),
-//! `truth/dive.json` ([`Truth`]: camera, rig, water, poses, homographies) and `truth/placements.txt`.
+//! `truth/dive.json` ([`Truth`]: camera, rig, water, poses, homographies) and `truth/placements.txt`; and the
+//! vehicle's `navigation.csv` (each survey photo's altitude, for `correct --navigation`).
 
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -1487,6 +1488,16 @@ impl Dive {
             use std::io::Write;
             w.write_all(text.as_bytes())
                 .map_err(|e| Error::io(&placements, e))
+        })?;
+        // What the vehicle logs: each photo's altitude above the floor (the camera centre's height), in metres.
+        let nav = out.join("navigation.csv");
+        let mut text = String::from("file,altitude\n");
+        for p in &self.truth.poses {
+            text += &format!("{},{:.3}\n", p.file, p.position[2]);
+        }
+        crate::io::write_with(&nav, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes()).map_err(|e| Error::io(&nav, e))
         })?;
         Ok(())
     }

@@ -9,6 +9,7 @@ pub(crate) mod jpeg;
 pub(crate) mod jpeg_check;
 pub(crate) mod mask;
 pub(crate) mod metadata;
+pub mod navigation;
 pub(crate) mod paths;
 pub(crate) mod pnm;
 pub(crate) mod scatter;

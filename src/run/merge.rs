@@ -489,8 +489,16 @@ fn mission_numbered(f: &Value, position: usize) -> Value {
         .flatten()
         .map(|w| shift(w).map_or(Value::Null, Value::from))
         .collect();
+    let chosen: Option<Vec<Value>> = f["window_by_altitude"].as_array().map(|c| {
+        c.iter()
+            .map(|w| shift(w).map_or(Value::Null, Value::from))
+            .collect()
+    });
     if window.len() == 2 {
         f["window"] = Value::Array(window);
+    }
+    if let Some(chosen) = chosen {
+        f["window_by_altitude"] = Value::Array(chosen);
     }
     f["index"] = position.into();
     f

@@ -221,7 +221,11 @@ fn report_of(
         window: WindowSummary::of(
             params,
             opts,
-            outcome.frames.iter().map(|f| f.window[1] + 1 - f.window[0]),
+            outcome.frames.iter().map(|f| {
+                f.window_by_altitude
+                    .as_ref()
+                    .map_or(f.window[1] + 1 - f.window[0], Vec::len)
+            }),
         ),
         layout: outcome.layout,
         scatter: before.scatter,

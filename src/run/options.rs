@@ -145,6 +145,10 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
+    /// A navigation log (CSV) of each photo's altitude above the seafloor, matched by file name
+    /// (`io::navigation`): where the altitude swings along the track, each photo's window is chosen among the
+    /// photos around it lit from the nearest heights (`method::altitude`). `method = abyss` only. Default: none.
+    pub navigation: Option<PathBuf>,
     /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
     /// `refine`), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
     /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
@@ -288,6 +292,7 @@ impl Default for Options {
             transfer: p.transfer,
             mask: None,
             mask_auto: false,
+            navigation: None,
             method: p.method,
             degree: p.degree,
             watch: false,
@@ -400,10 +405,15 @@ impl Options {
     /// `--contamination`, `--method abyss`) the longest the survey chooses, 31 photos; else the window.
     pub fn longest_window(&self) -> Result<usize, Error> {
         let params = self.params()?;
-        Ok(if params.window_is_auto() {
+        let n = if params.window_is_auto() {
             crate::method::stretch::MAX_AUTO_WINDOW
         } else {
             params.window_length()
+        };
+        // With a navigation log a window is chosen among the photos around the photo (`method::altitude`).
+        Ok(match self.navigation.is_some() {
+            true => crate::method::altitude::pool_length(n),
+            false => n,
         })
     }
 
@@ -449,6 +459,19 @@ impl Options {
         }
         if self.scatter.is_some() && self.water_column.is_some() {
             return usage("give either --water-column or --scatter, not both".into());
+        }
+        if self.navigation.is_some() {
+            if stdin {
+                return usage(
+                    "--navigation matches photos by file name; frames on stdin (--survey -) have none".into(),
+                );
+            }
+            if self.method != Method::Abyss {
+                return usage(format!(
+                    "--navigation chooses windows by altitude, a step of --method abyss (not {})",
+                    self.method
+                ));
+            }
         }
         Ok(())
     }
@@ -525,6 +548,7 @@ impl Options {
             shard: _,
             mask: _,
             mask_auto: _,
+            navigation: _,
             watch: _,
             idle_timeout: _,
             poll_interval: _,

@@ -5,6 +5,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
+use crate::io::navigation::Navigation;
 use crate::io::paths::check_no_links_below;
 use crate::io::{
     self, decode_expecting, find_photos, find_photos_excluding, majority_size, Entry, Found,
@@ -54,6 +55,8 @@ pub struct Plan {
     pub work_dir: Option<PathBuf>,
     /// What the user should know before the run starts.
     pub warnings: Vec<String>,
+    /// The navigation log (`--navigation`), read.
+    pub navigation: Option<Navigation>,
     /// The write gate of the run (src/io/gate.rs), open while the plan lives.
     pub _gate: crate::io::gate::Gate,
 }
@@ -77,7 +80,11 @@ impl Plan {
         let gate = check_run_paths(opts)?;
         let window = opts.window_choice()?;
         let found = list_survey(opts, &survey, &out, streaming)?;
-        let warnings = folder_warnings(opts, &survey, &found);
+        let mut warnings = folder_warnings(opts, &survey, &found);
+        let navigation = match &opts.navigation {
+            Some(p) => Some(navigation(p, &found, streaming, &mut warnings)?),
+            None => None,
+        };
         for m in &warnings {
             progress.warn(m);
         }
@@ -135,8 +142,14 @@ impl Plan {
             skipped_existing,
             work_dir,
             warnings,
+            navigation,
             _gate: gate,
         })
+    }
+
+    /// The altitude of the photo at `path` in the navigation log (`--navigation`), where one is given and lists it.
+    pub fn altitude_of(&self, path: &Path) -> Option<f32> {
+        self.navigation.as_ref()?.altitude_of(path)
     }
 
     /// Create `<out>/_abysslight`: the first thing a run writes.
@@ -476,12 +489,51 @@ impl Plan {
 /// The survey photos found (none when streaming), or why there are none to correct.
 /// The input folders and files of a run are there, each named by its flag where not (the path checks after it
 /// name only the path).
+/// The navigation log at `path`, read, with a warning for the survey's photos it does not list; none listed is an
+/// error (the wrong log, or names that do not match). Photos still to come (`--watch`) are not counted.
+fn navigation(
+    path: &Path,
+    found: &Found,
+    streaming: bool,
+    warnings: &mut Vec<String>,
+) -> Result<Navigation> {
+    let nav = Navigation::read(path)?;
+    let photos = &found.photos;
+    let unlisted = photos
+        .iter()
+        .filter(|e| nav.altitude_of(&e.path).is_none())
+        .count();
+    if !streaming && !photos.is_empty() && unlisted == photos.len() {
+        return Err(Error::Config {
+            path: path.to_path_buf(),
+            reason: format!(
+                "none of the {} survey photos is listed (photos are matched by file name, e.g. {})",
+                photos.len(),
+                photos[0]
+                    .path
+                    .file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+            ),
+        });
+    }
+    if unlisted > 0 {
+        warnings.push(format!(
+            "{}: {unlisted} of {} survey photos are not listed; they keep the window over time and are not chosen              into others' windows",
+            path.display(),
+            photos.len()
+        ));
+    }
+    Ok(nav)
+}
+
 fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     let inputs = [
         ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
         ("--water-column", opts.water_column.as_deref()),
         ("--scatter", opts.scatter.as_deref()),
         ("--mask", opts.mask.as_deref()),
+        ("--navigation", opts.navigation.as_deref()),
     ];
     for (flag, path) in inputs {
         if let Some(p) = path.filter(|p| !p.exists()) {
@@ -623,6 +675,7 @@ pub fn check_run_paths(opts: &Options) -> Result<crate::io::gate::Gate> {
         ("water-column folder", opts.water_column.as_deref()),
         ("scatter image", opts.scatter.as_deref()),
         ("mask", opts.mask.as_deref()),
+        ("navigation file", opts.navigation.as_deref()),
     ]
     .into_iter()
     .filter_map(|(what, p)| p.map(|p| (what, p)))

@@ -79,6 +79,9 @@ pub fn prepare<T: Sync>(
     }
     let mut engine = Engine::new(*params, scatter.as_ref(), mask)?;
     drop(scatter);
+    if plan.navigation.is_some() {
+        engine.expect_altitudes()?;
+    }
     // Photos as they come (`--watch`, standard input) are surveyed by the engine as it takes them; a folder is
     // surveyed first, from its JPEGs' block means where they stand for the block medians.
     if params.window_is_auto() && !plan.streaming {

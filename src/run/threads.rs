@@ -283,7 +283,8 @@ impl Feed<'_> {
             decode_ms,
             live: (use_ == Use::Correct).then_some(live),
         };
-        match engine.push_as(photo, tag, use_) {
+        let altitude = self.plan.altitude_of(&path);
+        match engine.push_at(photo, tag, use_, altitude) {
             Ok(out) => {
                 self.pending += usize::from(role != Role::Halo);
                 self.say_lasers(engine);
@@ -341,6 +342,8 @@ impl Feed<'_> {
                 input: entry.path.clone(),
                 index: c.index,
                 window: [c.window.start, c.window.end - 1],
+                altitude: c.altitude,
+                window_by_altitude: c.by_altitude,
                 decode_ms: c.tag.decode_ms,
                 estimate_ms: c.estimate_ms,
                 correct_ms: c.correct_ms,

@@ -4,6 +4,7 @@
 mod common;
 
 mod abyss_quality;
+mod altitude;
 mod api;
 mod batch;
 mod budgets;
