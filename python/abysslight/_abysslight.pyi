@@ -68,6 +68,10 @@ class Corrected:
     """Health figures and flags of the estimate (as in the run report's frames)."""
     window: Tuple[int, int]
     """(first, end) indices of the photos whose median gave F."""
+    altitude: Optional[float]
+    """The altitude the photo was pushed with (None: none)."""
+    by_altitude: Optional[List[int]]
+    """Where its window was chosen by altitude: the indices of the photos it took (None: those window spans)."""
 
 class Engine:
     """The method over a stream of photos in memory; memory bounded by the window.
@@ -90,8 +94,10 @@ class Engine:
         mask: Optional[Mask] = None,
         **options: Any,
     ) -> None: ...
-    def push(self, photo: PhotoArray, tag: Any = None) -> List[Corrected]:
-        """Give the next photo; returns the photos whose window became complete, in order (GIL released)."""
+    def push(self, photo: PhotoArray, tag: Any = None, altitude: Optional[float] = None) -> List[Corrected]:
+        """Give the next photo (and its altitude in metres, from a navigation log); returns the photos whose window
+        became complete, in order (GIL released). With altitudes, where the altitude swings along the track, windows
+        are chosen among the photos lit from the nearest heights."""
     def finish(self) -> List[Corrected]:
         """Every photo still waiting, corrected with the window shifted back from the end; the mission's end."""
     @property
@@ -109,10 +115,12 @@ def correct_arrays(
     photos: Iterable[PhotoArray],
     water_column: Union[None, Scatter, Iterable[PhotoArray]] = None,
     mask: Optional[Mask] = None,
+    altitudes: Optional[Sequence[float]] = None,
     **options: Any,
 ) -> List[PhotoArray]:
     """Correct a list of photos in one call through an Engine (the Engine's options); the corrected arrays in
-    order, each of its photo's shape and dtype. water_column: water-column frames, a Scatter, or None (S = 0)."""
+    order, each of its photo's shape and dtype. water_column: water-column frames, a Scatter, or None (S = 0).
+    altitudes: each photo's altitude in metres (a navigation log), for windows chosen by altitude."""
 
 def correct(progress: Optional[Callable[[int, int, str, bool], Any]] = None, **options: Any) -> Dict[str, Any]:
     """abysslight correct: the run report; with cruise=, {"dives": {name: report}, "failed": {name: message}}."""

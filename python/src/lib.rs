@@ -232,6 +232,11 @@ struct Corrected {
     health: PyObject,
     /// (first, end) indices of the photos whose median gave this photo's `F`.
     window: (usize, usize),
+    /// The altitude the photo was pushed with (None: none).
+    altitude: Option<f32>,
+    /// Where its window was chosen by altitude: the indices of the photos it took, in order (None: the photos
+    /// `window` spans).
+    by_altitude: Option<Vec<usize>>,
 }
 
 #[pymethods]
@@ -315,15 +320,19 @@ impl Engine {
     }
 
     /// Give the next photo (HxWx3 or HxW; uint8, uint16, or float32/float64 in 0..1) with a tag of your choice
-    /// (e.g. its index or file name). Returns the photos whose window became complete, in order. A photo of
-    /// another size or dtype than the first raises ValueError and leaves the engine as it was. The GIL is released
-    /// while it works.
-    #[pyo3(signature = (photo, tag = None))]
+    /// (e.g. its index or file name), and its altitude above the seafloor in metres where a navigation log gives
+    /// it. Returns the photos whose window became complete, in order. A photo of another size or dtype than the
+    /// first raises ValueError and leaves the engine as it was. The GIL is released while it works.
+    ///
+    /// Altitudes (the first photo's given): where the altitude swings along the track, each photo's window is
+    /// chosen among the photos around it lit from the nearest heights, as `correct(navigation=...)` does.
+    #[pyo3(signature = (photo, tag = None, altitude = None))]
     fn push(
         &self,
         py: Python<'_>,
         photo: &Bound<'_, PyAny>,
         tag: Option<PyObject>,
+        altitude: Option<f32>,
     ) -> PyResult<Vec<Corrected>> {
         let mut state = self.state("push")?;
         if state.finished {
@@ -341,7 +350,9 @@ impl Engine {
         }
         let tag = tag.unwrap_or_else(|| py.None());
         let inner = &mut state.inner;
-        let out = py.allow_threads(|| inner.push(photo, tag)).map_err(to_py)?;
+        let out = py
+            .allow_threads(|| inner.push_at(photo, tag, abysslight::Use::Correct, altitude))
+            .map_err(to_py)?;
         state.shape.get_or_insert(shape);
         out.into_iter().map(|c| corrected(py, c, shape)).collect()
     }
@@ -454,19 +465,23 @@ fn corrected(
         factor: array_from_raster(py, &c.factor)?.unbind(),
         health: to_dict(py, &c.health)?,
         window: (c.window.start, c.window.end),
+        altitude: c.altitude,
+        by_altitude: c.by_altitude,
     })
 }
 
 /// A list of photos corrected in one call, through an [`abysslight::Engine`] (which chooses the windows as it
 /// does for any stream): the corrected arrays in the photos' order, each of the shape and dtype of its photo.
-/// `water_column`: a `Scatter`, or water-column frames (a list of arrays), or None (`S = 0`).
+/// `water_column`: a `Scatter`, or water-column frames (a list of arrays), or None (`S = 0`). `altitudes`: each
+/// photo's altitude in metres (a navigation log), one per photo, for windows chosen by altitude.
 #[pyfunction]
-#[pyo3(signature = (photos, water_column = None, mask = None, **options))]
+#[pyo3(signature = (photos, water_column = None, mask = None, altitudes = None, **options))]
 fn correct_arrays(
     py: Python<'_>,
     photos: &Bound<'_, PyAny>,
     water_column: Option<&Bound<'_, PyAny>>,
     mask: Option<PyRef<'_, Mask>>,
+    altitudes: Option<Vec<f32>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyList>> {
     let scatter = match water_column {
@@ -478,6 +493,9 @@ fn correct_arrays(
     };
     let mask = mask.map(|m| m.inner.clone());
     let (mut engine, _) = new_engine::<usize>("correct_arrays()", scatter.as_ref(), mask, options)?;
+    if altitudes.is_some() {
+        engine.expect_altitudes().map_err(to_py)?;
+    }
     let mut shape: Option<Shape> = None;
     let mut out: Vec<Option<PyObject>> = Vec::new();
     for (i, p) in photos.try_iter()?.enumerate() {
@@ -492,14 +510,30 @@ fn correct_arrays(
         }
         shape = Some(s);
         out.push(None);
+        let altitude = match &altitudes {
+            Some(a) => Some(*a.get(i).ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "altitudes lists {} photos, photos has more",
+                    a.len()
+                ))
+            })?),
+            None => None,
+        };
         let done = py
-            .allow_threads(|| engine.push(photo, i))
+            .allow_threads(|| engine.push_at(photo, i, abysslight::Use::Correct, altitude))
             .map_err(|e| to_py(e.about(std::path::Path::new(&what))))?;
         keep(py, &mut out, done, s)?;
     }
     let Some(shape) = shape else {
         return Err(PyValueError::new_err("no photos given"));
     };
+    if let Some(a) = altitudes.as_ref().filter(|a| a.len() != out.len()) {
+        return Err(PyValueError::new_err(format!(
+            "altitudes lists {} photos, photos has {}",
+            a.len(),
+            out.len()
+        )));
+    }
     let done = py.allow_threads(|| engine.finish());
     keep(py, &mut out, done, shape)?;
     let images: Vec<PyObject> = out

@@ -50,7 +50,15 @@ const NEGATABLE: &[&str] = &[
 ];
 
 /// Options whose value is a path: set on `Options` directly (a path need not be valid UTF-8, which JSON needs).
-const PATHS: &[&str] = &["water_column", "scatter", "survey", "out", "mask", "report"];
+const PATHS: &[&str] = &[
+    "water_column",
+    "scatter",
+    "survey",
+    "out",
+    "mask",
+    "report",
+    "navigation",
+];
 
 /// Keyword arguments of `correct()` that are not fields of `Options`.
 const CORRECT_EXTRAS: &[&str] = &["config", "cruise"];
@@ -90,10 +98,11 @@ pub fn correct_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<CorrectOpt
     if cruise.is_some() {
         if let Some((k, _)) = given
             .iter()
-            .find(|(k, _)| k == "survey" || k == "water_column")
+            .find(|(k, _)| k == "survey" || k == "water_column" || k == "navigation")
         {
             return Err(PyValueError::new_err(format!(
-                "give either cruise or {k}: a cruise gives each dive its survey/ and water-column/ folders"
+                "give either cruise or {k}: a cruise gives each dive its survey/ and water-column/ folders \
+                 (and its navigation.csv)"
             )));
         }
     }
@@ -322,6 +331,7 @@ fn build(base: Options, given: &[(String, Given)]) -> PyResult<Options> {
         base.out.take(),
         base.mask.take(),
         base.report.take(),
+        base.navigation.take(),
     ];
     let Value::Object(mut map) =
         serde_json::to_value(&base).map_err(|e| PyValueError::new_err(e.to_string()))?
@@ -371,12 +381,13 @@ fn build(base: Options, given: &[(String, Given)]) -> PyResult<Options> {
             PyValueError::new_err(message)
         }
     })?;
-    let [water_column, scatter, survey, out, mask, report] = paths;
+    let [water_column, scatter, survey, out, mask, report, navigation] = paths;
     opts.water_column = water_column;
     opts.scatter = scatter;
     opts.survey = survey;
     opts.out = out;
     opts.mask = mask;
     opts.report = report;
+    opts.navigation = navigation;
     Ok(opts)
 }

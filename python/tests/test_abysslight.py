@@ -393,3 +393,52 @@ def test_simulate_read_and_evaluate(srgb_dive, tmp_path):
     sets = {s["label"]: s for s in ev["sets"]}
     assert sets["abyss"]["albedo_error"] < sets["raw"]["albedo_error"]
     assert all(0.0 <= s["clipped"] < 1.0 for s in ev["sets"])
+
+
+def test_altitudes_choose_the_windows_in_the_engine_as_in_the_command(tmp_path):
+    # A sledge whose altitude swings 3 ± 1.2 m, with the vehicle's log the simulator writes beside the photos.
+    root = tmp_path / "dive"
+    run_cli("simulate", "--out", root, "--frames", 30, "--water-column", 5, "--size", "96x64", "--seed", 4,
+            "--encode", "srgb", "--altitude-swing", 1.2)
+    nav = root / "navigation.csv"
+    altitudes = {name: float(a) for name, a in (row.split(",") for row in nav.read_text().splitlines()[1:])}
+    out = tmp_path / "cli"
+    run_cli("correct", "--water-column", root / "water", "--survey", root / "survey", "--out", out,
+            "--navigation", nav, "--quiet")
+    frames = _report(out)["frames"]
+    assert any("window_by_altitude" in f for f in frames), "no window chosen by altitude"
+    assert [f["altitude"] for f in frames] == pytest.approx([altitudes[p.name] for p in pngs(root / "survey")])
+
+    water = [read_png(p) for p in pngs(root / "water")]
+    scatter = abysslight.Scatter.from_frames(water)
+    engine = abysslight.Engine(scatter=scatter, transfer="srgb")
+    got = {}
+    photos = pngs(root / "survey")
+    for i, p in enumerate(photos):
+        for c in engine.push(read_png(p), i, altitude=altitudes[p.name]):
+            got[c.tag] = c
+    for c in engine.finish():
+        got[c.tag] = c
+    assert_same_pixels(got, out)
+    for i, f in enumerate(frames):
+        assert got[i].by_altitude == f.get("window_by_altitude"), f"photo {i}"
+        assert got[i].altitude == pytest.approx(altitudes[photos[i].name])
+
+    arrays = abysslight.correct_arrays([read_png(p) for p in photos], water_column=scatter, transfer="srgb",
+                                       altitudes=[altitudes[p.name] for p in photos])
+    assert all(np.array_equal(a, got[i].image) for i, a in enumerate(arrays))
+    py_out = tmp_path / "py"
+    abysslight.correct(water_column=root / "water", survey=root / "survey", out=py_out, navigation=nav)
+    assert [read_png(p).tobytes() for p in pngs(py_out) if "_abysslight" not in p.parts] == \
+        [got[i].image.tobytes() for i in range(len(photos))]
+
+    # Errors: a list of altitudes of another length, an altitude that is not a positive number, a log for an
+    # engine (it has no files to match), a log beside a cruise (each dive has its own).
+    with pytest.raises(ValueError, match="altitudes lists 2 photos"):
+        abysslight.correct_arrays([read_png(p) for p in photos[:3]], altitudes=[3.0, 3.1])
+    with pytest.raises(ValueError, match="positive"):
+        abysslight.Engine().push(read_png(photos[0]), 0, altitude=-2.0)
+    with pytest.raises((TypeError, ValueError), match="navigation"):
+        abysslight.Engine(navigation=str(nav))
+    with pytest.raises(ValueError, match="cruise"):
+        abysslight.correct(cruise=tmp_path, out=tmp_path / "c", navigation=nav)
