@@ -6,7 +6,8 @@
 //! ```
 //! Methods: `raw` (as recorded), `mean` and `polynomial` (baselines), `paper` (the paper as published,
 //! `--method paper`, absolute floor 0.05 — abysslight's default before the abyss method), `paper-f0.001` (the same
-//! with `--factor-floor 0.001`), `default` (`Options::default()`, i.e. `--method abyss`), `oracle` (`(I − S)/F` with
+//! with `--factor-floor 0.001`), `default` (`Options::default()`, i.e. `--method abyss`), `navigation` (the default
+//! given the simulator's `navigation.csv`, `--navigation`: windows chosen by altitude), `oracle` (`(I − S)/F` with
 //! the simulator's true `F` and `S`), `window-floor` (the window's `M` made from the true albedo alone:
 //! what a window over a straight track takes into `F` from the seafloor itself, whatever the lights do —
 //! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
@@ -272,6 +273,18 @@ fn main() {
             }),
         ),
         ("default".into(), Box::new(|o| o)),
+        // The default given the vehicle's log (`correct --navigation`): windows chosen by altitude.
+        (
+            "navigation".into(),
+            Box::new(|o| Options {
+                navigation: o
+                    .survey
+                    .as_ref()
+                    .and_then(|s| s.parent())
+                    .map(|d| d.join("navigation.csv")),
+                ..o
+            }),
+        ),
     ];
     if ablation {
         for (label, f) in ablations() {
@@ -333,6 +346,9 @@ fn main() {
                 matrix::save_as_jpeg(&root.join(sub), &dir.join(format!("{sub}-jpeg")))
                     .expect("save the dive as JPEG");
             }
+            // The log beside the JPEGs (it names the PNGs: photos are matched by name without the extension).
+            std::fs::copy(root.join("navigation.csv"), dir.join("navigation.csv"))
+                .expect("copy the navigation log");
         }
         let (survey, water) = if spec.jpeg {
             (dir.join("survey-jpeg"), dir.join("water-jpeg"))

@@ -376,6 +376,7 @@ impl Options {
             &mut opts.out,
             &mut opts.mask,
             &mut opts.report,
+            &mut opts.navigation,
         ]
         .into_iter()
         .flatten()

@@ -268,6 +268,26 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
         "{}",
         stderr(&o)
     );
+    // The same log from a config file, relative to the file's folder.
+    let cfg = d.path().join("run.toml");
+    std::fs::write(&cfg, "navigation = \"nav.csv\"\n").unwrap();
+    let o = abysslight(&[
+        "correct",
+        "--config",
+        s(&cfg),
+        "--survey",
+        s(&survey),
+        "--out",
+        s(&d.path().join("o4")),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("2 of 6 survey photos are not listed"),
+        "{}",
+        stderr(&o)
+    );
+    let r = report(&d.path().join("o4"));
+    assert_eq!(r["frames"][0]["altitude"].as_f64(), Some(3.0));
     // Frames on standard input have no names; the paper's method has no windows by altitude.
     let o = run(&["--navigation", s(&nav), "--method", "paper"]);
     assert!(stderr(&o).contains("--method abyss"), "{}", stderr(&o));
@@ -366,4 +386,48 @@ fn a_cruise_dive_reads_its_own_log() {
     assert_eq!(dives[1].navigation, None);
     let o = dives[0].options(&Options::default(), &out);
     assert_eq!(o.navigation, dives[0].navigation);
+}
+
+/// `--watch` with a log takes the batch command's windows by altitude and writes its pixels.
+#[test]
+fn watch_with_a_log_writes_the_batch_commands_pixels() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("dive");
+    let (sim, _) = dive("s02", (96, 64), &root);
+    let batch = d.path().join("batch");
+    correct_mission(&options(&sim, &root, &batch, true), &Silent).unwrap();
+    let watched = d.path().join("watched");
+    let transfer = sim.encode.to_string();
+    let o = abysslight(&[
+        "correct",
+        "--survey",
+        s(&root.join("survey")),
+        "--out",
+        s(&watched),
+        "--water-column",
+        s(&root.join("water")),
+        "--transfer",
+        &transfer,
+        "--navigation",
+        s(&root.join("navigation.csv")),
+        "--watch",
+        "--idle-timeout",
+        "1",
+        "--poll-interval",
+        "40",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(outputs(&batch), outputs(&watched));
+    let took = |r: serde_json::Value| -> Vec<serde_json::Value> {
+        r["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f["window_by_altitude"].clone())
+            .collect()
+    };
+    let batch_took = took(report(&batch));
+    assert!(batch_took.iter().any(|w| !w.is_null()));
+    assert_eq!(took(report(&watched)), batch_took);
 }
