@@ -131,7 +131,7 @@ enum Command {
     Sheet(SheetArgs),
     /// Benchmark: generate a 12 MP JPEG mission in a temp folder and measure correct against decode + encode.
     Bench(BenchArgs),
-    /// Render a simulated dive with known albedo (water/, survey/, truth/) for testing and evaluation.
+    /// Render a simulated dive with known albedo (water/, survey/, truth/, navigation.csv) for tests and evaluation.
     Simulate(SimulateArgs),
     /// Score corrected photos: against a simulated dive's truth, and/or by consistency over overlapping photos.
     Evaluate(EvaluateArgs),
@@ -241,7 +241,7 @@ struct BenchArgs {
 
 #[derive(Args, Debug)]
 struct SimulateArgs {
-    /// Output folder (water/, survey/, truth/ are written below it).
+    /// Output folder (water/, survey/, navigation.csv, truth/ are written below it).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Survey photos.

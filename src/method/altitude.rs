@@ -52,8 +52,8 @@ pub fn span(altitudes: impl IntoIterator<Item = Option<f32>>) -> Option<f64> {
 /// [`ALTITUDE_SPAN`] of its mean altitude.
 ///
 /// Otherwise: photo `i`, and as many photos before it as the window over time has, those nearest to `i` in
-/// altitude among the pool's photos before it with a known altitude (ties: the nearer in time); the same after it. Where one side
-/// has too few, the other gives the rest. Returns the photo numbers in order.
+/// altitude among the pool's photos before it with a known altitude (ties: the nearer in time); the same after it.
+/// Where one side has too few, the other gives the rest. Returns the photo numbers in order.
 pub fn choose(
     i: usize,
     n: usize,

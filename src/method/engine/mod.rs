@@ -18,7 +18,9 @@
 //! ```
 //!
 //! Memory: at most `n` low-resolution images in the ring buffer and at most `n/2 + 1` full-resolution photos
-//! waiting for the photos after them (`n` at the start of a mission), whatever the mission's length.
+//! waiting for the photos after them (`n` at the start of a mission), whatever the mission's length. With windows
+//! chosen by altitude ([`Engine::push_at`]) the ring holds the `2n + 1` photos each window is chosen among, and up
+//! to `n + 1` photos wait.
 
 use std::ops::Range;
 use std::time::Instant;
