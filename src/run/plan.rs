@@ -311,6 +311,21 @@ impl Plan {
             line(self.describe_disk(opts, params.downsample));
         }
         line(self.describe_window(opts, &params));
+        if let Some(nav) = &self.navigation {
+            let listed = self
+                .found
+                .photos
+                .iter()
+                .filter(|e| nav.altitude_of(&e.path).is_some())
+                .count();
+            line(format!(
+                "windows by altitude: {} lists {listed} of the {} survey photos; where a window's altitudes span \
+                 {:.0} % or more of their mean, it is chosen among the photos lit from the nearest heights",
+                nav.path.display(),
+                self.found.photos.len(),
+                100.0 * crate::method::altitude::ALTITUDE_SPAN
+            ));
+        }
         line(format!(
             "S: {}",
             match (&opts.scatter, &opts.water_column) {

@@ -123,15 +123,6 @@ fn a_level_track_with_a_log_is_corrected_as_without() {
     }
 }
 
-fn photos(dir: &Path) -> Vec<(std::path::PathBuf, Photo)> {
-    find_photos(dir)
-        .unwrap()
-        .photos
-        .into_iter()
-        .map(|e| (e.relative.clone(), decode(&e.path).unwrap()))
-        .collect()
-}
-
 #[test]
 fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
     let d = tempfile::tempdir().unwrap();
@@ -148,14 +139,14 @@ fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
     );
 
     // The engine, each photo pushed with its altitude.
-    let water: Vec<Photo> = photos(&root.join("water"))
+    let water: Vec<Photo> = decoded_photos(&root.join("water"))
         .into_iter()
         .map(|(_, p)| p)
         .collect();
     let scatter = Scatter::from_frames(&water).unwrap();
     let mut engine = Engine::new(opts.params().unwrap(), scatter.as_ref(), None).unwrap();
     let mut out = Vec::new();
-    for ((name, photo), pose) in photos(&root.join("survey"))
+    for ((name, photo), pose) in decoded_photos(&root.join("survey"))
         .into_iter()
         .zip(&dive.truth.poses)
     {
@@ -267,6 +258,13 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
         stderr(&o).contains("2 of 6 survey photos are not listed"),
         "{}",
         stderr(&o)
+    );
+    // A dry run says what the log gives.
+    let o = run(&["--navigation", s(&nav), "--dry-run"]);
+    assert!(
+        stdout(&o).contains("lists 4 of the 6 survey photos"),
+        "{}",
+        stdout(&o)
     );
     // The same log from a config file, relative to the file's folder.
     let cfg = d.path().join("run.toml");

@@ -33,15 +33,6 @@ fn options(sim: &Simulation, root: &Path, out: &Path) -> Options {
     }
 }
 
-fn photos(dir: &Path) -> Vec<(std::path::PathBuf, Photo)> {
-    find_photos(dir)
-        .unwrap()
-        .photos
-        .into_iter()
-        .map(|e| (e.relative.clone(), decode(&e.path).unwrap()))
-        .collect()
-}
-
 /// The in-memory engine at the command's defaults (`Options::params`), photos pushed one by one: the same pixels as
 /// `abysslight correct` on the folder, windows chosen by the engine's own survey as the photos come; on each field
 /// the survey chose windows longer than 7 for some photos, and every photo's window fits the mission.
@@ -65,14 +56,14 @@ fn the_engine_writes_the_batch_commands_pixels_on_nodule_fields() {
             Params::default(),
             "the command's defaults are the engine's"
         );
-        let water: Vec<Photo> = photos(&root.join("water"))
+        let water: Vec<Photo> = decoded_photos(&root.join("water"))
             .into_iter()
             .map(|(_, p)| p)
             .collect();
         let scatter = Scatter::from_frames(&water).unwrap();
         let mut engine = Engine::new(params, scatter.as_ref(), None).unwrap();
         let mut out = Vec::new();
-        for (name, photo) in photos(&root.join("survey")) {
+        for (name, photo) in decoded_photos(&root.join("survey")) {
             out.extend(engine.push(photo, name).unwrap());
         }
         out.extend(engine.finish());
@@ -125,7 +116,7 @@ fn watch_and_standard_input_write_the_batch_commands_pixels_on_a_nodule_field() 
     assert!(o.status.success(), "{}", stderr(&o));
 
     let piped = d.path().join("piped");
-    let names: Vec<_> = photos(&root.join("survey"))
+    let names: Vec<_> = decoded_photos(&root.join("survey"))
         .into_iter()
         .map(|(n, _)| n)
         .collect();
@@ -155,7 +146,7 @@ fn watch_and_standard_input_write_the_batch_commands_pixels_on_a_nodule_field() 
             .map(|f| f["window"].clone())
             .collect()
     };
-    let piped_out = photos(&piped);
+    let piped_out = decoded_photos(&piped);
     assert_eq!(piped_out.len(), names.len());
     for (i, n) in names.iter().enumerate() {
         let want = decode(&batch.join(n)).unwrap().samples;

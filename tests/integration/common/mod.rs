@@ -319,3 +319,14 @@ pub fn png_chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
     c.extend_from_slice(&crc.finalize().to_be_bytes());
     c
 }
+
+/// The photos of a folder (searched as a run searches it), decoded as a run decodes them, each with its path
+/// relative to the folder, in the run's order.
+pub fn decoded_photos(dir: &Path) -> Vec<(PathBuf, Photo)> {
+    abysslight::io::find_photos(dir)
+        .unwrap()
+        .photos
+        .into_iter()
+        .map(|e| (e.relative.clone(), abysslight::io::decode(&e.path).unwrap()))
+        .collect()
+}
