@@ -429,3 +429,97 @@ fn watch_with_a_log_writes_the_batch_commands_pixels() {
     assert!(batch_took.iter().any(|w| !w.is_null()));
     assert_eq!(took(report(&watched)), batch_took);
 }
+
+/// Over a mission longer than the engine holds (150 photos), with the engine's own survey and with a window given,
+/// each photo's window is the best balanced choice by altitude among the photos around it, knowing the whole
+/// mission: the engine kept every photo a window chose among.
+#[test]
+fn a_long_mission_keeps_every_photo_a_window_chooses_among() {
+    use abysslight::{Layout, Params, Samples, Window};
+    let (w, h, total) = (48usize, 32usize, 150usize);
+    // A swing of ±40 % with a period of 9 photos.
+    let altitude = |i: usize| 4.0 + 1.6 * (i as f32 * std::f32::consts::TAU / 9.0).sin();
+    let photo = |i: usize| {
+        let mut rng = Rng::new(i as u64 + 1);
+        let a = altitude(i);
+        let samples = (0..w * h * 3)
+            .map(|k| {
+                let (x, y) = ((k / 3) % w, (k / 3) / w);
+                let lit = light(x, y, k % 3, w, h) * 16.0 / (a * a);
+                ((0.3 + 0.2 * rng.f32()) * lit * 255.0).clamp(0.0, 255.0) as u8
+            })
+            .collect();
+        Photo {
+            layout: Layout {
+                width: w,
+                height: h,
+                channels: 3,
+            },
+            samples: Samples::U8(samples),
+            alpha: None,
+        }
+    };
+    // The photos `[start, end)` of `n` around photo `i`, shifted back at the mission's ends.
+    let around = |i: usize, n: usize| {
+        let s = i.saturating_sub(n / 2).min(total - n);
+        s..s + n
+    };
+    for params in [
+        Params::default(),
+        Params {
+            window: Window::Fixed(9),
+            ..Params::default()
+        },
+    ] {
+        let mut engine = Engine::new(params, None, None).unwrap();
+        let mut out = Vec::new();
+        for i in 0..total {
+            out.extend(
+                engine
+                    .push_at(photo(i), i, Use::Correct, Some(altitude(i)))
+                    .unwrap(),
+            );
+        }
+        out.extend(engine.finish());
+        assert_eq!(out.len(), total);
+        for c in &out {
+            let i = c.index;
+            let n = c.choice.map_or(9, |ch| ch.window);
+            let by_time = around(i, n);
+            let Some(took) = &c.by_altitude else {
+                panic!("photo {i}: the window over time, where the altitude spans 80 %");
+            };
+            let pool = around(i, 2 * n + 1);
+            assert_eq!(took.len(), n, "photo {i}");
+            assert!(
+                took.contains(&i) && took.iter().all(|j| pool.contains(j)),
+                "photo {i}: {took:?}"
+            );
+            assert_eq!(c.window, took[0]..took[n - 1] + 1);
+            // As many before it as the window over time has, each side the nearest in altitude of its side.
+            let side = |before: bool| move |j: &usize| if before { *j < i } else { *j > i };
+            assert_eq!(
+                took.iter().filter(|j| side(true)(j)).count(),
+                by_time.clone().filter(side(true)).count(),
+                "photo {i}"
+            );
+            for before in [true, false] {
+                let far = took
+                    .iter()
+                    .filter(|j| side(before)(j))
+                    .map(|&j| (altitude(j) - altitude(i)).abs())
+                    .fold(0.0f32, f32::max);
+                for j in pool
+                    .clone()
+                    .filter(side(before))
+                    .filter(|j| !took.contains(j))
+                {
+                    assert!(
+                        (altitude(j) - altitude(i)).abs() >= far,
+                        "photo {i}: {j} left out, {took:?}"
+                    );
+                }
+            }
+        }
+    }
+}
