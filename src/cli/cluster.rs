@@ -116,7 +116,8 @@ pub fn correct_cruise(mut args: CorrectArgs, cruise: &Path) -> Result<ExitCode, 
     }
     if args.navigation.is_some() {
         return Err(Error::Usage(format!(
-            "--navigation names one dive's log; with --cruise each dive reads its own,              CRUISE/<dive>/{}",
+            "--navigation names one dive's log; with --cruise each dive reads its own, \
+             CRUISE/<dive>/{}",
             abysslight::cruise::NAVIGATION
         )));
     }

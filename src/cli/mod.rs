@@ -431,7 +431,10 @@ struct CorrectArgs {
     ///
     /// A header row, then a row per photo; the photo's column is named file, filename, image, photo,
     /// relative_path or path, the altitude's starts with "altitude" (metres; oplab's "altitude [m]" reads as it
-    /// is). Photos are matched by file name (else by name without the extension). Where the altitude swings along
+    /// is). Photos are matched by file name (else by name without the extension). A log without a file column
+    /// but with a time column (time, timestamp, datetime, epoch, utc: seconds since 1970 UTC or dates such as
+    /// 2023-06-03T16:27:01.5Z) is read at each photo's EXIF time (DateTimeOriginal, its sub-seconds and offset),
+    /// interpolated between rows at most 10 s apart. Where the altitude swings along
     /// the track (more than 15 % over a window), each photo's window is taken among the photos around it lit from
     /// the nearest heights, half before and half after it, instead of the photos nearest in time: a towed sledge
     /// or an ROV over rough ground. Photos not in the log keep the window over time. --method abyss; each photo

@@ -1,13 +1,20 @@
-//! A navigation log: each photo's altitude above the seafloor, read from a CSV file of one row per photo, matched
-//! to the photos by file name (`--navigation`).
+//! A navigation log: each photo's altitude above the seafloor, read from a CSV file (`--navigation`), matched to
+//! the photos by file name or by time.
 //!
 //! The first row names the columns; commas, semicolons or tabs separate them (the header's first of these). The
-//! photo's column is the first named `file`, `filename`, `file_name`, `image`, `image_name`, `imagename`, `photo`,
-//! `relative_path` or `path` (any case); the altitude's the first whose name starts with `altitude` (`altitude`,
-//! `Altitude [m]`, `altitude_m`: metres). Other columns are ignored. oplab's navigation CSVs (`relative_path`,
-//! `altitude [m]`) read as they are. A photo is matched by its file name, or else by its name without the
-//! extension (a log written for the raw frames of converted photos). Values may be quoted; `#` starts a comment
-//! line.
+//! altitude's column is the first whose name starts with `altitude` (`altitude`, `Altitude [m]`, `altitude_m`:
+//! metres). Other columns are ignored. Values may be quoted; `#` starts a comment line.
+//!
+//! - **By file name**, one row per photo: the photo's column is the first named `file`, `filename`, `file_name`,
+//!   `image`, `image_name`, `imagename`, `photo`, `relative_path` or `path` (any case). oplab's navigation CSVs
+//!   (`relative_path`, `altitude [m]`) read as they are. A photo is matched by its file name, or else by its name
+//!   without the extension (a log written for the raw frames of converted photos).
+//! - **By time**, a log without a file column, as a vehicle writes it (rows at any rate, in any order): the time's
+//!   column is the first whose name starts with `time`, `datetime`, `date_time`, `epoch` or `unix`, or is `utc`.
+//!   Times are seconds since 1970-01-01 00:00 UTC, or dates as `2023-06-03T16:27:01.5Z` (a space for the `T`, an
+//!   offset such as `+02:00`, or none: UTC). A photo's time is its EXIF `DateTimeOriginal`
+//!   ([`crate::Metadata::time_taken`]); its altitude is interpolated between the rows around it, where they lie at
+//!   most [`MAX_GAP_S`] apart.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -16,6 +23,9 @@ use crate::error::{Error, Result};
 
 /// The largest navigation file read (1 GiB: a million photos at a kilobyte a row).
 pub const MAX_BYTES: u64 = 1 << 30;
+
+/// Rows of a log by time further apart than this (seconds) give no altitude between them (a gap in the log).
+pub const MAX_GAP_S: f64 = 10.0;
 
 /// Column names of the photo's file, in any case.
 const FILE_COLUMNS: [&str; 9] = [
@@ -31,12 +41,16 @@ const FILE_COLUMNS: [&str; 9] = [
 ];
 
 /// Each photo's altitude from a navigation log ([`Navigation::read`]).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Default)]
 pub struct Navigation {
     /// The file it was read from.
     pub path: PathBuf,
     by_name: HashMap<String, f32>,
     by_stem: HashMap<String, Option<f32>>,
+    /// A log by time: (seconds, altitude), in time order.
+    by_time: Vec<(f64, f32)>,
+    /// A log by time: the altitude found for each photo read so far.
+    found: std::sync::Mutex<HashMap<PathBuf, Option<f32>>>,
 }
 
 impl Navigation {
@@ -80,13 +94,24 @@ impl Navigation {
             .collect();
         let file_col = names
             .iter()
-            .position(|c| FILE_COLUMNS.contains(&c.as_str()))
-            .ok_or_else(|| {
-                format!(
-                    "line {header_line}: no column names the photo's file (one of {}); the header is {header:?}",
+            .position(|c| FILE_COLUMNS.contains(&c.as_str()));
+        let time_col = names.iter().position(|c| {
+            ["time", "datetime", "date_time", "epoch", "unix"]
+                .iter()
+                .any(|p| c.starts_with(p))
+                || c == "utc"
+        });
+        let (file_col, time_col) = match (file_col, time_col) {
+            (Some(f), _) => (f, None),
+            (None, Some(t)) => (0, Some(t)),
+            (None, None) => {
+                return Err(format!(
+                    "line {header_line}: no column names the photo's file (one of {}) or the time (time, \
+                     timestamp, datetime, epoch, utc); the header is {header:?}",
                     FILE_COLUMNS.join(", ")
-                )
-            })?;
+                ))
+            }
+        };
         let alt_col = names
             .iter()
             .position(|c| c.starts_with("altitude"))
@@ -104,6 +129,17 @@ impl Navigation {
         for (line, row) in lines {
             let cells = split(row, sep);
             let cell = |c: usize| cells.get(c).map(String::as_str).unwrap_or("");
+            if let Some(t) = time_col {
+                let time = parse_time(cell(t)).ok_or_else(|| {
+                    format!("line {line}: time {:?} does not read as a time", cell(t))
+                })?;
+                let text = cell(alt_col);
+                let altitude = positive(text).ok_or_else(|| {
+                    format!("line {line}: altitude {text:?} is not a positive number of metres")
+                })?;
+                nav.by_time.push((time, altitude));
+                continue;
+            }
             let file = file_name(cell(file_col));
             if file.is_empty() {
                 return Err(format!(
@@ -112,13 +148,11 @@ impl Navigation {
                 ));
             }
             let text = cell(alt_col);
-            let altitude: f32 = text
-                .parse()
-                .ok()
-                .filter(|a: &f32| a.is_finite() && *a > 0.0)
-                .ok_or_else(|| {
-                    format!("line {line}: altitude {text:?} of {file} is not a positive number of metres")
-                })?;
+            let altitude = positive(text).ok_or_else(|| {
+                format!(
+                    "line {line}: altitude {text:?} of {file} is not a positive number of metres"
+                )
+            })?;
             if let Some(was) = first_line.insert(file.clone(), line) {
                 return Err(format!(
                     "line {line}: {file} is listed twice (also on line {was})"
@@ -132,14 +166,23 @@ impl Navigation {
                 .or_insert(Some(altitude));
             nav.by_name.insert(file, altitude);
         }
-        if nav.by_name.is_empty() {
-            return Err("no rows: a row per photo after the header".into());
+        if nav.by_name.is_empty() && nav.by_time.is_empty() {
+            return Err("no rows: a row per photo (or per time) after the header".into());
         }
+        nav.by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
         Ok(nav)
     }
 
-    /// The altitude of the photo at `path`, matched by its file name, else by its name without the extension.
+    /// The altitude of the photo at `path`: matched by its file name, else by its name without the extension; or,
+    /// for a log by time, at the time the photo's EXIF gives (read once per photo).
     pub fn altitude_of(&self, path: &Path) -> Option<f32> {
+        if !self.by_time.is_empty() {
+            let mut found = self.found.lock().unwrap_or_else(|e| e.into_inner());
+            return *found.entry(path.to_path_buf()).or_insert_with(|| {
+                let t = crate::Metadata::read(path).ok()?.time_taken()?;
+                self.altitude_at(t)
+            });
+        }
         let name = path.file_name()?.to_string_lossy();
         self.by_name
             .get(name.as_ref())
@@ -147,14 +190,120 @@ impl Navigation {
             .or_else(|| self.by_stem.get(&stem(&name)).copied().flatten())
     }
 
-    /// Photos listed.
-    pub fn len(&self) -> usize {
-        self.by_name.len()
+    /// A log by time: the altitude at `t` (seconds since 1970 UTC), interpolated between the rows around it where
+    /// they lie at most [`MAX_GAP_S`] apart; `None` outside the log and in its gaps.
+    pub fn altitude_at(&self, t: f64) -> Option<f32> {
+        let rows = &self.by_time;
+        let k = rows.partition_point(|r| r.0 < t);
+        match (k.checked_sub(1).map(|j| rows[j]), rows.get(k)) {
+            (_, Some(&(t1, a1))) if t1 == t => Some(a1),
+            (Some((t0, a0)), Some(&(t1, a1))) if t1 - t0 <= MAX_GAP_S => {
+                let w = ((t - t0) / (t1 - t0)) as f32;
+                Some(a0 + w * (a1 - a0))
+            }
+            _ => None,
+        }
     }
 
-    /// No photo listed (never, for a navigation that was read).
+    /// Rows read: photos listed, or times of a log by time.
+    pub fn len(&self) -> usize {
+        self.by_name.len() + self.by_time.len()
+    }
+
+    /// No row (never, for a navigation that was read).
     pub fn is_empty(&self) -> bool {
-        self.by_name.is_empty()
+        self.len() == 0
+    }
+
+    /// Whether photos are matched by their time (a log without a file column).
+    pub fn by_time(&self) -> bool {
+        !self.by_time.is_empty()
+    }
+}
+
+/// A positive, finite number of metres.
+fn positive(text: &str) -> Option<f32> {
+    text.parse()
+        .ok()
+        .filter(|a: &f32| a.is_finite() && *a > 0.0)
+}
+
+/// A time as seconds since 1970-01-01 00:00 UTC: a number (those seconds), or a date and time, `YYYY-MM-DD` (or
+/// `YYYY:MM:DD`, as EXIF writes it, or with `/`), `T` or a space, `HH:MM:SS` with an optional fraction, and an
+/// optional `Z` or offset (`+02:00`, `-0330`); without one, UTC.
+pub fn parse_time(text: &str) -> Option<f64> {
+    let text = text.trim();
+    if let Ok(v) = text.parse::<f64>() {
+        return v.is_finite().then_some(v);
+    }
+    let (date, rest) = text.split_at_checked(10)?;
+    let rest = rest.strip_prefix(['T', 't', ' '])?;
+    let d: Vec<&str> = date.split(['-', ':', '/']).collect();
+    let [y, m, day] = d[..] else { return None };
+    let (y, m, day): (i64, u32, u32) = (y.parse().ok()?, m.parse().ok()?, day.parse().ok()?);
+    if !(1..=12).contains(&m) || day == 0 || day > days_in_month(y, m) {
+        return None;
+    }
+    // The clock, then the zone.
+    let zone_at = rest.find(['Z', 'z', '+', '-']).unwrap_or(rest.len());
+    let (clock, zone) = rest.split_at(zone_at);
+    let c: Vec<&str> = clock.split(':').collect();
+    let [hh, mm, ss] = c[..] else { return None };
+    let (hh, mm): (u32, u32) = (hh.parse().ok()?, mm.parse().ok()?);
+    let ss: f64 = ss.parse().ok()?;
+    if hh > 23 || mm > 59 || !(0.0..61.0).contains(&ss) {
+        return None;
+    }
+    let offset = if zone.is_empty() {
+        0.0
+    } else {
+        parse_offset(zone)?
+    };
+    let days = days_from_civil(y, m, day) as f64;
+    Some(days * 86_400.0 + (hh * 3600 + mm * 60) as f64 + ss - offset)
+}
+
+/// A time zone's offset from UTC in seconds: `Z`, or `+HH:MM`, `-HH:MM`, `+HHMM`, `+HH`.
+pub fn parse_offset(text: &str) -> Option<f64> {
+    let text = text.trim();
+    if text.eq_ignore_ascii_case("z") {
+        return Some(0.0);
+    }
+    let (sign, hm) = match text.as_bytes().first()? {
+        b'+' => (1.0, &text[1..]),
+        b'-' => (-1.0, &text[1..]),
+        _ => return None,
+    };
+    let digits: String = hm.chars().filter(|c| *c != ':').collect();
+    if !digits.bytes().all(|b| b.is_ascii_digit()) || !(digits.len() == 2 || digits.len() == 4) {
+        return None;
+    }
+    let h: f64 = digits[..2].parse().ok()?;
+    let m: f64 = if digits.len() == 4 {
+        digits[2..].parse().ok()?
+    } else {
+        0.0
+    };
+    (h <= 18.0 && m < 60.0).then_some(sign * (h * 3600.0 + m * 60.0))
+}
+
+/// Days from 1970-01-01 to the date (proleptic Gregorian calendar).
+fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = if y >= 0 { y } else { y - 399 } / 400;
+    let yoe = y - era * 400;
+    let mp = (m as i64 + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d as i64 - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+fn days_in_month(y: i64, m: u32) -> u32 {
+    match m {
+        2 if (y % 4 == 0 && y % 100 != 0) || y % 400 == 0 => 29,
+        2 => 28,
+        4 | 6 | 9 | 11 => 30,
+        _ => 31,
     }
 }
 
@@ -230,6 +379,7 @@ mod tests {
         let err = |t: &str| parse(t).unwrap_err();
         assert!(err("").contains("empty"));
         assert!(err("name,altitude\na.jpg,3\n").contains("no column names the photo's file"));
+        assert!(err("time,altitude\nnoon,3\n").contains("line 2"));
         assert!(err("file,depth\na.jpg,3\n").contains("no altitude column"));
         let e = err("file,altitude\na.jpg,3\nb.jpg,-1\n");
         assert!(
@@ -245,6 +395,56 @@ mod tests {
         );
         assert!(err("file,altitude\n").contains("no rows"));
         assert!(err("file,altitude\n,3\n").contains("line 2"));
+    }
+
+    #[test]
+    fn times_read_as_an_independent_calendar_gives_them() {
+        // Seconds since 1970 UTC from Python's datetime.
+        for (text, want) in [
+            ("2023-06-03T16:27:01Z", 1_685_809_621.0),
+            ("2023-06-03 16:27:01", 1_685_809_621.0),
+            ("2023:06:03 16:27:01", 1_685_809_621.0),
+            ("2023-06-03T16:27:01+02:00", 1_685_802_421.0),
+            ("2023-06-03T16:27:01-0130", 1_685_815_021.0),
+            ("2024-05-06T07:08:09.25Z", 1_714_979_289.25),
+            ("2000-02-29T23:59:59Z", 951_868_799.0),
+            ("1970-01-01T00:00:00Z", 0.0),
+            ("1685809621.5", 1_685_809_621.5),
+        ] {
+            assert_eq!(parse_time(text), Some(want), "{text}");
+        }
+        for bad in [
+            "2023-02-29T00:00:00",
+            "2023-13-01T00:00:00",
+            "2023-06-03T24:00:00",
+            "noon",
+            "2023-06-03",
+        ] {
+            assert_eq!(parse_time(bad), None, "{bad}");
+        }
+        assert_eq!(parse_offset("+05:30"), Some(19_800.0));
+        assert_eq!(parse_offset("5:30"), None);
+    }
+
+    #[test]
+    fn a_log_by_time_interpolates_and_leaves_its_gaps_unknown() {
+        // Rows out of order, at 1 Hz, then a gap of 30 s.
+        let nav =
+            parse("time,depth,altitude\n100,4000,3.0\n99,4000,2.0\n101,4000,5.0\n131,4000,4.0\n")
+                .unwrap();
+        assert!(nav.by_time());
+        assert_eq!(nav.altitude_at(99.0), Some(2.0));
+        assert_eq!(nav.altitude_at(99.25), Some(2.25));
+        assert_eq!(nav.altitude_at(100.5), Some(4.0));
+        assert_eq!(nav.altitude_at(131.0), Some(4.0));
+        assert_eq!(nav.altitude_at(110.0), None, "a gap of 30 s");
+        assert_eq!(nav.altitude_at(98.0), None, "before the log");
+        assert_eq!(nav.altitude_at(132.0), None, "after the log");
+        // Dates with a zone.
+        let nav =
+            parse("Timestamp;Altitude [m]\n2023-06-03T18:27:00+02:00;3\n2023-06-03T16:27:02Z;5\n")
+                .unwrap();
+        assert_eq!(nav.altitude_at(1_685_809_621.0), Some(4.0));
     }
 
     #[test]

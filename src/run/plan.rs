@@ -319,8 +319,9 @@ impl Plan {
                 .filter(|e| nav.altitude_of(&e.path).is_some())
                 .count();
             line(format!(
-                "windows by altitude: {} lists {listed} of the {} survey photos; where a window's altitudes span \
-                 {:.0} % or more of their mean, it is chosen among the photos lit from the nearest heights",
+                "windows by altitude: {} gives the altitude of {listed} of the {} survey photos; where a window's \
+                 altitudes span {:.0} % or more of their mean, it is chosen among the photos lit from the nearest \
+                 heights",
                 nav.path.display(),
                 self.found.photos.len(),
                 100.0 * crate::method::altitude::ALTITUDE_SPAN
@@ -518,23 +519,41 @@ fn navigation(
         .iter()
         .filter(|e| nav.altitude_of(&e.path).is_none())
         .count();
+    let (none, some) = match nav.by_time() {
+        true => (
+            "gives no altitude at the time of any",
+            "gives no altitude at the time of",
+        ),
+        false => ("lists none of the", "does not list"),
+    };
     if !streaming && !photos.is_empty() && unlisted == photos.len() {
+        let first = &photos[0].path;
+        let how = match nav.by_time() {
+            true => match crate::Metadata::read(first).ok().and_then(|m| m.time_taken()) {
+                Some(t) => format!(
+                    "photos are matched by the time in their EXIF, e.g. {} at {t:.0} s since 1970 UTC; the log's \
+                     times must be on the camera's clock",
+                    first.display()
+                ),
+                None => format!(
+                    "photos are matched by the time in their EXIF (DateTimeOriginal), and {} has none",
+                    first.display()
+                ),
+            },
+            false => format!(
+                "photos are matched by file name, e.g. {}",
+                first.file_name().unwrap_or_default().to_string_lossy()
+            ),
+        };
         return Err(Error::Config {
             path: path.to_path_buf(),
-            reason: format!(
-                "none of the {} survey photos is listed (photos are matched by file name, e.g. {})",
-                photos.len(),
-                photos[0]
-                    .path
-                    .file_name()
-                    .unwrap_or_default()
-                    .to_string_lossy()
-            ),
+            reason: format!("{none} {} survey photos ({how})", photos.len()),
         });
     }
     if unlisted > 0 {
         warnings.push(format!(
-            "{}: {unlisted} of {} survey photos are not listed; they keep the window over time and are not chosen              into others' windows",
+            "{}: {some} {unlisted} of the {} survey photos; they keep the window over time and are not chosen \
+             into others' windows",
             path.display(),
             photos.len()
         ));

@@ -215,7 +215,7 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
     let o = run(&["--navigation", s(&nav)]);
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains(s(&nav)) && stderr(&o).contains("none of the 6 survey photos"),
+        stderr(&o).contains(s(&nav)) && stderr(&o).contains("lists none of the 6 survey photos"),
         "{}",
         stderr(&o)
     );
@@ -255,14 +255,14 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("2 of 6 survey photos are not listed"),
+        stderr(&o).contains("does not list 2 of the 6 survey photos"),
         "{}",
         stderr(&o)
     );
     // A dry run says what the log gives.
     let o = run(&["--navigation", s(&nav), "--dry-run"]);
     assert!(
-        stdout(&o).contains("lists 4 of the 6 survey photos"),
+        stdout(&o).contains("gives the altitude of 4 of the 6 survey photos"),
         "{}",
         stdout(&o)
     );
@@ -280,7 +280,7 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
-        stderr(&o).contains("2 of 6 survey photos are not listed"),
+        stderr(&o).contains("does not list 2 of the 6 survey photos"),
         "{}",
         stderr(&o)
     );
@@ -522,4 +522,130 @@ fn a_long_mission_keeps_every_photo_a_window_chooses_among() {
             }
         }
     }
+}
+
+/// A log by time, as a vehicle writes it (no file column, rows at its own rate, times in UTC): each photo's altitude
+/// is read at the time its EXIF gives (`DateTimeOriginal`, `SubSecTimeOriginal`, `OffsetTimeOriginal`), and the
+/// run takes the windows a log by file name gives.
+#[test]
+fn a_log_by_time_reads_each_photo_at_its_exif_time() {
+    use exif::{Field, In, Tag, Value};
+    use std::io::Cursor;
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path().join("dive");
+    let (sim, dive) = dive("s02", (96, 64), &root);
+    // The photos as a camera on local time (UTC+2) writes them: JPEGs taken 2 s apart, the last without EXIF.
+    let survey = d.path().join("jpeg");
+    std::fs::create_dir_all(&survey).unwrap();
+    let names: Vec<String> = dive
+        .truth
+        .poses
+        .iter()
+        .map(|p| p.file.replace(".png", ".jpg"))
+        .collect();
+    let ascii = |s: &str| Value::Ascii(vec![s.as_bytes().to_vec()]);
+    for (i, pose) in dive.truth.poses.iter().enumerate() {
+        let photo = decode(&root.join("survey").join(&pose.file)).unwrap();
+        let abysslight::Samples::U8(rgb) = photo.samples else {
+            panic!("8-bit")
+        };
+        let (s, cs) = (2 * i, 25);
+        let fields = [
+            (
+                Tag::DateTimeOriginal,
+                ascii(&format!("2023:06:03 18:{:02}:{:02}", 27 + s / 60, s % 60)),
+            ),
+            (Tag::SubSecTimeOriginal, ascii(&cs.to_string())),
+            (Tag::OffsetTimeOriginal, ascii("+02:00")),
+        ];
+        let mut w = exif::experimental::Writer::new();
+        let fields: Vec<Field> = fields
+            .into_iter()
+            .map(|(tag, value)| Field {
+                tag,
+                ifd_num: In::PRIMARY,
+                value,
+            })
+            .collect();
+        for f in &fields {
+            w.push_field(f);
+        }
+        let mut blob = Cursor::new(Vec::new());
+        w.write(&mut blob, true).unwrap();
+        let mut out = Vec::new();
+        let mut enc = jpeg_encoder::Encoder::new(&mut out, 95);
+        if i + 1 < names.len() {
+            enc.add_app_segment(1, [&b"Exif\0\0"[..], &blob.into_inner()].concat())
+                .unwrap();
+        }
+        let l = photo.layout;
+        enc.encode(
+            &rgb,
+            l.width as u16,
+            l.height as u16,
+            jpeg_encoder::ColorType::Rgb,
+        )
+        .unwrap();
+        std::fs::write(survey.join(&names[i]), out).unwrap();
+    }
+    // The vehicle's log: UTC, a row half a second before and after each photo at its altitude, newest first.
+    let mut rows = Vec::new();
+    for (i, pose) in dive.truth.poses.iter().enumerate() {
+        for dt in [-0.5, 0.5] {
+            let t = 1_685_809_620.0 + 2.0 * i as f64 + 0.25 + dt;
+            rows.push(format!("{t:.2},4012.5,{:.3}\n", pose.position[2]));
+        }
+    }
+    rows.reverse();
+    let by_time = d.path().join("vehicle.csv");
+    std::fs::write(&by_time, format!("time,depth,altitude\n{}", rows.concat())).unwrap();
+    // The same altitudes by file name, without the photo that has no time.
+    let listed: Vec<String> = names
+        .iter()
+        .zip(&dive.truth.poses)
+        .take(names.len() - 1)
+        .map(|(n, p)| format!("{n},{:.3}\n", p.position[2]))
+        .collect();
+    let by_name = d.path().join("names.csv");
+    std::fs::write(&by_name, format!("file,altitude\n{}", listed.concat())).unwrap();
+
+    let run = |nav: &Path, out: &str| {
+        let out = d.path().join(out);
+        let o = abysslight(&[
+            "correct",
+            "--survey",
+            s(&survey),
+            "--water-column",
+            s(&root.join("water")),
+            "--transfer",
+            &sim.encode.to_string(),
+            "--navigation",
+            s(nav),
+            "--out",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (report(&out), stderr(&o), out)
+    };
+    let (time_report, time_err, time_out) = run(&by_time, "time");
+    let (name_report, _, name_out) = run(&by_name, "name");
+    assert!(
+        time_err.contains("gives no altitude at the time of 1 of the 40 survey photos"),
+        "{time_err}"
+    );
+    assert_eq!(outputs(&time_out), outputs(&name_out));
+    let frames = |r: &serde_json::Value| r["frames"].as_array().unwrap().clone();
+    let (t, n) = (frames(&time_report), frames(&name_report));
+    assert!(t.iter().any(|f| f.get("window_by_altitude").is_some()));
+    for (i, (a, b)) in t.iter().zip(&n).enumerate() {
+        assert_eq!(
+            a["window_by_altitude"], b["window_by_altitude"],
+            "photo {i}"
+        );
+        match (a["altitude"].as_f64(), b["altitude"].as_f64()) {
+            (Some(x), Some(y)) => assert!((x - y).abs() < 1e-3, "photo {i}: {x} {y}"),
+            (x, y) => assert_eq!(x, y, "photo {i}"),
+        }
+    }
+    assert!(t[names.len() - 1].get("altitude").is_none());
 }

@@ -185,6 +185,59 @@ impl Metadata {
         ifd0.get(274)?.uint(order).map(|v| v as u16)
     }
 
+    /// When the photo was taken, in seconds since 1970-01-01 00:00 UTC: EXIF `DateTimeOriginal` (else IFD0's
+    /// `DateTime`) with `SubSecTimeOriginal`, less `OffsetTimeOriginal` where the camera wrote its time zone (a
+    /// time without one is taken as UTC). `None` without such a tag or with one that does not read as a time.
+    pub fn time_taken(&self) -> Option<f64> {
+        const DATE_TIME: u16 = 306;
+        const DATE_TIME_ORIGINAL: u16 = 36867;
+        const OFFSET_TIME_ORIGINAL: u16 = 36881;
+        const SUB_SEC_TIME_ORIGINAL: u16 = 37521;
+        let blob = self.exif.as_deref()?;
+        let mut src: &[u8] = blob;
+        let (order, at) = ifd::read_header(&mut src).ok()?;
+        let wanted = [
+            DATE_TIME,
+            ifd::EXIF_IFD,
+            DATE_TIME_ORIGINAL,
+            OFFSET_TIME_ORIGINAL,
+            SUB_SEC_TIME_ORIGINAL,
+        ];
+        let (ifd0, _) = ifd::read_ifd(
+            &mut src,
+            order,
+            at,
+            &|d, t| d <= 1 && wanted.contains(&t),
+            &mut Vec::new(),
+        )
+        .ok()?;
+        let text = |ifd: &ifd::Ifd, tag: u16| {
+            let v = &ifd.get(tag)?.value;
+            let v = v.split(|&b| b == 0).next().unwrap_or(v);
+            Some(String::from_utf8_lossy(v).trim().to_string())
+        };
+        let exif = ifd0.get(ifd::EXIF_IFD).and_then(|e| e.sub.as_ref());
+        let (time, sub, offset) = match exif.and_then(|e| text(e, DATE_TIME_ORIGINAL)) {
+            Some(t) => {
+                let e = exif?;
+                (
+                    t,
+                    text(e, SUB_SEC_TIME_ORIGINAL),
+                    text(e, OFFSET_TIME_ORIGINAL),
+                )
+            }
+            None => (text(&ifd0, DATE_TIME)?, None, None),
+        };
+        let mut seconds = crate::io::navigation::parse_time(&time)?;
+        if let Some(sub) = sub.filter(|s| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit())) {
+            seconds += format!("0.{sub}").parse::<f64>().ok()?;
+        }
+        if let Some(offset) = offset {
+            seconds -= crate::io::navigation::parse_offset(&offset)?;
+        }
+        Some(seconds)
+    }
+
     /// Put this metadata into `encoded`, a complete file in `format` (JPEG, PNG or TIFF) as abysslight's encoders
     /// write it. Returns the new file and what could not be carried (each a short sentence). Never fails: what
     /// does not fit is left out and reported.
