@@ -182,6 +182,9 @@ pub struct WindowSummary {
     pub shortest: usize,
     /// The longest window a photo of the run used (0: no photo).
     pub longest: usize,
+    /// With a navigation log (`--navigation`): the photos whose window was chosen by altitude (`None`: no log).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub by_altitude: Option<usize>,
 }
 
 impl WindowSummary {
@@ -210,6 +213,7 @@ impl WindowSummary {
             p_half: fixed.map_or(f64::NAN, |w| w.p_half),
             shortest: if longest == 0 { 0 } else { shortest },
             longest,
+            by_altitude: None,
         }
     }
 
@@ -376,6 +380,7 @@ mod report_fallback_tests {
                 p_half: f64::NAN,
                 shortest: 7,
                 longest: 7,
+                by_altitude: None,
             },
             layout: None,
             scatter: ScatterInfo {

@@ -1013,6 +1013,20 @@ fn correct(args: &CorrectArgs) -> Result<ExitCode, Error> {
                 .unwrap_or(Path::new("-"))
                 .display()
         );
+        if let (Some(n), Some(log)) = (report.window.by_altitude, &opts.navigation) {
+            let photos = report.frames.len();
+            eprintln!(
+                "abysslight: windows by altitude ({}): {n} of {photos} photos took theirs among the photos lit from \
+                 the nearest heights{}",
+                log.display(),
+                match photos - n {
+                    0 => String::new(),
+                    _ => "; the others kept the window over time (the altitude spanned less than 15 % of it, or \
+                          was not in the log)"
+                        .into(),
+                }
+            );
+        }
         eprintln!("abysslight: {}", report.monitor.line(report.frames.len()));
         extras::print_flagged(&report, batch_out.as_deref());
         if report.floored_pixels > 0 {

@@ -456,13 +456,23 @@ fn merged_report(shards: &[ShardReport], work: &Path) -> Result<(Value, Vec<Fram
         r["layout"] = layout.clone();
     }
     r["monitor"] = serde_json::to_value(summary_of(&frames_json)).unwrap_or(Value::Null);
-    // The windows the mission's photos used, over every shard.
+    // The windows the mission's photos used, over every shard (a window chosen by altitude: its photos).
     let used: Vec<u64> = frames_json
         .iter()
-        .filter_map(|f| Some(f["window"][1].as_u64()? + 1 - f["window"][0].as_u64()?))
+        .filter_map(|f| match f["window_by_altitude"].as_array() {
+            Some(took) => Some(took.len() as u64),
+            None => Some(f["window"][1].as_u64()? + 1 - f["window"][0].as_u64()?),
+        })
         .collect();
     r["window"]["shortest"] = used.iter().min().copied().unwrap_or(0).into();
     r["window"]["longest"] = used.iter().max().copied().unwrap_or(0).into();
+    if r["window"].get("by_altitude").is_some() {
+        let chosen = frames_json
+            .iter()
+            .filter(|f| f.get("window_by_altitude").is_some())
+            .count();
+        r["window"]["by_altitude"] = chosen.into();
+    }
     r["frames"] = Value::Array(frames_json);
     r["errors"] = Value::Array(errors);
     r["warnings"] = Value::Array(union(shards, "warnings"));

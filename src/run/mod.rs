@@ -218,15 +218,22 @@ fn report_of(
         version: env!("CARGO_PKG_VERSION").into(),
         options: opts.clone(),
         transfer_assumed: before.transfer_assumed,
-        window: WindowSummary::of(
-            params,
-            opts,
-            outcome.frames.iter().map(|f| {
-                f.window_by_altitude
-                    .as_ref()
-                    .map_or(f.window[1] + 1 - f.window[0], Vec::len)
+        window: WindowSummary {
+            by_altitude: opts.navigation.as_ref().map(|_| {
+                (outcome.frames.iter())
+                    .filter(|f| f.window_by_altitude.is_some())
+                    .count()
             }),
-        ),
+            ..WindowSummary::of(
+                params,
+                opts,
+                outcome.frames.iter().map(|f| {
+                    f.window_by_altitude
+                        .as_ref()
+                        .map_or(f.window[1] + 1 - f.window[0], Vec::len)
+                }),
+            )
+        },
         layout: outcome.layout,
         scatter: before.scatter,
         survey_photos: if plan.streaming {

@@ -99,8 +99,20 @@ fn windows_chosen_by_altitude_correct_a_swinging_sledge_better() {
         chosen > sim.frames / 2,
         "{chosen} windows chosen by altitude"
     );
-    // The window lengths the run reports are the lengths the photos used.
-    assert!(r["window"]["longest"].as_u64().unwrap() as usize <= 31);
+    // The window summary: the lengths the photos used, and how many took theirs by altitude.
+    let lengths: Vec<u64> = frames
+        .iter()
+        .map(|f| f["window_auto"]["window"].as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        r["window"]["longest"].as_u64(),
+        lengths.iter().max().copied()
+    );
+    assert_eq!(
+        r["window"]["shortest"].as_u64(),
+        lengths.iter().min().copied()
+    );
+    assert_eq!(r["window"]["by_altitude"].as_u64(), Some(chosen as u64));
 }
 
 #[test]
@@ -185,6 +197,12 @@ fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
     abysslight::merge_shards(&sharded).unwrap();
     assert_eq!(outputs(&batch), outputs(&sharded));
     let merged = report(&sharded);
+    assert_eq!(merged["window"], r["window"], "the window summary");
+    let chosen = frames
+        .iter()
+        .filter(|f| f.get("window_by_altitude").is_some())
+        .count();
+    assert_eq!(r["window"]["by_altitude"].as_u64(), Some(chosen as u64));
     for (a, b) in frames.iter().zip(merged["frames"].as_array().unwrap()) {
         assert_eq!(a["window_by_altitude"], b["window_by_altitude"]);
         assert_eq!(a["window"], b["window"]);
