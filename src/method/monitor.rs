@@ -68,6 +68,8 @@ pub enum Flag {
     FactorChange {
         /// Mean relative change of `F`.
         change: f32,
+        /// With a navigation log: the previous photo's altitude and this one's, metres.
+        altitude: Option<(f32, f32)>,
     },
     /// `F`'s colour balance moved away from what its overall level predicts (seafloor or water colour change).
     ColourShift {
@@ -157,10 +159,28 @@ impl std::fmt::Display for Flag {
                 100.0 * share,
                 if share > 0.5 { "past" } else { "near" }
             ),
-            Flag::FactorChange { change } => write!(
+            Flag::FactorChange {
+                change,
+                altitude: None,
+            } => write!(
                 f,
                 "F changed {:.0} % from the previous photo (altitude or attitude jump, or a seafloor change)",
                 100.0 * change
+            ),
+            Flag::FactorChange {
+                change,
+                altitude: Some((before, now)),
+            } => write!(
+                f,
+                "F changed {:.0} % from the previous photo; the navigation log puts it at {now:.2} m, the previous \
+                 at {before:.2} m ({:+.0} %){}",
+                100.0 * change,
+                100.0 * (now / before - 1.0),
+                if (now / before - 1.0).abs() < 0.03 {
+                    ": hardly an altitude jump (attitude, or a seafloor change)"
+                } else {
+                    ""
+                }
             ),
             Flag::ColourShift { shift } => write!(
                 f,
@@ -1061,7 +1081,10 @@ impl Monitor {
                 *sorted.select_nth_unstable_by(mid, f32::total_cmp).1
             };
             if change > t.factor_change && change > t.factor_change_ratio * typical {
-                h.flags.push(Flag::FactorChange { change });
+                h.flags.push(Flag::FactorChange {
+                    change,
+                    altitude: None,
+                });
             }
             self.changes.push(change);
         }
@@ -1601,6 +1624,27 @@ mod tests {
     }
 
     #[test]
+    fn a_jump_of_f_says_the_altitudes_the_log_gives() {
+        let m = |altitude| {
+            Flag::FactorChange {
+                change: 0.31,
+                altitude,
+            }
+            .to_string()
+        };
+        assert!(m(None).contains("(altitude or attitude jump, or a seafloor change)"));
+        let said = m(Some((3.70, 3.33)));
+        assert!(
+            said.contains("F changed 31 %")
+                && said.contains("3.33 m, the previous at 3.70 m (-10 %)"),
+            "{said}"
+        );
+        assert!(!said.contains("hardly"), "{said}");
+        let level = m(Some((3.0, 3.05)));
+        assert!(level.contains("(+2 %): hardly an altitude jump"), "{level}");
+    }
+
+    #[test]
     fn flags_serialise_as_kind_and_message() {
         let f = Flag::ExposureJump { level: 1.5 };
         let v = serde_json::to_value(f).unwrap();
@@ -1609,7 +1653,10 @@ mod tests {
         assert!(f.to_string().contains("+50 %"), "{f}");
         let all = [
             Flag::Contamination { share: 0.5 },
-            Flag::FactorChange { change: 0.5 },
+            Flag::FactorChange {
+                change: 0.5,
+                altitude: None,
+            },
             Flag::ColourShift { shift: 0.5 },
             Flag::SceneInFactor {
                 roughness: 0.2,

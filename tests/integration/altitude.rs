@@ -667,3 +667,55 @@ fn a_log_by_time_reads_each_photo_at_its_exif_time() {
     }
     assert!(t[names.len() - 1].get("altitude").is_none());
 }
+
+/// With a log, a jump of `F` is said with the altitudes it came with, as the log gives them.
+#[test]
+fn a_jump_of_f_names_the_altitudes_the_log_gives() {
+    let d = tempfile::tempdir().unwrap();
+    let dive = d.path().join("dive");
+    let o = abysslight(&[
+        "simulate",
+        "--out",
+        s(&dive),
+        "--altitude-swing",
+        "1.2",
+        "--frames",
+        "30",
+        "--size",
+        "160x120",
+        "--encode",
+        "srgb",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let log = std::fs::read_to_string(dive.join("navigation.csv")).unwrap();
+    let altitude: Vec<f64> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    let out = d.path().join("out");
+    let o = correct_dive(
+        &dive,
+        s(&out),
+        &["--navigation", s(&dive.join("navigation.csv"))],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut said = 0;
+    for f in report(&out)["frames"].as_array().unwrap() {
+        let i = f["index"].as_u64().unwrap() as usize;
+        for flag in f["health"]["flags"].as_array().unwrap() {
+            if flag["kind"] != "factor-change" {
+                continue;
+            }
+            let m = flag["message"].as_str().unwrap();
+            let want = format!(
+                "puts it at {:.2} m, the previous at {:.2} m",
+                altitude[i],
+                altitude[i - 1]
+            );
+            assert!(m.contains(&want), "photo {i}: {m} ({want})");
+            said += 1;
+        }
+    }
+    assert!(said > 0, "no jump of F on a swinging dive");
+}

@@ -90,7 +90,8 @@ impl<T> Engine<T> {
     }
 
     /// The flags only the stream knows: a window short of independent samples, a mission shorter than the window
-    /// given; and no advice of a window longer than the photos the mission is known to hold.
+    /// given; no advice of a window longer than the photos the mission is known to hold; and with altitudes, those
+    /// a jump of `F` came with.
     fn flags_of_the_stream(&self, i: usize, eof: bool, health: &mut Health) {
         let (photos, n) = (self.ring.pushed(), self.window_of(i));
         let holds = if photos.is_multiple_of(2) {
@@ -98,9 +99,15 @@ impl<T> Engine<T> {
         } else {
             photos
         };
+        let altitude_of = |j: usize| self.ring.get(j).and_then(|e| e.altitude);
         for f in &mut health.flags {
-            if let Flag::StructureAdded { longer, .. } = f {
-                *longer = longer.filter(|&m| m <= holds);
+            match f {
+                Flag::StructureAdded { longer, .. } => *longer = longer.filter(|&m| m <= holds),
+                // With a navigation log, the altitudes the jump of `F` came with.
+                Flag::FactorChange { altitude, .. } => {
+                    *altitude = i.checked_sub(1).and_then(altitude_of).zip(altitude_of(i))
+                }
+                _ => {}
             }
         }
         match self.choice(i) {
