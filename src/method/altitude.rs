@@ -31,6 +31,15 @@ pub fn pool_length(n: usize) -> usize {
     2 * n + 1
 }
 
+/// The photos a window of `n` is chosen among, and so the reach a photo waits for and a shard reads: the window,
+/// or where windows are chosen by altitude, its pool ([`pool_length`]).
+pub fn waits_for(n: usize, by_altitude: bool) -> usize {
+    match by_altitude {
+        true => pool_length(n),
+        false => n,
+    }
+}
+
 /// The share of their mean altitude that `altitudes` span (`max − min` over the mean); `None` when one is unknown
 /// or the mean is not positive.
 pub fn span(altitudes: impl IntoIterator<Item = Option<f32>>) -> Option<f64> {

@@ -36,7 +36,7 @@ pub(crate) struct Window<'a> {
     /// The photo's number in the mission.
     pub i: usize,
     /// The photos of its window, in order (contiguous unless chosen by altitude: [`crate::method::altitude`]).
-    pub members: Vec<usize>,
+    pub members: &'a [usize],
     /// What the engine kept of them, in order.
     pub seen: Vec<&'a Seen>,
     /// The photo's own.

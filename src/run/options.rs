@@ -145,8 +145,8 @@ pub struct Options {
     /// Find pixels that stay the same throughout the mission (overlays, lasers) and treat them as masked; the mask
     /// found is written to `_abysslight/mask-auto.png`. Default: false.
     pub mask_auto: bool,
-    /// A navigation log (CSV) of each photo's altitude above the seafloor, matched by file name
-    /// (`io::navigation`): where the altitude swings along the track, each photo's window is chosen among the
+    /// A navigation log (CSV) of each photo's altitude above the seafloor, matched by file name or by the photo's
+    /// EXIF time (`io::navigation`): where the altitude swings along the track, each photo's window is chosen among the
     /// photos around it lit from the nearest heights (`method::altitude`). `method = abyss` only. Default: none.
     pub navigation: Option<PathBuf>,
     /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
@@ -412,10 +412,10 @@ impl Options {
             params.window_length()
         };
         // With a navigation log a window is chosen among the photos around the photo (`method::altitude`).
-        Ok(match self.navigation.is_some() {
-            true => crate::method::altitude::pool_length(n),
-            false => n,
-        })
+        Ok(crate::method::altitude::waits_for(
+            n,
+            self.navigation.is_some(),
+        ))
     }
 
     /// Check values that do not depend on the file system.
@@ -464,7 +464,9 @@ impl Options {
         if self.navigation.is_some() {
             if stdin {
                 return usage(
-                    "--navigation matches photos by file name; frames on stdin (--survey -) have none".into(),
+                    "--navigation matches photos by file name or EXIF time; frames on stdin (--survey -) have \
+                     neither"
+                        .into(),
                 );
             }
             if self.method != Method::Abyss {

@@ -141,7 +141,7 @@ impl<T> Engine<T> {
     }
 
     /// Photo `i`'s window over the photos `members` ([`Engine::members`]), as the chain's steps read it.
-    fn window(&self, i: usize, members: &[usize]) -> chain::Window<'_> {
+    fn window<'a>(&'a self, i: usize, members: &'a [usize]) -> chain::Window<'a> {
         let seen: Vec<&Seen> = members
             .iter()
             .map(|&j| {
@@ -152,7 +152,7 @@ impl<T> Engine<T> {
             .collect();
         chain::Window {
             i,
-            members: members.to_vec(),
+            members,
             seen,
             own: self.own(i),
             s_low: self.scatter_low.as_ref(),

@@ -32,6 +32,7 @@ use lasers::Lasers;
 pub(crate) use lasers::LASER_PHOTOS;
 
 use crate::error::{Error, Result};
+use crate::method::altitude::waits_for;
 use crate::method::baseline::Method;
 use crate::method::blocks::{linear_block_medians, masked_blocks, median_linear_table};
 use crate::method::chain::Seen;
@@ -279,10 +280,7 @@ impl<T> Engine<T> {
             (_, true) => crate::method::stretch::MAX_AUTO_WINDOW,
             _ => self.params.window_length(),
         };
-        let longest = match self.by_altitude {
-            true => crate::method::altitude::pool_length(longest),
-            false => longest,
-        };
+        let longest = waits_for(longest, self.by_altitude);
         match &self.survey {
             Some(s) if !s.finished() => longest.max(FIRST_DECIDED + 1),
             _ => longest,
@@ -553,16 +551,14 @@ impl<T> Engine<T> {
                 break;
             }
             let (survey, window) = (&self.survey, self.params.window_length());
-            let pool = |n: usize| match self.by_altitude {
-                true => crate::method::altitude::pool_length(n),
-                false => n,
-            };
+            let by_altitude = self.by_altitude;
             let ready = self.ring.next_ready_by(eof, |i| {
-                pool(
+                waits_for(
                     survey
                         .as_ref()
                         .and_then(|s| s.choice(i))
                         .map_or(window, |c| c.window),
+                    by_altitude,
                 )
             });
             let Some((i, w, range)) = ready else { break };
