@@ -15,4 +15,4 @@ pub(crate) mod overlaps;
 pub(crate) mod quantile;
 pub(crate) mod scatter_scale;
 
-pub(crate) use crate::method::chain::Window;
+pub(crate) use crate::method::seen::Window;
