@@ -10,7 +10,6 @@ use crate::method::factor::factor_filled;
 use crate::method::median::stack_median;
 use crate::method::params::Params;
 use crate::method::raster::{Photo, Raster};
-use crate::method::refine::scaled;
 use crate::method::seen::Window;
 use crate::method::steps::levelling::LEVEL_MIN_WINDOW;
 use crate::method::steps::{
@@ -50,7 +49,7 @@ pub(crate) fn abyss(w: &Window, photo: Option<&Photo>) -> Estimate {
     let m = near_window::shape(w, window_m.clone(), levelled);
     let m = overlaps::shape(w, m);
     let scale = scatter_scale::of(w, &m);
-    let s_k = w.s_low.map(|s| scaled(s, &scale));
+    let s_k = w.s_low.map(|s| scatter_scale::scaled(s, &scale));
     let rescaled = scale.iter().any(|&v| v != 1.0);
     let mut f = w.factor(&m, if rescaled { s_k.as_ref() } else { w.s_low });
     gain::apply(w, &mut f, &m, s_k.as_ref());

@@ -559,6 +559,16 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
     out
 }
 
+/// The value at quantile `q` (0..=1, by nearest rank: no mean of two middle values here) of `v` (reordered in
+/// place, by selection: linear time); NaN for an empty slice.
+pub fn quantile(v: &mut [f32], q: f64) -> f32 {
+    if v.is_empty() {
+        return f32::NAN;
+    }
+    let i = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    *v.select_nth_unstable_by(i, f32::total_cmp).1
+}
+
 #[cfg(test)]
 pub(crate) mod reference {
     //! Brute-force twins of the kernels above, written to be obviously right.
@@ -617,6 +627,18 @@ pub(crate) mod reference {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn quantile_nearest_rank() {
+        let mut v = vec![5.0, 1.0, 4.0, 2.0, 3.0];
+        assert_eq!(quantile(&mut v, 0.5), 3.0);
+        assert_eq!(quantile(&mut v, 0.0), 1.0);
+        assert_eq!(quantile(&mut v, 1.0), 5.0);
+        // 21 values 0..=20: the 95th percentile by nearest rank is index round(20·0.95) = 19.
+        let mut w: Vec<f32> = (0..=20).rev().map(|x| x as f32).collect();
+        assert_eq!(quantile(&mut w, 0.95), 19.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+    }
 
     #[test]
     fn nan_and_negative_zero_are_found_as_by_their_predicates() {

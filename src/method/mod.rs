@@ -37,7 +37,6 @@ pub mod outliers;
 pub mod overlap;
 pub mod params;
 pub mod raster;
-pub mod refine;
 pub(crate) mod ring;
 pub(crate) mod running;
 pub mod scatter;

@@ -19,8 +19,8 @@
 
 use rayon::prelude::*;
 
+use crate::method::median::quantile;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
-use crate::method::refine::quantile;
 use crate::method::transfer::Curve;
 
 /// Sensor noise and albedo texture of one photo, per channel, in linear light.

@@ -4,7 +4,7 @@
 use crate::method::correct::NEGLIGIBLE_BLEND;
 use crate::method::noise::{block_stats, Blended, NoiseModel};
 use crate::method::raster::{Photo, Raster};
-use crate::method::steps::Window;
+use crate::method::seen::Window;
 
 /// The noise and texture measured on the photo (with `denoise`), against its `F`.
 pub(crate) fn noise(w: &Window, photo: Option<&Photo>, f: &Raster) -> Option<NoiseModel> {

@@ -3,7 +3,7 @@
 
 use crate::method::noise::{level_by_light, Blended};
 use crate::method::raster::Raster;
-use crate::method::steps::Window;
+use crate::method::seen::Window;
 
 /// The blend's levels evened out by light, where the step is on and there is a blend.
 pub(crate) fn even(w: &Window, blended: Option<&mut Blended>, f: &Raster) {
