@@ -6,9 +6,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::factor::{lerp_rows, taps, Tap};
-use crate::method::noise::{Blended, LEVEL_MIN};
 use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
+use crate::method::steps::blend::{Blended, LEVEL_MIN, NEGLIGIBLE_BLEND};
 use crate::method::transfer::Curve;
 use crate::simd::Avx2;
 
@@ -70,7 +70,7 @@ pub fn correct_in_place<T: Sample>(
 /// What `--method abyss` adds to the correction: `S` scaled per channel, and the noise-aware blend of dim regions.
 #[derive(Debug, Clone, Copy)]
 pub struct Blend<'a> {
-    /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`crate::method::noise::Blended`]);
+    /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`Blended`]);
     /// `None`: no blend, `A = (I − k·S)/F`.
     pub fields: Option<&'a Blended>,
     /// `k`: the scale of `S`, one per channel (`backscatter_scale`).
@@ -464,10 +464,6 @@ fn correct_row<T: Sample>(
     }
     clipped as u64
 }
-
-/// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
-/// most 0.1 % of a pixel's detail).
-pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
 
 /// What a row with a [`Blend`] reads: the taps along x, the two block rows and the weight between them, the blend,
 /// the channel count, the floor of `F`, the row of `S` and the curve.
@@ -1000,7 +996,7 @@ mod tests {
 
     #[test]
     fn blend_correction_matches_unfused_reference() {
-        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // A = w·Â + (1 − w)·A_low·r per pixel (blend::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
         // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
         let (layout, k, low, scatter) = reference_frame(0.03);
         let fields = reference_fields();

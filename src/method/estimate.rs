@@ -1,9 +1,9 @@
 //! What corrects one photo ([`Estimate`]): its window's `M` and `F` and how `F` is applied, as a recipe of
 //! [`crate::method::chain`] gives it to the [`Engine`](crate::method::engine::Engine).
 
-use crate::method::noise::{Blended, NoiseModel};
 use crate::method::raster::Raster;
 use crate::method::seen::Window;
+use crate::method::steps::blend::{Blended, NoiseModel};
 
 /// What corrects one photo: its window's `M` and `F`, and how `F` is applied.
 pub(crate) struct Estimate {

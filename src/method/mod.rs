@@ -32,7 +32,6 @@ pub mod mask;
 pub mod matching;
 pub mod median;
 pub mod monitor;
-pub mod noise;
 pub mod outliers;
 pub mod overlap;
 pub mod params;

@@ -38,7 +38,6 @@ use crate::method::blocks::{linear_block_medians, masked_blocks, median_linear_t
 use crate::method::correct::CorrectStats;
 use crate::method::mask::Mask;
 use crate::method::monitor::{pool_factor, pooled, Health, Monitor, Thresholds};
-use crate::method::noise::NoiseModel;
 use crate::method::outliers::{bright_spots, SpotPath};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
@@ -46,6 +45,7 @@ use crate::method::raster::{Layout, Photo, Raster};
 use crate::method::ring::Ring;
 use crate::method::scatter::{for_the_engine, Prepared, Scatter};
 use crate::method::seen::Seen;
+use crate::method::steps::blend::NoiseModel;
 use crate::method::stretch::Choice;
 use crate::method::survey::{Survey, FIRST_DECIDED};
 use crate::method::transfer::Curve;
