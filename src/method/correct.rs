@@ -290,36 +290,16 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
             }
             let taps: &[Tap; 8] = tx[x..x + 8].try_into().unwrap();
             let out: &mut [f32; N] = (&mut fx[x * C..x * C + N]).try_into().unwrap();
-            let mut any_low = false;
-            if let Some((t, tq)) = tq.map(|(t, tq)| (t, &tq[x * C..x * C + N])) {
+            let any_low = if let Some((t, tq)) = tq.map(|(t, tq)| (t, &tq[x * C..x * C + N])) {
                 #[cfg(target_arch = "x86_64")]
                 {
-                    any_low = avx2::expand_group::<C>(t, a, b, tq, out, floor);
+                    avx2::expand_group::<C>(t, a, b, tq, out, floor)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 match (t, tq).0 {}
-            } else if BY_PIXEL {
-                // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler
-                // kept the `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain
-                // row the flat loop is the faster (`cargo bench --bench kernels`).
-                for (p, tp) in taps.iter().enumerate() {
-                    for ch in 0..C {
-                        let f = av[ch] + dv[ch] * tp.t;
-                        // `f < floor || f.is_nan()`
-                        let low = !(f >= floor);
-                        out[p * C + ch] = if low { floor } else { f };
-                        any_low |= low;
-                    }
-                }
             } else {
-                for q in 0..N {
-                    let f = av[q % C] + dv[q % C] * taps[q / C].t;
-                    // `f < floor || f.is_nan()`
-                    let low = !(f >= floor);
-                    out[q] = if low { floor } else { f };
-                    any_low |= low;
-                }
-            }
+                expand_group::<C, N, BY_PIXEL>(&av, &dv, taps, out, floor)
+            };
             if any_low {
                 // Rare (dark corners): count the floored pixels of the group again, one by one.
                 for tp in taps {
@@ -346,6 +326,44 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
         x += 1;
     }
     floored_pixels
+}
+
+/// One group of [`expand_f`] without AVX2: the 8 pixels of `taps` between the same two block centres, `a + d·t` per
+/// channel (`av`, `dv`), floored, into `out`; whether any sample was floored.
+#[inline(always)]
+// `!(f >= floor)` on purpose: true for NaN too, in one comparison.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn expand_group<const C: usize, const N: usize, const BY_PIXEL: bool>(
+    av: &[f32; C],
+    dv: &[f32; C],
+    taps: &[Tap; 8],
+    out: &mut [f32; N],
+    floor: f32,
+) -> bool {
+    let mut any_low = false;
+    if BY_PIXEL {
+        // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler kept the
+        // `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain row the flat
+        // loop is the faster (`cargo bench --bench kernels`).
+        for (p, tp) in taps.iter().enumerate() {
+            for ch in 0..C {
+                let f = av[ch] + dv[ch] * tp.t;
+                // `f < floor || f.is_nan()`
+                let low = !(f >= floor);
+                out[p * C + ch] = if low { floor } else { f };
+                any_low |= low;
+            }
+        }
+    } else {
+        for q in 0..N {
+            let f = av[q % C] + dv[q % C] * taps[q / C].t;
+            // `f < floor || f.is_nan()`
+            let low = !(f >= floor);
+            out[q] = if low { floor } else { f };
+            any_low |= low;
+        }
+    }
+    any_low
 }
 
 /// [`expand_f`] for 3 and 1 channels, [`expand_f_dyn`] otherwise (inlined, so that it is compiled for the
