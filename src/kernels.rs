@@ -16,7 +16,7 @@
 pub use crate::method::correct::{correct_in_place, correct_with_offset, Blend, CorrectStats};
 pub use crate::method::factor::{auto_block, factor, upsample};
 pub use crate::method::median::{block_median, stack_median, stack_quantile};
-pub use crate::method::noise::Blended;
 pub use crate::method::scatter::Prepared;
+pub use crate::method::steps::blend::Blended;
 pub use crate::method::transfer::Curve;
 pub use crate::method::window::near_window;

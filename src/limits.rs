@@ -2,13 +2,13 @@
 //! Each is far above any real use and far below what would overflow a size computation or a `Duration`.
 
 /// `--window` (also the largest window `--contamination` may choose).
-pub const WINDOW: usize = crate::method::window::MAX_WINDOW;
+pub const WINDOW: usize = 1001;
 /// `--downsample` block size K.
-pub const DOWNSAMPLE: usize = crate::method::params::MAX_DOWNSAMPLE;
+pub const DOWNSAMPLE: usize = 1024;
 /// `--threads`.
 pub const THREADS: usize = 1024;
 /// `--degree` of `--method polynomial`.
-pub const DEGREE: usize = crate::method::params::MAX_DEGREE;
+pub const DEGREE: usize = 8;
 /// `--idle-timeout`, seconds (a year).
 pub const IDLE_TIMEOUT_S: f64 = 365.0 * 24.0 * 3600.0;
 /// `--poll-interval`, milliseconds (an hour).

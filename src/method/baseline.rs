@@ -22,7 +22,7 @@ use crate::method::raster::Raster;
 pub enum Method {
     /// The default: the paper's sliding-window `F`, then per photo a robust gain against its window, a floor
     /// relative to the photo's lit level with a smooth hand-over, and `S` scaled by a factor estimated from the
-    /// mission (see `refine`).
+    /// mission (the steps of `chain::abyss`, one file each in `method/steps/`).
     #[default]
     Abyss,
     /// Köser et al. as published: temporal median over a sliding window of block medians, `F = (M − S)/C`,

@@ -1,117 +1,21 @@
 //! The estimate of one photo's `F` from its window, as a chain of steps in the order they run: the paper's
 //! ([`paper`]), the baselines it compares with ([`baseline`]) and the default's ([`abyss`], whose steps are in
 //! [`crate::method::steps`], one file each). The [`Engine`](crate::method::engine::Engine) keeps the stream (the
-//! ring of block images, the photos waiting, the survey) and gives each photo's [`Window`] to one of them.
+//! ring of block images, the photos waiting, the survey) and gives each photo's [`Window`] to one of them; each
+//! gives the photo's [`Estimate`].
 
 use crate::method::baseline::{polynomial_m, Method};
+use crate::method::estimate::Estimate;
 use crate::method::factor::factor_filled;
 use crate::method::median::stack_median;
-use crate::method::noise::{Blended, NoiseModel};
 use crate::method::params::Params;
 use crate::method::raster::{Photo, Raster};
-use crate::method::refine::scaled;
+use crate::method::seen::Window;
 use crate::method::steps::levelling::LEVEL_MIN_WINDOW;
 use crate::method::steps::{
     blend, bright_spots, floor, gain, levelling, levels_by_light, near_window, overlaps, quantile,
     scatter_scale,
 };
-use crate::method::transfer::Curve;
-
-/// What the engine keeps of a photo it has seen, for the windows of the photos around it.
-pub(crate) struct Seen {
-    /// Its block medians, in linear light.
-    pub low: Raster,
-    /// The same pooled for the monitor (when the blocks are smaller than 8 pixels).
-    pub judged: Option<Raster>,
-    /// With `--bright-spots`, when it had any: its blocks of bright spots ([`crate::method::outliers`]).
-    pub spots: Option<Vec<bool>>,
-    /// With `steps.overlaps`: the shift of the ground from the photo before, in blocks (`None`: no match).
-    pub step: Option<(f64, f64)>,
-    /// The photo's altitude, where known ([`crate::method::altitude`]).
-    pub altitude: Option<f32>,
-}
-
-/// One photo's window, as the steps read it.
-pub(crate) struct Window<'a> {
-    /// The photo's number in the mission.
-    pub i: usize,
-    /// The photos of its window, in order (contiguous unless chosen by altitude: [`crate::method::altitude`]).
-    pub members: &'a [usize],
-    /// What the engine kept of them, in order.
-    pub seen: Vec<&'a Seen>,
-    /// The photo's own.
-    pub own: &'a Seen,
-    /// `S` at block resolution, linear light.
-    pub s_low: Option<&'a Raster>,
-    /// `C`, linear light, per channel.
-    pub colour: &'a [f32],
-    /// The method's parameters (resolved).
-    pub params: &'a Params,
-    /// The quantile the window's `M` takes.
-    pub quantile: f32,
-    /// The near window (`None`: off).
-    pub near: Option<usize>,
-    /// The quantile of the per-photo gain (the window's, where the survey chose it; else the median).
-    pub gain_quantile: f64,
-    /// A mask left blocks without samples (filled in `F`).
-    pub masked: bool,
-    /// One flag per block: near a masked pixel (no blend there).
-    pub masked_blocks: Option<&'a [bool]>,
-    /// `M` of [`Method::Mean`].
-    pub mission_mean: Option<&'a Raster>,
-    /// The transfer tables of 8- and 16-bit photos.
-    pub curves: (&'a Curve, &'a Curve),
-}
-
-impl Window<'_> {
-    /// The block images of the window's photos, in order.
-    pub fn stack(&self) -> Vec<&Raster> {
-        self.seen.iter().map(|e| &e.low).collect()
-    }
-
-    /// The window was chosen for a dense field (its quantile above the median).
-    pub fn dense(&self) -> bool {
-        self.gain_quantile > 0.5
-    }
-
-    /// `F = (M − S)/C`, with the blocks a mask left without samples filled from their neighbours.
-    pub fn factor(&self, m: &Raster, s: Option<&Raster>) -> Raster {
-        factor_filled(m, s, self.colour, self.masked)
-    }
-}
-
-/// What corrects one photo: its window's `M` and `F`, and how `F` is applied.
-pub(crate) struct Estimate {
-    /// The window's `M` (before the steps that bend it: what the monitor judges).
-    pub window_m: Raster,
-    /// `F` at block resolution.
-    pub f: Raster,
-    /// The smallest `F` a pixel is divided by.
-    pub floor: f32,
-    /// The scale of `S` per channel (empty: none).
-    pub scale: Vec<f32>,
-    /// The noise and texture measured on the photo.
-    pub noise: Option<NoiseModel>,
-    /// The blend of dim regions.
-    pub blended: Option<Blended>,
-    /// Correct with the blend and the scale of `S` (else the plain `(I − S)/F`).
-    pub use_blend: bool,
-}
-
-impl Estimate {
-    /// `F` of `m` applied plainly with the absolute floor (the paper and the baselines).
-    fn plain(w: &Window, m: Raster) -> Self {
-        Estimate {
-            f: w.factor(&m, w.s_low),
-            window_m: m,
-            floor: w.params.factor_floor,
-            scale: Vec::new(),
-            noise: None,
-            blended: None,
-            use_blend: false,
-        }
-    }
-}
 
 /// The paper's estimate (Köser et al.): `M`, the per-block median over the window's photos, and `F = (M − S)/C`.
 pub(crate) fn paper(w: &Window) -> Estimate {
@@ -145,7 +49,7 @@ pub(crate) fn abyss(w: &Window, photo: Option<&Photo>) -> Estimate {
     let m = near_window::shape(w, window_m.clone(), levelled);
     let m = overlaps::shape(w, m);
     let scale = scatter_scale::of(w, &m);
-    let s_k = w.s_low.map(|s| scaled(s, &scale));
+    let s_k = w.s_low.map(|s| scatter_scale::scaled(s, &scale));
     let rescaled = scale.iter().any(|&v| v != 1.0);
     let mut f = w.factor(&m, if rescaled { s_k.as_ref() } else { w.s_low });
     gain::apply(w, &mut f, &m, s_k.as_ref());
@@ -189,7 +93,7 @@ pub(crate) fn window_m(
 }
 
 /// The monitor's `F` and `F·C` of the photo of `w` from its window's block images pooled to about 8 pixels (the
-/// monitor's thresholds were set there; [`Seen::judged`]), with `S` and the mission's mean pooled alike (`fixed`);
+/// monitor's thresholds were set there; [`crate::method::seen::Seen::judged`]), with `S` and the mission's mean pooled alike (`fixed`);
 /// `None` where the blocks are not pooled.
 pub(crate) fn pooled(
     w: &Window,

@@ -6,9 +6,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::factor::{lerp_rows, taps, Tap};
-use crate::method::noise::{Blended, LEVEL_MIN};
 use crate::method::raster::{Layout, Raster, Sample};
 use crate::method::scatter::Prepared;
+use crate::method::steps::blend::{Blended, LEVEL_MIN, NEGLIGIBLE_BLEND};
 use crate::method::transfer::Curve;
 use crate::simd::Avx2;
 
@@ -70,7 +70,7 @@ pub fn correct_in_place<T: Sample>(
 /// What `--method abyss` adds to the correction: `S` scaled per channel, and the noise-aware blend of dim regions.
 #[derive(Debug, Clone, Copy)]
 pub struct Blend<'a> {
-    /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`crate::method::noise::Blended`]);
+    /// The blend's fields at block resolution, upsampled bilinearly like `F` ([`Blended`]);
     /// `None`: no blend, `A = (I − k·S)/F`.
     pub fields: Option<&'a Blended>,
     /// `k`: the scale of `S`, one per channel (`backscatter_scale`).
@@ -290,36 +290,16 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
             }
             let taps: &[Tap; 8] = tx[x..x + 8].try_into().unwrap();
             let out: &mut [f32; N] = (&mut fx[x * C..x * C + N]).try_into().unwrap();
-            let mut any_low = false;
-            if let Some((t, tq)) = tq.map(|(t, tq)| (t, &tq[x * C..x * C + N])) {
+            let any_low = if let Some((t, tq)) = tq.map(|(t, tq)| (t, &tq[x * C..x * C + N])) {
                 #[cfg(target_arch = "x86_64")]
                 {
-                    any_low = avx2::expand_group::<C>(t, a, b, tq, out, floor);
+                    avx2::expand_group::<C>(t, a, b, tq, out, floor)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 match (t, tq).0 {}
-            } else if BY_PIXEL {
-                // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler
-                // kept the `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain
-                // row the flat loop is the faster (`cargo bench --bench kernels`).
-                for (p, tp) in taps.iter().enumerate() {
-                    for ch in 0..C {
-                        let f = av[ch] + dv[ch] * tp.t;
-                        // `f < floor || f.is_nan()`
-                        let low = !(f >= floor);
-                        out[p * C + ch] = if low { floor } else { f };
-                        any_low |= low;
-                    }
-                }
             } else {
-                for q in 0..N {
-                    let f = av[q % C] + dv[q % C] * taps[q / C].t;
-                    // `f < floor || f.is_nan()`
-                    let low = !(f >= floor);
-                    out[q] = if low { floor } else { f };
-                    any_low |= low;
-                }
-            }
+                expand_group::<C, N, BY_PIXEL>(&av, &dv, taps, out, floor)
+            };
             if any_low {
                 // Rare (dark corners): count the floored pixels of the group again, one by one.
                 for tp in taps {
@@ -346,6 +326,44 @@ fn expand_f<const C: usize, const N: usize, const BY_PIXEL: bool>(
         x += 1;
     }
     floored_pixels
+}
+
+/// One group of [`expand_f`] without AVX2: the 8 pixels of `taps` between the same two block centres, `a + d·t` per
+/// channel (`av`, `dv`), floored, into `out`; whether any sample was floored.
+#[inline(always)]
+// `!(f >= floor)` on purpose: true for NaN too, in one comparison.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn expand_group<const C: usize, const N: usize, const BY_PIXEL: bool>(
+    av: &[f32; C],
+    dv: &[f32; C],
+    taps: &[Tap; 8],
+    out: &mut [f32; N],
+    floor: f32,
+) -> bool {
+    let mut any_low = false;
+    if BY_PIXEL {
+        // Pixel by pixel, channel by channel (the same values as below): in the blend's row the compiler kept the
+        // `q % C`, `q / C` index arithmetic of the flat loop, at three times the cost; in the plain row the flat
+        // loop is the faster (`cargo bench --bench kernels`).
+        for (p, tp) in taps.iter().enumerate() {
+            for ch in 0..C {
+                let f = av[ch] + dv[ch] * tp.t;
+                // `f < floor || f.is_nan()`
+                let low = !(f >= floor);
+                out[p * C + ch] = if low { floor } else { f };
+                any_low |= low;
+            }
+        }
+    } else {
+        for q in 0..N {
+            let f = av[q % C] + dv[q % C] * taps[q / C].t;
+            // `f < floor || f.is_nan()`
+            let low = !(f >= floor);
+            out[q] = if low { floor } else { f };
+            any_low |= low;
+        }
+    }
+    any_low
 }
 
 /// [`expand_f`] for 3 and 1 channels, [`expand_f_dyn`] otherwise (inlined, so that it is compiled for the
@@ -464,10 +482,6 @@ fn correct_row<T: Sample>(
     }
     clipped as u64
 }
-
-/// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
-/// most 0.1 % of a pixel's detail).
-pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
 
 /// What a row with a [`Blend`] reads: the taps along x, the two block rows and the weight between them, the blend,
 /// the channel count, the floor of `F`, the row of `S` and the curve.
@@ -1000,7 +1014,7 @@ mod tests {
 
     #[test]
     fn blend_correction_matches_unfused_reference() {
-        // A = w·Â + (1 − w)·A_low·r per pixel (noise::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
+        // A = w·Â + (1 − w)·A_low·r per pixel (blend::Blended), Â = (I − k·S)/max(F, floor), with F, A_low and
         // w upsampled first to full size, in f64: for linear 16-bit codes and sRGB 8-bit codes.
         let (layout, k, low, scatter) = reference_frame(0.03);
         let fields = reference_fields();

@@ -222,7 +222,6 @@ pub fn block_median<T: Sample>(
         return out;
     }
     let (scale, kk) = (1.0 / T::MAX, k * k);
-    let row_len = width * channels;
     let net = if kk <= NETWORK_MAX && !unrolled::handles(kk) {
         prune_network(&sorting_network(kk), &median_positions(kk))
     } else {
@@ -237,6 +236,13 @@ pub fn block_median<T: Sample>(
             let y0 = by * k;
             let y1 = (y0 + k).min(height);
             let first_scalar = if y1 - y0 == k { full_bx } else { 0 };
+            let band = Band {
+                samples,
+                width,
+                channels,
+                k,
+                rows: y0..y1,
+            };
             if first_scalar > 0 {
                 let total = first_scalar * channels;
                 // Whole blocks per chunk (lanes a multiple of the channel count), so the gather copies pixels, and
@@ -252,24 +258,7 @@ pub fn block_median<T: Sample>(
                 while lane0 < total {
                     let lanes = chunk_lanes.min(total - lane0);
                     let v = &mut v[..kk * lanes];
-                    // Gather: element e = dy·k + dx of lane (bx, ch).
-                    let rows =
-                        (0..k).map(|dy| &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]);
-                    let rgb8 = (k == 8 && channels == 3)
-                        .then(|| T::as_bytes(samples).zip(T::as_bytes_mut(v)))
-                        .flatten();
-                    if let Some((bytes, vb)) = rgb8 {
-                        let rows: [&[u8]; 8] = std::array::from_fn(|dy| {
-                            &bytes[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]
-                        });
-                        gather_rgb8_k8(&rows, vb, lanes, lane0);
-                    } else {
-                        match channels {
-                            3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lanes, lane0),
-                            1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lanes, lane0),
-                            _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
-                        }
-                    }
+                    gather_lanes(&band, v, lanes, lane0);
                     if !unrolled::middle_values(v, kk, lanes) {
                         apply_network(&net, v, lanes);
                     }
@@ -277,16 +266,31 @@ pub fn block_median<T: Sample>(
                     lane0 += lanes;
                 }
             }
-            let band = Band {
-                samples,
-                width,
-                channels,
-                k,
-                rows: y0..y1,
-            };
             selected_medians(&band, first_scalar..bw, scale, out_row);
         });
     out
+}
+
+/// The samples of `lanes` lanes of the complete blocks of `band` (a complete block row) from lane `lane0` on, into
+/// `v`: element `e = dy·k + dx` of lane `(bx, ch)`.
+fn gather_lanes<T: Sample>(band: &Band<T>, v: &mut [T], lanes: usize, lane0: usize) {
+    let (samples, k, channels, y0) = (band.samples, band.k, band.channels, band.rows.start);
+    let row_len = band.width * channels;
+    let rows = (0..k).map(|dy| &samples[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]);
+    let rgb8 = (k == 8 && channels == 3)
+        .then(|| T::as_bytes(samples).zip(T::as_bytes_mut(v)))
+        .flatten();
+    if let Some((bytes, vb)) = rgb8 {
+        let rows: [&[u8]; 8] =
+            std::array::from_fn(|dy| &bytes[(y0 + dy) * row_len..(y0 + dy + 1) * row_len]);
+        gather_rgb8_k8(&rows, vb, lanes, lane0);
+    } else {
+        match channels {
+            3 => gather_blocks::<T, 3, 4>(rows, v, k, lanes, lanes, lane0),
+            1 => gather_blocks::<T, 1, 2>(rows, v, k, lanes, lanes, lane0),
+            _ => gather_blocks_dyn(rows, v, k, lanes, lane0, channels),
+        }
+    }
 }
 
 /// A band of block rows `rows` of a photo of `width` pixels of `channels` samples, in blocks of `k`.
@@ -559,6 +563,16 @@ pub fn stack_median(frames: &[&Raster]) -> Raster {
     out
 }
 
+/// The value at quantile `q` (0..=1, by nearest rank: no mean of two middle values here) of `v` (reordered in
+/// place, by selection: linear time); NaN for an empty slice.
+pub fn quantile(v: &mut [f32], q: f64) -> f32 {
+    if v.is_empty() {
+        return f32::NAN;
+    }
+    let i = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    *v.select_nth_unstable_by(i, f32::total_cmp).1
+}
+
 #[cfg(test)]
 pub(crate) mod reference {
     //! Brute-force twins of the kernels above, written to be obviously right.
@@ -617,6 +631,18 @@ pub(crate) mod reference {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn quantile_nearest_rank() {
+        let mut v = vec![5.0, 1.0, 4.0, 2.0, 3.0];
+        assert_eq!(quantile(&mut v, 0.5), 3.0);
+        assert_eq!(quantile(&mut v, 0.0), 1.0);
+        assert_eq!(quantile(&mut v, 1.0), 5.0);
+        // 21 values 0..=20: the 95th percentile by nearest rank is index round(20·0.95) = 19.
+        let mut w: Vec<f32> = (0..=20).rev().map(|x| x as f32).collect();
+        assert_eq!(quantile(&mut w, 0.95), 19.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+    }
 
     #[test]
     fn nan_and_negative_zero_are_found_as_by_their_predicates() {

@@ -20,8 +20,9 @@
 //! They join the mask of static pixels, so no photo's median holds them (docs/evaluation.md, "The paths of laser
 //! dots").
 
+use crate::method::median::quantile;
 use crate::method::raster::Raster;
-use crate::method::refine::{between_nodes, near_nodes, node_medians, quantile};
+use crate::method::steps::nodes::{between_nodes, near_nodes, node_medians};
 use crate::method::window::binomial_tail;
 
 /// A block is bright when one of its channels is at least this many times the channel's local level.
@@ -41,7 +42,7 @@ pub const SPOT_GROW: usize = 2;
 /// The blocks of `low` (a photo's block medians, linear light) that are bright spots, with the blocks within
 /// [`SPOT_GROW`] of them; an empty vector when there are none. The local level is the median over a square of blocks a sixteenth of the
 /// longer side across around grid nodes that far apart, interpolated bilinearly (as
-/// [`crate::method::refine::near_shape`] does); NaN blocks (a mask) are never spots and do not vote.
+/// [`crate::method::steps::near_window::near_shape`] does); NaN blocks (a mask) are never spots and do not vote.
 pub fn bright_spots(low: &Raster) -> Vec<bool> {
     spots_where(low, |_, _| true)
 }

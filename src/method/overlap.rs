@@ -602,6 +602,52 @@ mod tests {
         x
     }
 
+    /// One row `log L_a(x) − log L_b(x + d) = f(x) − f(x + d) + g_a − g_b` per sample of each pair (integer
+    /// shifts), over `n` unknowns: one `f` per block of `lit`'s photos, then `g_1`, `g_2`, …
+    fn ratio_rows(lit: &[Raster], pairs: &[Pair], n: usize) -> Vec<(Vec<f64>, f64)> {
+        let (w, h) = (lit[0].width, lit[0].height);
+        let mut rows = Vec::new();
+        for p in pairs {
+            let (dx, dy) = (p.shift.0 as isize, p.shift.1 as isize);
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    let (u, v) = (x + dx, y + dy);
+                    if u < 0 || v < 0 || u >= w as isize || v >= h as isize {
+                        continue;
+                    }
+                    let mut row = vec![0.0; n];
+                    row[(y * w as isize + x) as usize] += 1.0;
+                    row[(v * w as isize + u) as usize] -= 1.0;
+                    if p.a > 0 {
+                        row[w * h + p.a - 1] += 1.0;
+                    }
+                    if p.b > 0 {
+                        row[w * h + p.b - 1] -= 1.0;
+                    }
+                    let r = (lit[p.a].get(x as usize, y as usize, 0) as f64).ln()
+                        - (lit[p.b].get(u as usize, v as usize, 0) as f64).ln();
+                    rows.push((row, r));
+                }
+            }
+        }
+        rows
+    }
+
+    /// The least-squares solution of `rows` (`n` unknowns), by elimination on the normal equations.
+    fn least_squares(rows: &[(Vec<f64>, f64)], n: usize) -> Vec<f64> {
+        let mut ata = vec![vec![0.0; n]; n];
+        let mut atb = vec![0.0; n];
+        for (row, r) in rows {
+            for i in 0..n {
+                atb[i] += row[i] * r;
+                for j in 0..n {
+                    ata[i][j] += row[i] * row[j];
+                }
+            }
+        }
+        dense_solve(ata, atb)
+    }
+
     /// On a tiny grid (one node per block, integer shifts, every sample at full weight) the plain estimate is
     /// the least-squares solution written out: one row per ratio `log L_a(x) − log L_b(x + d) = f(x) − f(x + d) +
     /// g_a − g_b`, the prior's rows `√λ (f_k − π_k)`, `g_0 = 0`, solved by elimination on the normal equations.
@@ -646,30 +692,7 @@ mod tests {
             .delta;
         // Unknowns: f (w·h), g_1 … g_{photos−1}.
         let n = w * h + photos - 1;
-        let mut rows: Vec<(Vec<f64>, f64)> = Vec::new();
-        for p in &pairs {
-            let (dx, dy) = (p.shift.0 as isize, p.shift.1 as isize);
-            for y in 0..h as isize {
-                for x in 0..w as isize {
-                    let (u, v) = (x + dx, y + dy);
-                    if u < 0 || v < 0 || u >= w as isize || v >= h as isize {
-                        continue;
-                    }
-                    let mut row = vec![0.0; n];
-                    row[(y * w as isize + x) as usize] += 1.0;
-                    row[(v * w as isize + u) as usize] -= 1.0;
-                    if p.a > 0 {
-                        row[w * h + p.a - 1] += 1.0;
-                    }
-                    if p.b > 0 {
-                        row[w * h + p.b - 1] -= 1.0;
-                    }
-                    let r = (lit[p.a].get(x as usize, y as usize, 0) as f64).ln()
-                        - (lit[p.b].get(u as usize, v as usize, 0) as f64).ln();
-                    rows.push((row, r));
-                }
-            }
-        }
+        let mut rows = ratio_rows(&lit, &pairs, n);
         // λ: PRIOR_WEIGHT of the mean data weight per node (each ratio weighs 1 at two nodes).
         let lambda = PRIOR_WEIGHT * 2.0 * rows.len() as f64 / (w * h) as f64;
         for k in 0..w * h {
@@ -677,17 +700,7 @@ mod tests {
             row[k] = lambda.sqrt();
             rows.push((row, lambda.sqrt() * (prior.data[k] as f64).ln()));
         }
-        let mut ata = vec![vec![0.0; n]; n];
-        let mut atb = vec![0.0; n];
-        for (row, r) in &rows {
-            for i in 0..n {
-                atb[i] += row[i] * r;
-                for j in 0..n {
-                    ata[i][j] += row[i] * row[j];
-                }
-            }
-        }
-        let f = dense_solve(ata, atb);
+        let f = least_squares(&rows, n);
         for k in 0..w * h {
             let want = f[k] - (prior.data[k] as f64).ln();
             assert!(

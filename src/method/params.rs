@@ -6,6 +6,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::error::InvalidConfig;
 pub use crate::method::baseline::Method;
 use crate::method::factor::auto_block;
 use crate::method::transfer::Transfer;
@@ -135,75 +136,12 @@ pub enum Window {
 /// stretch where the survey finds nothing that calls for more.
 pub const BASE_WINDOW: usize = 7;
 
-/// Why [`Params`] cannot run ([`Params::validate`]): each variant names the option and the value, in the
-/// command line's words.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum InvalidConfig {
-    /// The window is not an odd number of photos from 1 to [`limits::WINDOW`](crate::limits::WINDOW).
-    #[error("--window must be an odd number of photos from 1 to {MAX_WINDOW}, got {0}")]
-    Window(usize),
-    /// The contamination rate is not in `[0, 0.5)`.
-    #[error(
-        "--contamination must be in [0, 0.5), got {0}{hint}: a median breaks down once half its samples are \
-         contaminated, so no window size can help; {DENSE_HINT}",
-        hint = percent_hint(*.0)
-    )]
-    Contamination(f64),
-    /// The breakdown probability is not in `(0, 1)`.
-    #[error("--risk must be in (0, 1), got {0}")]
-    Risk(f64),
-    /// No window up to [`limits::WINDOW`](crate::limits::WINDOW) photos keeps the breakdown probability at `risk`.
-    #[error(
-        "no window up to {MAX_WINDOW} photos brings P_half below {risk} at contamination {contamination}; \
-         {DENSE_HINT}"
-    )]
-    NoWindow {
-        /// The contamination rate.
-        contamination: f64,
-        /// The breakdown probability asked.
-        risk: f64,
-    },
-    /// The block size is above [`limits::DOWNSAMPLE`](crate::limits::DOWNSAMPLE).
-    #[error("--downsample must be auto or 1 to {MAX_DOWNSAMPLE}, got {0}")]
-    Downsample(usize),
-    /// The near window is not off, auto or an odd number of photos up to
-    /// [`limits::WINDOW`](crate::limits::WINDOW).
-    #[error("--near-window must be auto, 0 (off) or an odd number of photos up to {MAX_WINDOW}, got {0}")]
-    NearWindow(usize),
-    /// The factor floor is not in `(0, 1]`.
-    #[error("--factor-floor must be above 0 and at most 1, got {0}")]
-    FactorFloor(f32),
-    /// The relative floor is not in `(0, 1)`.
-    #[error("--relative-floor must be above 0 and below 1, got {0}")]
-    RelativeFloor(f32),
-    /// The scale of `S` is not in `(0, 2]`.
-    #[error("--backscatter-scale must be above 0 and at most 2 (or auto), got {0}")]
-    BackscatterScale(f32),
-    /// The polynomial's degree is not 1 to [`limits::DEGREE`](crate::limits::DEGREE).
-    #[error("--degree must be 1 to {MAX_DEGREE}, got {0}")]
-    Degree(usize),
-}
-
-/// What to do instead when `--contamination` asks for more than the median's window rule can give.
-pub(crate) const DENSE_HINT: &str = "for dark clutter this dense (a nodule field) give no --contamination and no --window: the \
-     default (--window auto) surveys the photos and takes a higher quantile of a shorter window per stretch";
-
-/// For a contamination given in per cent (`--contamination 20`): `" (did you mean 0.2, that is 20 %?)"`; else
-/// nothing. A share is a number below 1, so 1 to 100 reads as per cent.
-fn percent_hint(c: f64) -> String {
-    match (1.0..=100.0).contains(&c) {
-        true => format!(" (did you mean {}, that is {c} %?)", c / 100.0),
-        false => String::new(),
-    }
-}
-
 /// The longest window `--window` and `--contamination` may give.
-pub const MAX_WINDOW: usize = crate::method::window::MAX_WINDOW;
+pub const MAX_WINDOW: usize = crate::limits::WINDOW;
 /// The largest block size `K`.
-pub const MAX_DOWNSAMPLE: usize = 1024;
+pub const MAX_DOWNSAMPLE: usize = crate::limits::DOWNSAMPLE;
 /// The largest degree of [`Method::Polynomial`].
-pub const MAX_DEGREE: usize = 8;
+pub const MAX_DEGREE: usize = crate::limits::DEGREE;
 
 /// The method's parameters: what the [`Engine`](crate::method::engine::Engine) needs to know. `Params::default()`
 /// is exactly what `abysslight correct` runs without options (`Options::default()` is made from it, and

@@ -1,7 +1,7 @@
 //! A per-block quantile over a sliding window of block images, kept up to date as images enter and leave instead
 //! of selected again from every image each time: each block holds its finite levels sorted (by [`f32::total_cmp`],
 //! as integer keys), so entering and leaving cost a short shift and the quantile is an index. The value is the
-//! one [`crate::method::refine::quantile`] selects from the same levels, bit for bit.
+//! one [`crate::method::median::quantile`] selects from the same levels, bit for bit.
 
 /// The finite levels of the block images held, per block, sorted.
 pub(crate) struct RunningQuantile {
@@ -84,7 +84,7 @@ impl RunningQuantile {
         }
     }
 
-    /// Per block, the value at quantile `q` (nearest rank, as [`crate::method::refine::quantile`]) of the levels
+    /// Per block, the value at quantile `q` (nearest rank, as [`crate::method::median::quantile`]) of the levels
     /// held; NaN where a block holds none.
     pub(crate) fn quantile(&self, q: f64) -> Vec<f32> {
         let q = q.clamp(0.0, 1.0);
@@ -102,7 +102,7 @@ impl RunningQuantile {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::method::refine::quantile;
+    use crate::method::median::quantile;
     use std::collections::VecDeque;
 
     /// Levels with ties, both zeros, NaN, infinities and negative values.

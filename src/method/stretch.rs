@@ -20,8 +20,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::method::matching::box_blur;
+use crate::method::median::quantile;
 use crate::method::raster::Raster;
-use crate::method::refine::quantile;
 use crate::method::running::RunningQuantile;
 use crate::method::window::{near_range, quantile_window, window_range, NEAR_MIN, NEAR_RISK};
 

@@ -270,16 +270,6 @@ impl Curve {
         }
     }
 
-    /// Linear light of a stored value given in `[0, 1]` (e.g. a median between two codes).
-    #[inline]
-    pub fn linear_of_value(&self, v: f32) -> f32 {
-        if self.to_lin.is_empty() {
-            v
-        } else {
-            self.transfer.to_linear(v)
-        }
-    }
-
     /// The stored code nearest (in stored values) to linear light `l`, clamped to the code range.
     #[inline]
     pub fn code(&self, l: f32) -> u16 {

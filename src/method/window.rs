@@ -9,7 +9,7 @@ use serde::Serialize;
 use crate::method::params::InvalidConfig;
 
 /// Largest window [`choose_window`] will propose.
-pub const MAX_WINDOW: usize = 1001;
+pub const MAX_WINDOW: usize = crate::limits::WINDOW;
 
 /// Probability that at least half of `n` samples are contaminated, each independently with probability `c`:
 /// `Σ_{u = ⌈n/2⌉}^{n} C(n, u) c^u (1 − c)^(n − u)`.

@@ -9,8 +9,8 @@ use super::{
     blend_row_portable, code_of, correct_row_portable, pixel_ratios, precision, sample_and_scatter,
     Along, BlendRow, CorrectStats, RowScratch,
 };
-use crate::method::noise::{Blended, LEVEL_MIN};
 use crate::method::raster::Sample;
+use crate::method::steps::blend::{Blended, LEVEL_MIN};
 use crate::method::transfer::Curve;
 use crate::simd::Avx2;
 

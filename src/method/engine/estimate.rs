@@ -7,11 +7,13 @@ use std::time::Instant;
 use super::{ms, Corrected, Engine, Waiting};
 use crate::method::altitude::choose;
 use crate::method::baseline::Method;
-use crate::method::chain::{self, Seen};
+use crate::method::chain;
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
+use crate::method::estimate::Estimate;
 use crate::method::factor::{factor_filled, lit_seafloor};
 use crate::method::monitor::{pool_factor, pooled, Flag, Health};
 use crate::method::raster::{Photo, Raster, Samples};
+use crate::method::seen::{Seen, Window};
 use crate::method::window::window_range;
 
 impl<T> Engine<T> {
@@ -60,7 +62,7 @@ impl<T> Engine<T> {
         });
         self.monitor = monitor;
         self.flags_of_the_stream(i, eof, &mut health);
-        let chain::Estimate {
+        let Estimate {
             f,
             mut scale,
             noise,
@@ -141,7 +143,7 @@ impl<T> Engine<T> {
     }
 
     /// Photo `i`'s window over the photos `members` ([`Engine::members`]), as the chain's steps read it.
-    fn window<'a>(&'a self, i: usize, members: &'a [usize]) -> chain::Window<'a> {
+    fn window<'a>(&'a self, i: usize, members: &'a [usize]) -> Window<'a> {
         let seen: Vec<&Seen> = members
             .iter()
             .map(|&j| {
@@ -150,7 +152,7 @@ impl<T> Engine<T> {
                     .expect("the ring holds the photos of a window")
             })
             .collect();
-        chain::Window {
+        Window {
             i,
             members,
             seen,
@@ -219,7 +221,7 @@ impl<T> Engine<T> {
     }
 
     /// `A = (I − S)/F` of the photo, in place, with the blend and the scale of `S` of the estimate.
-    fn correct(&self, p: &mut Photo, e: &chain::Estimate) -> CorrectStats {
+    fn correct(&self, p: &mut Photo, e: &Estimate) -> CorrectStats {
         let (l, k) = (p.layout, self.params.downsample);
         let s = self.scatter.as_ref();
         let blend = e.use_blend.then_some(Blend {

@@ -119,33 +119,8 @@ fn gather_rgb8_k8_in(_t: Avx2, rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, la
                 };
                 *rj = _mm256_shuffle_epi8(_mm256_set_m128i(hi, lo), widen);
             }
-            // 8×8 transpose of 32-bit lanes: t[dx] = pixel dx of blocks g..g+8.
-            let a0 = _mm256_unpacklo_epi32(r[0], r[1]);
-            let a1 = _mm256_unpackhi_epi32(r[0], r[1]);
-            let a2 = _mm256_unpacklo_epi32(r[2], r[3]);
-            let a3 = _mm256_unpackhi_epi32(r[2], r[3]);
-            let a4 = _mm256_unpacklo_epi32(r[4], r[5]);
-            let a5 = _mm256_unpackhi_epi32(r[4], r[5]);
-            let a6 = _mm256_unpacklo_epi32(r[6], r[7]);
-            let a7 = _mm256_unpackhi_epi32(r[6], r[7]);
-            let b0 = _mm256_unpacklo_epi64(a0, a2);
-            let b1 = _mm256_unpackhi_epi64(a0, a2);
-            let b2 = _mm256_unpacklo_epi64(a1, a3);
-            let b3 = _mm256_unpackhi_epi64(a1, a3);
-            let b4 = _mm256_unpacklo_epi64(a4, a6);
-            let b5 = _mm256_unpackhi_epi64(a4, a6);
-            let b6 = _mm256_unpacklo_epi64(a5, a7);
-            let b7 = _mm256_unpackhi_epi64(a5, a7);
-            let t = [
-                _mm256_permute2x128_si256(b0, b4, 0x20),
-                _mm256_permute2x128_si256(b1, b5, 0x20),
-                _mm256_permute2x128_si256(b2, b6, 0x20),
-                _mm256_permute2x128_si256(b3, b7, 0x20),
-                _mm256_permute2x128_si256(b0, b4, 0x31),
-                _mm256_permute2x128_si256(b1, b5, 0x31),
-                _mm256_permute2x128_si256(b2, b6, 0x31),
-                _mm256_permute2x128_si256(b3, b7, 0x31),
-            ];
+            // t[dx] = pixel dx of blocks g..g+8.
+            let t = transpose_8x8(&r);
             for (dx, &tx) in t.iter().enumerate() {
                 let packed = _mm256_permutevar8x32_epi32(_mm256_shuffle_epi8(tx, narrow), join);
                 let at = (dy * 8 + dx) * lanes + g * 3;
@@ -175,4 +150,36 @@ fn gather_rgb8_k8_in(_t: Avx2, rows: &[&[u8]; 8], v: &mut [u8], lanes: usize, la
             lane0 + g * 3,
         );
     }
+}
+
+/// The 8×8 transpose of 32-bit lanes: lane `j` of the result's row `i` is lane `i` of `r[j]`.
+#[target_feature(enable = "avx2")]
+#[inline]
+fn transpose_8x8(r: &[__m256i; 8]) -> [__m256i; 8] {
+    let a0 = _mm256_unpacklo_epi32(r[0], r[1]);
+    let a1 = _mm256_unpackhi_epi32(r[0], r[1]);
+    let a2 = _mm256_unpacklo_epi32(r[2], r[3]);
+    let a3 = _mm256_unpackhi_epi32(r[2], r[3]);
+    let a4 = _mm256_unpacklo_epi32(r[4], r[5]);
+    let a5 = _mm256_unpackhi_epi32(r[4], r[5]);
+    let a6 = _mm256_unpacklo_epi32(r[6], r[7]);
+    let a7 = _mm256_unpackhi_epi32(r[6], r[7]);
+    let b0 = _mm256_unpacklo_epi64(a0, a2);
+    let b1 = _mm256_unpackhi_epi64(a0, a2);
+    let b2 = _mm256_unpacklo_epi64(a1, a3);
+    let b3 = _mm256_unpackhi_epi64(a1, a3);
+    let b4 = _mm256_unpacklo_epi64(a4, a6);
+    let b5 = _mm256_unpackhi_epi64(a4, a6);
+    let b6 = _mm256_unpacklo_epi64(a5, a7);
+    let b7 = _mm256_unpackhi_epi64(a5, a7);
+    [
+        _mm256_permute2x128_si256(b0, b4, 0x20),
+        _mm256_permute2x128_si256(b1, b5, 0x20),
+        _mm256_permute2x128_si256(b2, b6, 0x20),
+        _mm256_permute2x128_si256(b3, b7, 0x20),
+        _mm256_permute2x128_si256(b0, b4, 0x31),
+        _mm256_permute2x128_si256(b1, b5, 0x31),
+        _mm256_permute2x128_si256(b2, b6, 0x31),
+        _mm256_permute2x128_si256(b3, b7, 0x31),
+    ]
 }

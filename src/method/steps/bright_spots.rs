@@ -1,9 +1,9 @@
 //! Bright spots that move (`Steps::bright_spots`, `--bright-spots`): laser dots and highlights that held more than
 //! half of the window at a block, filled from the blocks around them as under a mask ([`crate::method::outliers`]).
 
-use crate::method::chain::Seen;
 use crate::method::mask::fill_missing;
 use crate::method::raster::Raster;
+use crate::method::seen::Seen;
 
 /// `m` (the `M` of the photos `seen`) with the blocks where bright spots held more than half of them filled from the
 /// blocks around them. Elsewhere `m` stands: the quantile outvoted the spots. (Two ways that also changed the blocks

@@ -3,7 +3,7 @@
 
 use crate::method::overlap::{chained_pairs, overlap_correction};
 use crate::method::raster::Raster;
-use crate::method::steps::Window;
+use crate::method::seen::Window;
 
 /// `m` bent to the overlaps' `F` where the step is on and the window's photos were registered.
 pub(crate) fn shape(w: &Window, mut m: Raster) -> Raster {
