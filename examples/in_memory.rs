@@ -27,7 +27,7 @@ fn main() -> Result<(), abysslight::Error> {
     let mut engine = Engine::new(Params::default(), scatter.as_ref(), None)?;
     let mut corrected: Vec<(usize, Photo)> = Vec::new();
     for (i, photo) in dive.survey.iter().cloned().enumerate() {
-        for c in engine.push(photo, i)? {
+        for c in engine.push((photo, i))? {
             corrected.extend(c.photo.map(|p| (c.tag, p)));
         }
     }

@@ -27,7 +27,7 @@
 //! let mut engine = Engine::new(Params::default(), scatter.as_ref(), None)?;
 //! let mut corrected = Vec::new();
 //! for (i, photo) in dive.survey.into_iter().enumerate() {
-//!     corrected.extend(engine.push(photo, i)?);
+//!     corrected.extend(engine.push((photo, i))?);
 //! }
 //! corrected.extend(engine.finish());
 //! assert_eq!(corrected.len(), 9);
@@ -73,7 +73,7 @@ pub use error::{Error, Result};
 pub use io::metadata::Metadata;
 pub use io::navigation::Navigation;
 pub use method::baseline::Method;
-pub use method::engine::{Corrected, Engine, Use};
+pub use method::engine::{Corrected, Engine, PhotoIn, Use};
 pub use method::mask::Mask;
 pub use method::params::{BlockRule, Facts, InvalidConfig, Params, SeafloorColour, Steps, Window};
 pub use method::raster::{BitDepth, Layout, Photo, Raster, Sample, Samples};

@@ -351,7 +351,7 @@ impl Engine {
         let tag = tag.unwrap_or_else(|| py.None());
         let inner = &mut state.inner;
         let out = py
-            .allow_threads(|| inner.push_at(photo, tag, abysslight::Use::Correct, altitude))
+            .allow_threads(|| inner.push((photo, tag, altitude)))
             .map_err(to_py)?;
         state.shape.get_or_insert(shape);
         out.into_iter().map(|c| corrected(py, c, shape)).collect()
@@ -520,7 +520,7 @@ fn correct_arrays(
             None => None,
         };
         let done = py
-            .allow_threads(|| engine.push_at(photo, i, abysslight::Use::Correct, altitude))
+            .allow_threads(|| engine.push((photo, i, altitude)))
             .map_err(|e| to_py(e.about(std::path::Path::new(&what))))?;
         keep(py, &mut out, done, s)?;
     }

@@ -154,7 +154,8 @@ mod tests {
                 transfer: Some(Transfer::Srgb),
                 ..Params::default()
             };
-            let engine = Engine::<usize>::new(params, None, None).unwrap();
+            let mut engine = Engine::<usize>::new(params, None, None).unwrap();
+            let engine = engine.first_pass();
             let got = engine.block_image_from_means(&means, (bw, bh), 3);
             assert_eq!(engine.takes_block_means(), k % 8 == 0, "K = {k}");
             let Some(got) = got else {

@@ -114,7 +114,8 @@ impl<E, W> Ring<E, W> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::method::window::near_range;
+    use crate::method::altitude::{choose, waits_for};
+    use crate::method::window::{near_range, window_range};
     use proptest::prelude::*;
 
     proptest! {
@@ -158,6 +159,57 @@ mod tests {
             }
             while let Some((i, w, range)) = ring.next_ready(true) {
                 check(&ring, i, w, range, true)?;
+                out.push(i);
+            }
+            prop_assert_eq!(out, (0..total).collect::<Vec<_>>());
+            prop_assert_eq!(ring.waiting(), 0);
+        }
+    }
+
+    proptest! {
+        /// The engine's readiness with a window of its own for each photo (any odd length up to 31, as the survey
+        /// chooses them) and, with windows by altitude, the pool each is chosen among ([`waits_for`]), in a ring as
+        /// long as the longest: every photo comes out exactly once, in order, and when it does the ring holds its
+        /// whole pool, its window over time lies in it, and so does every photo its window by altitude chooses.
+        #[test]
+        fn per_photo_windows_and_altitude_pools_come_out_once_in_order_with_their_members_held(
+            halves in proptest::collection::vec(0usize..16, 0..90),
+            altitudes in proptest::collection::vec(proptest::option::weighted(0.9, 1.0f32..6.0), 90),
+            by_altitude in any::<bool>(),
+        ) {
+            let total = halves.len();
+            let window_of = |i: usize| 2 * halves[i] + 1;
+            let longest = (0..total).map(window_of).max().unwrap_or(1);
+            let mut ring: Ring<usize, usize> = Ring::new(waits_for(longest, by_altitude));
+            let mut out = Vec::new();
+            let check = |ring: &Ring<usize, usize>, i: usize, w: usize, pool: Range<usize>, eof: bool| {
+                prop_assert_eq!(i, w);
+                let mission = if eof { total } else { ring.pushed() };
+                let (n, reach) = (window_of(i), waits_for(window_of(i), by_altitude));
+                prop_assert!(pool.contains(&i) && pool.end <= mission, "{:?} for {}", pool, i);
+                prop_assert_eq!(pool.len(), reach.min(mission));
+                let held: Vec<usize> = ring.in_range(pool.clone()).copied().collect();
+                prop_assert_eq!(held, pool.clone().collect::<Vec<_>>(), "the ring lost a photo of the pool");
+                let by_time = window_range(i, n, ring.pushed());
+                prop_assert!(by_time.start >= pool.start && by_time.end <= pool.end && by_time.contains(&i));
+                let members = choose(i, n, pool.clone(), by_time, |j| altitudes[j]);
+                prop_assert!(members.contains(&i));
+                prop_assert!(members.windows(2).all(|m| m[0] < m[1]), "{:?}", members);
+                for m in members {
+                    prop_assert_eq!(ring.get(m), Some(&m), "member {} of photo {}", m, i);
+                }
+                Ok(())
+            };
+            let ready = |i: usize| waits_for(window_of(i), by_altitude);
+            for p in 0..total {
+                ring.push(p, p);
+                while let Some((i, w, pool)) = ring.next_ready_by(false, ready) {
+                    check(&ring, i, w, pool, false)?;
+                    out.push(i);
+                }
+            }
+            while let Some((i, w, pool)) = ring.next_ready_by(true, ready) {
+                check(&ring, i, w, pool, true)?;
                 out.push(i);
             }
             prop_assert_eq!(out, (0..total).collect::<Vec<_>>());

@@ -8,13 +8,12 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::io::{decode_expecting, Entry};
 use crate::method::baseline::{block_mean, Method};
-use crate::method::blocks::{linear_block_medians, median_linear_table};
-use crate::method::engine::LASER_PHOTOS;
-use crate::method::engine::{Engine, Params};
+use crate::method::engine::{too_few_warning, Engine, FirstPass, Found, Params, LASER_PHOTOS};
 use crate::method::mask::{detect_static, DetectSettings, Mask};
 use crate::method::outliers::{laser_spots, LaserPaths, SpotPath};
 use crate::method::raster::{Layout, Raster};
 use crate::method::scatter::Scatter;
+use crate::method::steps::lasers;
 use crate::method::stretch::{
     Choice, PhotoSurvey, Rule, Surveyor, MAX_AUTO_WINDOW, MEANS_CHECKED_EVERY, REFERENCE_HALF,
     STRETCH_HALF,
@@ -88,26 +87,29 @@ pub fn prepare<T: Sync>(
         // With the paths of laser dots not left out (`--no-laser-paths`) and no mask, the survey looks for them
         // (a warning that names the fix).
         let lasers = opts.mask.is_none() && !opts.mask_auto && !params.steps.laser_paths;
-        let (survey, path) = survey(&engine, plan, progress, lasers);
+        let mut first = engine.first_pass();
+        let (survey, path) = survey(&first, plan, progress, lasers);
         progress.stage(&stretches_line(survey.choices()));
-        engine.set_survey(survey)?;
-        if let Some(w) = lasers_warning(&path) {
+        first.set_survey(survey)?;
+        if let Some(w) = lasers::kept_warning(&path) {
             warnings.warn(w);
         }
         // `--mask-auto` finds the paths over the whole mission itself.
         if params.steps.laser_paths && !opts.mask_auto {
-            let paths = laser_paths(&engine, plan, progress);
-            if let Some(p) = &paths {
-                let saved = plan
-                    .photo_size
-                    .and_then(|size| save_laser_paths(p, params.downsample, size, plan));
-                warnings.warn(laser_note(p, saved));
+            match laser_paths(&mut first, plan, progress)? {
+                Found::Paths(p) => {
+                    let saved = plan
+                        .photo_size
+                        .and_then(|size| save_laser_paths(&p, params.downsample, size, plan));
+                    warnings.warn(laser_note(&p, saved));
+                }
+                Found::TooFew { photos } => warnings.warn(too_few_warning(photos)),
+                Found::None => {}
             }
-            engine.set_laser_paths(paths)?;
         }
     }
     if opts.method == Method::Mean {
-        engine.set_mission_mean(mission_mean(
+        engine.first_pass().set_mission_mean(mission_mean(
             &plan.found.photos,
             plan.photo_size,
             opts.block(),
@@ -141,7 +143,7 @@ const SURVEY_AFTER: usize = MAX_AUTO_WINDOW / 2 + STRETCH_HALF + REFERENCE_HALF;
 /// takes (of every photo it decodes, one in [`MEANS_CHECKED_EVERY`] of those it reads by their means), spread over
 /// the mission ([`SpotPath`], as `--mask-auto` does on photos it decodes for the purpose).
 fn survey<T: Sync>(
-    engine: &Engine<T>,
+    engine: &FirstPass<T>,
     plan: &Plan,
     progress: &dyn Progress,
     lasers: bool,
@@ -175,57 +177,29 @@ fn survey<T: Sync>(
     (Survey::of_mission(&photos), path)
 }
 
-/// The warning for laser dots' paths the survey found ([`SpotPath`]) when they are not left out of `F`
-/// (`--no-laser-paths`), if it found at least [`LASER_MIN_BLOCKS`](crate::method::outliers::LASER_MIN_BLOCKS).
-fn lasers_warning(path: &SpotPath) -> Option<String> {
-    let (on, share) = path.on_path();
-    (on >= crate::method::outliers::LASER_MIN_BLOCKS).then(|| {
-        format!(
-            "laser dots: red or green bright spots came back to the same blocks ({:.1} % of the frame) in the {} \
-             photos looked at, the paths of laser dots (or of something coloured that stays in view); where most \
-             photos of a window had a dot, F takes it, and photos whose own dot is elsewhere get a stain there \
-             (teal beside a red laser): leave out --no-laser-paths, or give --mask-auto, to keep those paths out of F \
-             (docs/guide.md)",
-            100.0 * share,
-            path.photos()
-        )
-    })
-}
-
-/// The paths of laser dots in the mission's first [`LASER_PHOTOS`] photos that decode at its size, as the engine
-/// finds them when it surveys the photos as they come (its block images: the blocks, mask and curve it takes), so
-/// that a run over a folder, `--watch`, `--survey -` and the `Engine` leave the same blocks out of `F`. Every shard
-/// of a mission looks at the same photos. One more decode of these photos.
+/// The paths of laser dots in the mission's first [`LASER_PHOTOS`] photos that the engine accepts (that decode at
+/// its size, of the first one's layout), as the engine finds them when it is given the photos as they come (its
+/// block images: the blocks, mask and curve it takes), so that a run over a folder, `--watch`, `--survey -` and the
+/// `Engine` leave the same blocks out of `F`; given to the engine. Every shard of a mission looks at the same
+/// photos. One more decode of these photos.
 fn laser_paths<T: Sync>(
-    engine: &Engine<T>,
+    first: &mut FirstPass<T>,
     plan: &Plan,
     progress: &dyn Progress,
-) -> Option<LaserPaths> {
+) -> Result<Found> {
     let photos = &plan.found.photos;
     progress.stage(&format!(
         "looking for the paths of laser dots in the first {} photos",
         LASER_PHOTOS.min(photos.len())
     ));
-    let mut path = SpotPath::new();
-    let mut next = 0;
-    // In order, a batch at a time: a photo that does not decode is passed over as the engine passes it over.
-    while path.photos() < LASER_PHOTOS && next < photos.len() {
-        let end = (next + LASER_PHOTOS - path.photos()).min(photos.len());
-        let lows: Vec<Option<crate::method::raster::Raster>> = photos[next..end]
-            .par_iter()
-            .map(|e| {
-                let p = decode_expecting(&e.path, plan.photo_size).ok()?;
-                let low = engine.block_image(&p);
-                crate::io::buffers::recycle(p);
-                low
-            })
-            .collect();
-        for low in lows.iter().flatten() {
-            path.add(low);
-        }
-        next = end;
-    }
-    LaserPaths::of(&path)
+    // A photo that does not decode is passed over as the engine passes it over.
+    first.find_laser_paths(photos.len(), |first, i| {
+        let p = decode_expecting(&photos[i].path, plan.photo_size).ok()?;
+        let low = first.block_image(&p);
+        let layout = p.layout;
+        crate::io::buffers::recycle(p);
+        Some((layout, low?))
+    })
 }
 
 /// The run's words on the paths of laser dots it leaves out of `F`, with where their mask was written.
@@ -262,7 +236,7 @@ pub(crate) fn save_laser_paths(
 /// of every `spots_every`-th block image counted; `Err` names the photo whose means and medians disagreed (the pass
 /// stops there).
 fn survey_pass<T: Sync>(
-    engine: &Engine<T>,
+    engine: &FirstPass<T>,
     plan: &Plan,
     items: &[Item],
     by_means: bool,
@@ -280,14 +254,15 @@ fn survey_pass<T: Sync>(
             let mut path = SpotPath::new();
             for reads in receive {
                 for (low, spots) in reads {
-                    if let (Some((_, r)), Some(spots)) = (&low, spots) {
-                        path.add_spots((r.width, r.height), &spots);
+                    // Only the photos of the mission's layout, as the engine takes them.
+                    let Some((_, low)) = low.filter(|(l, _)| *layout.get_or_insert(*l) == *l)
+                    else {
+                        continue;
+                    };
+                    if let Some(spots) = spots {
+                        path.add_spots((low.width, low.height), &spots);
                     }
-                    if let Some((l, low)) = low {
-                        if *layout.get_or_insert(l) == l {
-                            surveyor.push(&low);
-                        }
-                    }
+                    surveyor.push(&low);
                 }
             }
             (surveyor.finish(), path)
@@ -349,7 +324,7 @@ type SurveyRead = (Option<(Layout, Raster)>, Option<Vec<bool>>);
 /// (decoded as well when `check`, its block medians then taken and compared with the means), any other photo
 /// decoded.
 fn survey_read<T: Sync>(
-    engine: &Engine<T>,
+    engine: &FirstPass<T>,
     plan: &Plan,
     item: &Item,
     by_means: bool,
@@ -611,30 +586,16 @@ fn mask(
 /// +25 % of the run's time; a long mission of 12 MP photos: 400 decodes, well under 1 % of its time).
 const PATH_PHOTOS: usize = 400;
 
-/// The blocks where laser-coloured bright spots came back to over the photos of `sample` ([`SpotPath`]: laser dots
-/// that wander with the altitude), as a pixel mask; `None` when there are none. Block medians of `k` pixels, leaving out what
-/// `fixed` (the static pixels) ignores, in linear light; photos that do not decode or differ in size from `fixed`
-/// are passed over (the correction stream reports them).
+/// The blocks where laser-coloured bright spots came back to over the photos of `sample`, as a pixel mask
+/// ([`lasers::paths_over_the_mission`]); `None` when there are none. Photos that do not decode or differ in size from
+/// `fixed` (the static pixels) are passed over (the correction stream reports them).
 fn spot_path(sample: &[Entry], fixed: &Mask, k: usize, transfer: Transfer) -> Option<Mask> {
-    let (w, h) = (fixed.width, fixed.height);
-    let table = median_linear_table(transfer);
-    // Counted as the photos decode (a count per block and thread), not kept: 400 block images of 12 MP photos
-    // would take 0.9 GB.
-    let path = sample
+    let size = Some((fixed.width, fixed.height));
+    // Of another size: never decoded (a small file may declare a huge photo).
+    let photos = sample
         .par_iter()
-        .fold(SpotPath::new, |mut path, e| {
-            // Of another size: never decoded (a small file may declare a huge photo).
-            let Ok(p) = decode_expecting(&e.path, Some((w, h))) else {
-                return path;
-            };
-            path.add(&linear_block_medians(&p, k, Some(fixed), transfer, &table));
-            path
-        })
-        .reduce(SpotPath::new, SpotPath::merge);
-    let blocks = path.blocks();
-    blocks
-        .contains(&true)
-        .then(|| Mask::from_blocks(&blocks, k, w, h))
+        .filter_map(|e| decode_expecting(&e.path, size).ok());
+    lasers::paths_over_the_mission(photos, fixed, k, transfer)
 }
 
 /// Up to `most` indices spread evenly over `0..n` (first and last included).

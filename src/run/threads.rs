@@ -21,7 +21,7 @@ use crate::error::{Error, Result};
 use crate::io::paths::check_no_links_below;
 use crate::io::EncodeSettings;
 use crate::method::correct::CorrectStats;
-use crate::method::engine::{Corrected, Engine, Use};
+use crate::method::engine::{too_few_warning, Corrected, Engine, Found, Use};
 use crate::method::raster::{Layout, Photo, Raster};
 use crate::report::{FileError, FrameReport, Progress};
 use crate::run::options::Options;
@@ -284,7 +284,7 @@ impl Feed<'_> {
             live: (use_ == Use::Correct).then_some(live),
         };
         let altitude = self.plan.altitude_of(&path);
-        match engine.push_at(photo, tag, use_, altitude) {
+        match engine.push((photo, tag, use_, altitude)) {
             Ok(out) => {
                 self.pending += usize::from(role != Role::Halo);
                 self.say_lasers(engine);
@@ -309,22 +309,25 @@ impl Feed<'_> {
     }
 
     /// Photos as they come (`--watch`, `--survey -`): once the engine found the paths of laser dots in the first
-    /// photos, say so, and write their mask beside the report.
+    /// photos, say so, and write their mask beside the report; or say that the mission was too short to find them.
     fn say_lasers(&mut self, engine: &Engine<Tag>) {
         if self.lasers_said || !self.plan.streaming {
             return;
         }
-        let (Some(p), Some(l)) = (engine.laser_paths(), engine.layout()) else {
-            return;
+        let m = match (engine.lasers_found(), engine.layout()) {
+            (Some(Found::Paths(p)), Some(l)) => {
+                let saved = crate::run::prepare::save_laser_paths(
+                    p,
+                    engine.params().downsample,
+                    (l.width, l.height),
+                    self.plan,
+                );
+                crate::run::prepare::laser_note(p, saved)
+            }
+            (Some(Found::TooFew { photos }), _) => too_few_warning(*photos),
+            _ => return,
         };
         self.lasers_said = true;
-        let saved = crate::run::prepare::save_laser_paths(
-            p,
-            engine.params().downsample,
-            (l.width, l.height),
-            self.plan,
-        );
-        let m = crate::run::prepare::laser_note(p, saved);
         self.progress.warn(&m);
         self.outcome.warnings.push(m);
     }

@@ -163,7 +163,7 @@ fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
         .zip(&dive.truth.poses)
     {
         let altitude = Some((pose.position[2] * 1000.0).round() as f32 / 1000.0);
-        out.extend(engine.push_at(photo, name, Use::Correct, altitude).unwrap());
+        out.extend(engine.push((photo, name, Use::Correct, altitude)).unwrap());
     }
     out.extend(engine.finish());
     assert_eq!(out.len(), sim.frames);
@@ -341,7 +341,7 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
     // The engine refuses an altitude that is not a positive number.
     let mut engine: Engine<usize> = Engine::new(Default::default(), None, None).unwrap();
     let photo = decode(&find_photos(&survey).unwrap().photos[0].path).unwrap();
-    assert!(engine.push_at(photo, 0, Use::Correct, Some(-1.0)).is_err());
+    assert!(engine.push((photo, 0, Some(-1.0))).is_err());
 }
 
 #[test]
@@ -492,11 +492,7 @@ fn a_long_mission_keeps_every_photo_a_window_chooses_among() {
         let mut engine = Engine::new(params, None, None).unwrap();
         let mut out = Vec::new();
         for i in 0..total {
-            out.extend(
-                engine
-                    .push_at(photo(i), i, Use::Correct, Some(altitude(i)))
-                    .unwrap(),
-            );
+            out.extend(engine.push((photo(i), i, Some(altitude(i)))).unwrap());
         }
         out.extend(engine.finish());
         assert_eq!(out.len(), total);

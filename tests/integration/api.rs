@@ -71,7 +71,7 @@ fn a_callers_malformed_photo_is_an_error_not_a_panic() {
     ];
     let mut e = engine();
     for (i, (p, why)) in bad.into_iter().enumerate() {
-        let got = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| e.push(p, i)));
+        let got = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| e.push((p, i))));
         let err = got.expect("no panic").expect_err("refused");
         assert!(err.to_string().contains(why), "{why}: {err}");
     }
@@ -79,7 +79,7 @@ fn a_callers_malformed_photo_is_an_error_not_a_panic() {
     let mut out = Vec::new();
     for i in 0..5 {
         out.extend(
-            e.push_as(photo(16, 12, 3, 16 * 12 * 3), i, Use::Correct)
+            e.push((photo(16, 12, 3, 16 * 12 * 3), i, Use::Correct))
                 .unwrap(),
         );
     }
@@ -100,7 +100,7 @@ fn malformed_water_frames_are_errors_and_none_is_no_scatter() {
         .unwrap()
         .unwrap();
     let mut e = Engine::new(Params::default(), Some(&grey), None).unwrap();
-    assert!(e.push(photo(8, 8, 3, 192), 0usize).is_err());
+    assert!(e.push((photo(8, 8, 3, 192), 0usize)).is_err());
 }
 
 /// Settings a caller can get wrong are refused by `Engine::new`, not later.

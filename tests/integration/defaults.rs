@@ -90,7 +90,7 @@ fn the_command_line_options_and_params_defaults_give_the_same_pixels() {
     let mut engine = Engine::new(Params::default(), scatter.as_ref(), None).unwrap();
     let mut mem = Vec::new();
     for (name, p) in photos(&survey) {
-        mem.extend(engine.push(p, name).unwrap());
+        mem.extend(engine.push((p, name)).unwrap());
     }
     mem.extend(engine.finish());
     assert_eq!(

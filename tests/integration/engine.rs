@@ -37,7 +37,7 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
     .unwrap();
     let mut out = Vec::new();
     for (i, p) in dive.survey.iter().cloned().enumerate() {
-        out.extend(engine.push(p, i).unwrap());
+        out.extend(engine.push((p, i)).unwrap());
         // A photo waits only for the n/2 photos after it (n at the start of the mission).
         assert!(engine.waiting() <= n, "{} waiting", engine.waiting());
         if i >= n {
@@ -91,7 +91,7 @@ fn other_uses_and_a_photo_of_another_size() {
             4 => Use::Estimate,
             _ => Use::Correct,
         };
-        out.extend(engine.push_as(p, i, use_).unwrap());
+        out.extend(engine.push((p, i, use_)).unwrap());
         if i == 5 {
             let odd = Photo {
                 layout: Layout {
@@ -102,7 +102,7 @@ fn other_uses_and_a_photo_of_another_size() {
                 samples: Samples::U8(vec![9; 64 * 48 * 3]),
                 alpha: None,
             };
-            let e = engine.push(odd, 99).unwrap_err();
+            let e = engine.push((odd, 99)).unwrap_err();
             assert!(matches!(e, Error::Mismatch { .. }), "{e}");
             assert!(e.to_string().contains("64x48"), "{e}");
         }
@@ -167,7 +167,7 @@ fn engine_and_folder_run_give_the_same_photos() {
     .unwrap();
     let mut out = Vec::new();
     for e in &frames {
-        out.extend(engine.push(decode(&e.path), e.relative.clone()).unwrap());
+        out.extend(engine.push((decode(&e.path), e.relative.clone())).unwrap());
     }
     out.extend(engine.finish());
     assert_eq!(out.len(), 9);
@@ -262,7 +262,7 @@ fn a_wandering_laser_dot_leaves_no_stain_where_it_is_not() {
         .unwrap();
         let mut out = Vec::new();
         for k in 0..frames {
-            out.extend(engine.push(photo(k), k).unwrap());
+            out.extend(engine.push((photo(k), k)).unwrap());
         }
         out.extend(engine.finish());
         out.iter()
@@ -288,4 +288,113 @@ fn a_wandering_laser_dot_leaves_no_stain_where_it_is_not() {
         without < 0.8,
         "the stain this guards against did not show: {without}"
     );
+}
+
+/// The photos an engine holds in full (waiting for the photos after them) stay under the bounds docs/live.md and
+/// docs/python.md state, for windows up to 31 photos, with and without altitudes: a window of `n` holds `n` photos
+/// at the start of a mission and `n/2 + 1` after; chosen by altitude `2n + 1` and `n + 1`; at the default (the
+/// window chosen per stretch as the photos come, up to 31) 41 and 26, with altitudes 63 and 32. A photo is counted
+/// from its push (the photo being pushed included) until it comes out. The fixed windows reach their bounds.
+#[test]
+fn the_photos_held_stay_under_the_stated_bounds() {
+    let altitude = |i: usize| 2.0 + 0.8 * (i as f32 * 0.4).sin();
+    // The most photos held at the start (before the `start`-th push) and after.
+    let peaks = |mut engine: Engine<usize>, photos: Vec<Photo>, alt: bool, start: usize| {
+        let (mut first, mut after, total) = (0, 0, photos.len());
+        let mut out = Vec::new();
+        for (i, p) in photos.into_iter().enumerate() {
+            let held = engine.waiting() + 1;
+            match i < start {
+                true => first = first.max(held),
+                false => after = after.max(held),
+            }
+            out.extend(engine.push((p, i, alt.then(|| altitude(i)))).unwrap());
+        }
+        out.extend(engine.finish());
+        assert_eq!(out.len(), total, "every photo comes out");
+        let longest = out
+            .iter()
+            .filter_map(|c| c.choice.as_ref())
+            .map(|c| c.window)
+            .max();
+        (first, after, longest)
+    };
+    let noise = |i: usize| {
+        let mut r = (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let samples = (0..32 * 24 * 3)
+            .map(|_| {
+                r ^= r << 13;
+                r ^= r >> 7;
+                r ^= r << 17;
+                60 + (r % 120) as u8
+            })
+            .collect();
+        Photo {
+            layout: Layout {
+                width: 32,
+                height: 24,
+                channels: 3,
+            },
+            samples: Samples::U8(samples),
+            alpha: None,
+        }
+    };
+    for n in (1..=31).step_by(2) {
+        for alt in [false, true] {
+            let (start, after) = match alt {
+                false => (n, n / 2 + 1),
+                true => (2 * n + 1, n + 1),
+            };
+            let params = Params {
+                window: abysslight::Window::Fixed(n),
+                ..Params::default()
+            };
+            let engine = Engine::new(params, None, None).unwrap();
+            let photos = (0..2 * start + 5).map(noise).collect();
+            let (first, later, _) = peaks(engine, photos, alt, start);
+            assert_eq!(
+                (first, later),
+                (start, after),
+                "window {n}, altitudes {alt}"
+            );
+        }
+    }
+    // At the default, on a dense field under a slow camera, whose windows grow long.
+    let photos = Simulation {
+        frames: 140,
+        width: 128,
+        height: 96,
+        contamination: 0.45,
+        overlap: 0.9,
+        seed: 4,
+        ..Simulation::default()
+    }
+    .render()
+    .unwrap()
+    .survey;
+    for alt in [false, true] {
+        let (start, after) = match alt {
+            false => (41, 26),
+            true => (63, 32),
+        };
+        let mut engine = Engine::new(Params::default(), None, None).unwrap();
+        if alt {
+            engine.expect_altitudes().unwrap();
+        }
+        let (first, later, longest) = peaks(engine, photos.clone(), alt, start);
+        eprintln!(
+            "default window, altitudes {alt}: {first} photos held at the start, {later} after (windows up to \
+             {longest:?})"
+        );
+        assert!(
+            first <= start && later <= after,
+            "altitudes {alt}: {first}, {later}"
+        );
+        assert!(
+            first >= 41,
+            "the first photo waits for the survey's first decision: {first}"
+        );
+        // Windows of up to 31 chosen by altitude: the first photos wait for their pools, past the 41.
+        assert!(!alt || first > 41, "{first}");
+    }
 }

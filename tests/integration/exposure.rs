@@ -60,7 +60,7 @@ fn corrected(photos: &[Photo], params: Params) -> Vec<Vec<f32>> {
     let mut engine = Engine::new(params, None::<&Scatter>, None).unwrap();
     let mut out = Vec::new();
     for (i, p) in photos.iter().cloned().enumerate() {
-        out.extend(engine.push(p, i).unwrap());
+        out.extend(engine.push((p, i)).unwrap());
     }
     out.extend(engine.finish());
     assert_eq!(out.len(), photos.len());

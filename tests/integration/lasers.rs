@@ -189,7 +189,7 @@ fn at_default_options_laser_dots_stay_red_leave_no_stain_and_are_reported() {
     let mut engine = Engine::new(opts.params().unwrap(), None, None).unwrap();
     let mut out = Vec::new();
     for e in find_photos(&survey).unwrap().photos {
-        out.extend(engine.push(decode(&e.path).unwrap(), e.relative).unwrap());
+        out.extend(engine.push((decode(&e.path).unwrap(), e.relative)).unwrap());
         if engine.accepted() <= abysslight::Survey::FIRST_DECIDED {
             assert!(
                 !engine.laser_paths_decided(),
@@ -234,7 +234,7 @@ fn dives_without_lasers_get_no_laser_paths() {
     for (name, photos) in dives {
         let mut engine: Engine<usize> = Engine::new(Params::default(), None, None).unwrap();
         for (i, p) in photos.into_iter().enumerate() {
-            engine.push(p, i).unwrap();
+            engine.push((p, i)).unwrap();
         }
         engine.finish();
         assert!(engine.laser_paths_decided(), "{name}");
@@ -244,4 +244,183 @@ fn dives_without_lasers_get_no_laser_paths() {
             100.0 * engine.laser_paths_share().unwrap()
         );
     }
+}
+
+/// `photo` with one channel, its red: a grey photo of the mission's size.
+fn grey(photo: &Photo) -> Photo {
+    let Samples::U8(v) = &photo.samples else {
+        panic!("an 8-bit dive")
+    };
+    Photo {
+        layout: abysslight::Layout {
+            channels: 1,
+            ..photo.layout
+        },
+        samples: Samples::U8(v.iter().step_by(3).copied().collect()),
+        alpha: None,
+    }
+}
+
+/// `abysslight correct --survey - --out OUT` fed the photos of `survey` one after the other (in the run's order),
+/// with `args`; its console.
+fn piped(survey: &Path, out: &Path, args: &[&str]) -> String {
+    use std::process::{Command, Stdio};
+    let mut input = Vec::new();
+    for e in find_photos(survey).unwrap().photos {
+        input.extend(std::fs::read(&e.path).unwrap());
+    }
+    let mut child = Command::new(BIN)
+        .args(["correct", "--survey", "-", "--out", s(out)])
+        .args(args)
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &input));
+    let o = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    stderr(&o)
+}
+
+/// One grey photo among the mission's first 41 (photo 5, of the mission's size): the engine refuses it (its channels
+/// are not the mission's), and so do both of a batch run's passes over the folder, the survey and the look for the
+/// paths of laser dots, which count the next colour photo instead. A run over the folder, `--survey -` and the engine
+/// find the same paths and write the same pixels: in a mission of 45 photos, and in one of 20, where the grey photo
+/// counted would make the 20 photos the paths are decided on (19 colour photos are too few).
+#[test]
+fn a_grey_photo_among_the_first_is_passed_over_by_the_batch_run_as_by_the_engine() {
+    for frames in [FRAMES, 20] {
+        let d = tempfile::tempdir().unwrap();
+        let mut photos = laser_dive().photos;
+        photos.truncate(frames);
+        photos[5] = grey(&photos[5]);
+        let survey = d.path().join("survey");
+        write_all(&photos, &survey, "img", "png");
+        let batch = d.path().join("batch");
+        let opts = Options {
+            survey: Some(survey.clone()),
+            out: Some(batch.clone()),
+            transfer: Some(Transfer::Linear),
+            ..Options::default()
+        };
+        let report = correct_mission(&opts, &Silent).unwrap();
+        assert_eq!(report.corrected, frames - 1);
+        assert_eq!(report.failed, 1, "the grey photo is refused");
+        let batch_outs = outputs_of(&batch);
+        assert_eq!(batch_outs.len(), frames - 1);
+
+        let piped_out = d.path().join("piped");
+        let console = piped(&survey, &piped_out, &["--transfer", "linear", "-q"]);
+        let piped_outs = outputs_of(&piped_out);
+        assert_eq!(piped_outs.len(), frames - 1, "{console}");
+
+        let mut engine = Engine::new(opts.params().unwrap(), None, None).unwrap();
+        let mut out = Vec::new();
+        for (i, e) in find_photos(&survey).unwrap().photos.into_iter().enumerate() {
+            match engine.push((decode(&e.path).unwrap(), i)) {
+                Ok(o) => out.extend(o),
+                Err(abysslight::Error::Mismatch { .. }) => assert_eq!(i, 5),
+                Err(e) => panic!("{e}"),
+            }
+        }
+        out.extend(engine.finish());
+        assert_eq!(out.len(), frames - 1);
+        let note = report
+            .warnings
+            .iter()
+            .find(|w| w.contains("they are left out of F"));
+        match (frames, engine.laser_paths_share()) {
+            (FRAMES, Some(share)) => {
+                let note = note.expect("the batch run finds the paths");
+                assert!(
+                    note.contains(&format!("({:.1} % of the frame", 100.0 * share)),
+                    "the batch run finds the engine's paths ({:.1} %): {note}",
+                    100.0 * share
+                );
+            }
+            (20, None) => assert!(note.is_none(), "paths from 19 colour photos: {note:?}"),
+            (_, share) => panic!("{frames} photos: the engine's paths {share:?}"),
+        }
+        for (k, c) in out.iter().enumerate() {
+            let want = &c.photo.as_ref().unwrap().samples;
+            assert!(
+                batch_outs[k].samples == *want,
+                "{frames} photos: batch, photo {}",
+                c.tag
+            );
+            assert!(
+                piped_outs[k].samples == *want,
+                "{frames} photos: --survey -, photo {}",
+                c.tag
+            );
+        }
+    }
+}
+
+/// Laser dots in a mission of fewer than 20 photos (12): too few photos to tell their paths from something red on
+/// the seafloor, so they are not left out of `F`; the run says so and points to `--mask-auto`, over a folder and
+/// through a pipe alike, and the engine decides on no paths.
+#[test]
+fn laser_dots_in_a_short_mission_are_said_with_the_way_to_mask_them() {
+    let d = tempfile::tempdir().unwrap();
+    let mut dive = laser_dive();
+    dive.photos.truncate(12);
+    let survey = d.path().join("survey");
+    write_all(&dive.photos, &survey, "img", "png");
+    let opts = Options {
+        survey: Some(survey.clone()),
+        out: Some(d.path().join("batch")),
+        transfer: Some(Transfer::Linear),
+        ..Options::default()
+    };
+    let report = correct_mission(&opts, &Silent).unwrap();
+    assert_eq!(report.corrected, 12);
+    let short: Vec<&String> = report
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with("laser dots"))
+        .collect();
+    assert_eq!(short.len(), 1, "{:?}", report.warnings);
+    assert!(
+        short[0].contains("12 photos")
+            && short[0].contains("fewer than 20")
+            && short[0].contains("--mask-auto"),
+        "{}",
+        short[0]
+    );
+    let console = piped(&survey, &d.path().join("piped"), &["--transfer", "linear"]);
+    assert!(
+        console.contains("fewer than 20") && console.contains("--mask-auto"),
+        "{console}"
+    );
+    // A mission without dots of the same length is told nothing of lasers.
+    let plain = d.path().join("plain");
+    write_all(&dive_plain(12), &plain, "img", "png");
+    let r = correct_mission(
+        &Options {
+            survey: Some(plain),
+            out: Some(d.path().join("plain-out")),
+            transfer: Some(Transfer::Linear),
+            ..Options::default()
+        },
+        &Silent,
+    )
+    .unwrap();
+    assert!(
+        !r.warnings.iter().any(|w| w.starts_with("laser dots")),
+        "{:?}",
+        r.warnings
+    );
+    let mut engine = Engine::new(opts.params().unwrap(), None, None).unwrap();
+    for (i, p) in dive.photos.into_iter().enumerate() {
+        engine.push((p, i)).unwrap();
+    }
+    engine.finish();
+    assert!(engine.laser_paths_decided() && engine.laser_paths_share().is_none());
+}
+
+/// The simple dive of [`laser_dive`] without its dots, `frames` photos.
+fn dive_plain(frames: usize) -> Vec<Photo> {
+    dive(W, H, frames, 0, 0.05, false, 11).photos
 }

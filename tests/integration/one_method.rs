@@ -64,7 +64,7 @@ fn the_engine_writes_the_batch_commands_pixels_on_nodule_fields() {
         let mut engine = Engine::new(params, scatter.as_ref(), None).unwrap();
         let mut out = Vec::new();
         for (name, photo) in decoded_photos(&root.join("survey")) {
-            out.extend(engine.push(photo, name).unwrap());
+            out.extend(engine.push((photo, name)).unwrap());
         }
         out.extend(engine.finish());
         assert_eq!(out.len(), sim.frames, "{name}");

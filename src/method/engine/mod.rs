@@ -10,7 +10,7 @@
 //! let mut engine = Engine::new(Params { window: Window::Fixed(3), ..Params::default() }, None, None)?;
 //! let mut out = Vec::new();
 //! for (i, level) in [100u8, 110, 120, 130].into_iter().enumerate() {
-//!     out.extend(engine.push(photo(level), i)?); // photos come out once their window is complete
+//!     out.extend(engine.push((photo(level), i))?); // photos come out once their window is complete
 //! }
 //! out.extend(engine.finish());
 //! assert_eq!(out.iter().map(|c| c.tag).collect::<Vec<_>>(), vec![0, 1, 2, 3]);
@@ -19,17 +19,23 @@
 //!
 //! Memory: at most `n` low-resolution images in the ring buffer and at most `n/2 + 1` full-resolution photos
 //! waiting for the photos after them (`n` at the start of a mission), whatever the mission's length. With windows
-//! chosen by altitude ([`Engine::push_at`]) the ring holds the `2n + 1` photos each window is chosen among, and up
-//! to `n + 1` photos wait.
+//! chosen by altitude (photos pushed with an altitude, [`PhotoIn::altitude`]) the ring holds the `2n + 1` photos
+//! each window is chosen among, and up to `n + 1` photos wait (`2n + 1` at the start). With the window chosen per
+//! stretch ([`Window::Auto`](crate::Window::Auto)) as photos come, a photo also waits for the survey's decision:
+//! up to [`crate::Survey::FIRST_DECIDED`]` + 1` (41) photos at the start of a mission and 26 after, or with
+//! altitudes up to 63 at the start and 32 after (the longest window, 31, chosen by altitude).
 
 use std::ops::Range;
 use std::time::Instant;
 
 mod estimate;
+mod first_pass;
 mod lasers;
+mod photo_in;
 
-use lasers::Lasers;
-pub(crate) use lasers::LASER_PHOTOS;
+pub(crate) use crate::method::steps::lasers::{too_few_warning, Found, LASER_PHOTOS};
+pub(crate) use first_pass::FirstPass;
+pub use photo_in::{PhotoIn, Use};
 
 use crate::error::{Error, Result};
 use crate::method::altitude::waits_for;
@@ -38,7 +44,6 @@ use crate::method::blocks::{linear_block_medians, masked_blocks, median_linear_t
 use crate::method::correct::CorrectStats;
 use crate::method::mask::Mask;
 use crate::method::monitor::{pool_factor, pooled, Health, Monitor, Thresholds};
-use crate::method::outliers::{bright_spots, SpotPath};
 use crate::method::params::Facts;
 pub use crate::method::params::Params;
 use crate::method::raster::{Layout, Photo, Raster};
@@ -46,21 +51,11 @@ use crate::method::ring::Ring;
 use crate::method::scatter::{for_the_engine, Prepared, Scatter};
 use crate::method::seen::Seen;
 use crate::method::steps::blend::NoiseModel;
+use crate::method::steps::lasers::{Lasers, Look};
+use crate::method::steps::{bright_spots, overlaps::Registration};
 use crate::method::stretch::Choice;
 use crate::method::survey::{Survey, FIRST_DECIDED};
 use crate::method::transfer::Curve;
-
-/// What the engine does with a photo it is given.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Use {
-    /// Estimate its `F` and health, and correct it.
-    Correct,
-    /// Estimate its `F` and health, but do not correct it (an output that exists already, `--resume`): it comes
-    /// out with `photo: None`.
-    Estimate,
-    /// Only a neighbour for the windows of other photos (a shard's halo): it never comes out.
-    Context,
-}
 
 /// One photo out of the [`Engine`].
 #[derive(Debug)]
@@ -74,7 +69,7 @@ pub struct Corrected<T> {
     pub window: Range<usize>,
     /// Where the window was chosen by altitude ([`crate::method::altitude`]): its photos (by `index`, in order).
     pub by_altitude: Option<Vec<usize>>,
-    /// The altitude the photo was pushed with ([`Engine::push_at`]).
+    /// The altitude the photo was pushed with ([`PhotoIn::altitude`]).
     pub altitude: Option<f32>,
     /// The corrected photo (`None` for photos pushed with [`Use::Estimate`]).
     pub photo: Option<Photo>,
@@ -144,8 +139,8 @@ pub struct Engine<T> {
     survey: Option<Survey>,
     /// [`Engine::finish`] was called: the mission is over.
     finished: bool,
-    /// With `steps.overlaps`: the texture of the last photo's block medians, to match the next one against.
-    previous_texture: Option<crate::method::matching::Texture>,
+    /// With `steps.overlaps`: each photo registered against the one before ([`Registration`]).
+    registration: Registration,
     /// The paths of laser dots left out of every window's `M` ([`Steps::laser_paths`](crate::Steps::laser_paths)).
     lasers: Lasers,
     /// Windows are chosen by altitude ([`Engine::expect_altitudes`], or the first photo came with one): a photo
@@ -190,7 +185,7 @@ impl<T> Engine<T> {
             judged_fixed: None,
             survey: None,
             finished: false,
-            previous_texture: None,
+            registration: Registration::default(),
             lasers: Lasers::Off,
             by_altitude: false,
         }
@@ -205,7 +200,7 @@ impl<T> Engine<T> {
             self.survey = Some(Survey::new(self.scatter_low.as_ref()));
             self.ring = Ring::new(self.ring_length());
             if self.params.steps.laser_paths {
-                self.lasers = Lasers::Looking(SpotPath::new());
+                self.lasers = Lasers::Looking(Look::new());
             }
         }
         self
@@ -218,11 +213,11 @@ impl<T> Engine<T> {
             1 => None,
             p => Some(pooled(&low, p)),
         };
-        // With `--bright-spots`: this photo's blocks of bright spots that move (laser dots, highlights).
-        let spots = (self.params.method == Method::Abyss && self.params.steps.bright_spots)
-            .then(|| bright_spots(&low))
-            .filter(|s| !s.is_empty());
-        let step = self.step_from_previous(&low);
+        let abyss = self.params.method == Method::Abyss;
+        let spots = bright_spots::spots(&low, abyss && self.params.steps.bright_spots);
+        let step = self
+            .registration
+            .step(&low, abyss && self.params.steps.overlaps);
         Seen {
             low,
             judged,
@@ -232,31 +227,7 @@ impl<T> Engine<T> {
         }
     }
 
-    /// The survey of the whole mission, made before its photos are pushed (a run over a folder surveys it first,
-    /// from its JPEGs' block means where it can): its choices instead of the engine's own survey as photos come, so
-    /// that no photo waits for the decision and the ring holds only the longest window chosen. Only with
-    /// [`Window::Auto`](crate::Window::Auto) and [`Method::Abyss`] (otherwise ignored); refused once photos were pushed, or
-    /// when the survey is not finished ([`Survey::finish`]).
-    pub fn set_survey(&mut self, survey: Survey) -> Result<()> {
-        if self.ring.pushed() > 0 {
-            return Err(Error::Usage(
-                "the survey of a mission is set before its first photo".into(),
-            ));
-        }
-        if !self.params.window_is_auto() {
-            return Ok(());
-        }
-        if !survey.finished() || survey.decided() == 0 {
-            return Err(Error::Usage(
-                "a survey given to the engine is finished and holds at least one photo".into(),
-            ));
-        }
-        self.survey = Some(survey);
-        self.ring = Ring::new(self.ring_length());
-        Ok(())
-    }
-
-    /// Choose windows by altitude ([`Engine::push_at`]) from the mission's first photo on, whether or not it has an
+    /// Choose windows by altitude ([`PhotoIn::altitude`]) from the mission's first photo on, whether or not it has an
     /// altitude (a navigation log that starts late). Only with [`Method::Abyss`] (otherwise ignored); refused once
     /// photos were pushed.
     pub fn expect_altitudes(&mut self) -> Result<()> {
@@ -287,57 +258,6 @@ impl<T> Engine<T> {
         }
     }
 
-    /// `S` at block resolution in linear light, as the engine and its survey take it (`None`: no `S`).
-    pub fn scatter_low(&self) -> Option<&Raster> {
-        self.scatter_low.as_ref()
-    }
-
-    /// The block medians the engine takes of `photo` (its blocks, mask and curve, linear light); `None` while the
-    /// block size is not known (no size before the first photo) or when the photo does not fit the mask.
-    pub fn block_image(&self, photo: &Photo) -> Option<Raster> {
-        let l = photo.layout;
-        let fits = self
-            .mask
-            .as_ref()
-            .is_none_or(|m| (m.width, m.height) == (l.width, l.height));
-        (self.params.downsample > 0 && fits).then(|| self.block_medians(photo))
-    }
-
-    /// The survey's block image from a JPEG's 8×8 block means (sRGB levels as shares of 255, `blocks` across and
-    /// down, `channels` interleaved; [`crate::io::survey_block_means`]) instead of [`Engine::block_image`]'s block
-    /// medians of the decoded photo: each `K`×`K` block the mean of the 8×8 means it covers, in linear light.
-    /// `None` where the means cannot stand for the blocks: `K` not a multiple of 8, or a mask (its pixels are left
-    /// out of the blocks).
-    pub fn block_image_from_means(
-        &self,
-        means: &[f32],
-        blocks: (usize, usize),
-        channels: usize,
-    ) -> Option<Raster> {
-        if !self.takes_block_means() {
-            return None;
-        }
-        crate::method::blocks::from_means(
-            means,
-            blocks,
-            channels,
-            self.params.downsample,
-            self.params.curve(),
-        )
-    }
-
-    /// Whether a photo's block image from block means sees the dark blocks its block image from block medians sees
-    /// (the survey's test, against this engine's `S`).
-    pub fn means_stand_for_medians(&self, means: &Raster, medians: &Raster) -> bool {
-        crate::method::stretch::means_stand_for_medians(means, medians, self.scatter_low.as_ref())
-    }
-
-    /// Whether [`Engine::block_image_from_means`] takes 8×8 block means: `K` a multiple of 8, no mask.
-    pub fn takes_block_means(&self) -> bool {
-        let k = self.params.downsample;
-        k > 0 && k.is_multiple_of(8) && self.mask.is_none()
-    }
-
     /// Photo `i`'s choice, when the window is chosen per stretch (once the survey decided it).
     fn choice(&self, i: usize) -> Option<&Choice> {
         self.survey.as_ref()?.choice(i)
@@ -364,11 +284,6 @@ impl<T> Engine<T> {
         }
     }
 
-    /// `M` of [`Method::Mean`]: the mission's mean image at block resolution, in linear light.
-    pub fn set_mission_mean(&mut self, mean: Raster) {
-        self.mission_mean = Some(mean);
-    }
-
     /// The method's parameters.
     pub fn params(&self) -> &Params {
         &self.params
@@ -389,33 +304,18 @@ impl<T> Engine<T> {
         self.ring.waiting()
     }
 
-    /// Give the next photo of the mission, to be corrected. Returns the photos whose window became complete, in
-    /// order. A photo of another size than the first is refused with [`Error::Mismatch`] (its path empty: the
-    /// caller knows it) and leaves the engine as it was; a first photo that does not fit `S` or the mask is
-    /// refused with [`Error::Usage`].
-    pub fn push(&mut self, photo: Photo, tag: T) -> Result<Vec<Corrected<T>>> {
-        self.push_as(photo, tag, Use::Correct)
-    }
-
-    /// [`push`](Self::push), saying what to do with the photo.
-    pub fn push_as(&mut self, photo: Photo, tag: T, use_: Use) -> Result<Vec<Corrected<T>>> {
-        self.push_at(photo, tag, use_, None)
-    }
-
-    /// [`push_as`](Self::push_as), with the photo's altitude above the seafloor in metres where it is known (a
-    /// navigation log). With [`Method::Abyss`], where the altitude swings along the track, a photo's window is then
-    /// chosen among the photos around it lit from the nearest heights ([`crate::method::altitude`]); a photo then
-    /// waits for its window's length of photos after it, not half. Windows are chosen by altitude when the
-    /// mission's first photo comes with an altitude, or after [`Engine::expect_altitudes`]; photos without one
-    /// keep the window over time and are not chosen into others'. An altitude that is not a positive number is
-    /// refused with [`Error::Usage`].
-    pub fn push_at(
-        &mut self,
-        photo: Photo,
-        tag: T,
-        use_: Use,
-        altitude: Option<f32>,
-    ) -> Result<Vec<Corrected<T>>> {
+    /// Give the next photo of the mission ([`PhotoIn`]: from `(photo, tag)` to be corrected, or with what to do
+    /// with it and its altitude). Returns the photos whose window became complete, in order. A photo of another
+    /// layout than the first is refused with [`Error::Mismatch`] (its path empty: the caller knows it) and leaves the
+    /// engine as it was; a first photo that does not fit `S` or the mask, or an altitude that is not a positive
+    /// number, is refused with [`Error::Usage`].
+    pub fn push(&mut self, photo: impl Into<PhotoIn<T>>) -> Result<Vec<Corrected<T>>> {
+        let PhotoIn {
+            photo,
+            tag,
+            use_,
+            altitude,
+        } = photo.into();
         if let Some(a) = altitude.filter(|a| !(a.is_finite() && *a > 0.0)) {
             return Err(Error::Usage(format!(
                 "a photo's altitude is a positive number of metres, got {a}"
@@ -461,70 +361,6 @@ impl<T> Engine<T> {
         }
         self.finished = true;
         self.flush(true)
-    }
-
-    /// With `steps.overlaps`: the shift of the ground from the last photo to this one, in blocks, by phase
-    /// correlation of the block medians' textures (`None`: no match, or the step is off).
-    fn step_from_previous(&mut self, low: &Raster) -> Option<(f64, f64)> {
-        use crate::method::matching::{match_pair, reduction, texture};
-        if self.params.method != Method::Abyss || !self.params.steps.overlaps {
-            return None;
-        }
-        let t = texture(low, reduction(low.width, low.height));
-        let m = self.previous_texture.as_ref().map(|p| match_pair(p, &t));
-        self.previous_texture = Some(t);
-        m.filter(|m| m.accepted).map(|m| m.shift)
-    }
-
-    /// Check a photo against the mission's size (the first photo sets it).
-    fn accept(&mut self, photo: &Photo) -> Result<()> {
-        photo.check()?;
-        match self.layout {
-            Some(l) if l != photo.layout => Err(Error::Mismatch {
-                path: Default::default(),
-                reason: format!(
-                    "photo is {}, the mission's photos are {}; skipped (split mixed missions into one folder per \
-                     camera setting)",
-                    photo.layout, l
-                ),
-            }),
-            Some(_) => Ok(()),
-            None => {
-                if let Some(s) = &self.scatter {
-                    if s.layout != photo.layout {
-                        return Err(Error::Usage(format!(
-                            "scatter estimate is {}, but the survey photos are {}: water-column frames and \
-                             survey photos must come from the same camera",
-                            s.layout, photo.layout
-                        )));
-                    }
-                }
-                if let Some(m) = &self.mask {
-                    if (m.width, m.height) != (photo.layout.width, photo.layout.height) {
-                        return Err(Error::Usage(format!(
-                            "the mask is {}x{} but the photos are {}",
-                            m.width, m.height, photo.layout
-                        )));
-                    }
-                }
-                self.layout = Some(photo.layout);
-                let (w, h) = (photo.layout.width, photo.layout.height);
-                self.params = self.params.resolved(&Facts {
-                    size: Some((w, h)),
-                    masked: self.mask.is_some(),
-                    transfer: None,
-                });
-                let transfer = self.params.curve();
-                self.colour = self
-                    .params
-                    .seafloor_colour
-                    .for_channels(photo.layout.channels)
-                    .into_iter()
-                    .map(|c| transfer.to_linear(c))
-                    .collect();
-                Ok(())
-            }
-        }
     }
 
     /// The photo's `K`×`K` block medians, in linear light (masked pixels left out).

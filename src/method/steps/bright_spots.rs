@@ -2,8 +2,15 @@
 //! half of the window at a block, filled from the blocks around them as under a mask ([`crate::method::outliers`]).
 
 use crate::method::mask::fill_missing;
+use crate::method::outliers::bright_spots;
 use crate::method::raster::Raster;
 use crate::method::seen::Seen;
+
+/// The per-photo half, as each photo comes: its blocks of bright spots that move (laser dots, highlights), when the
+/// step is `on` and it has any.
+pub(crate) fn spots(low: &Raster, on: bool) -> Option<Vec<bool>> {
+    on.then(|| bright_spots(low)).filter(|s| !s.is_empty())
+}
 
 /// `m` (the `M` of the photos `seen`) with the blocks where bright spots held more than half of them filled from the
 /// blocks around them. Elsewhere `m` stands: the quantile outvoted the spots. (Two ways that also changed the blocks

@@ -11,6 +11,7 @@ pub(crate) mod blend;
 pub(crate) mod bright_spots;
 pub(crate) mod floor;
 pub(crate) mod gain;
+pub(crate) mod lasers;
 pub(crate) mod levelling;
 pub(crate) mod levels_by_light;
 pub(crate) mod lit_level;

@@ -1,9 +1,36 @@
 //! Overlaps (`Steps::overlaps`, `--overlaps`): `M − S` bent to the `F` that the window's overlapping photos give
 //! ([`crate::method::overlap`]), with the window's `M` as the prior for what they leave undetermined.
 
+use crate::method::matching::{match_pair, reduction, texture, Texture};
 use crate::method::overlap::{chained_pairs, overlap_correction};
 use crate::method::raster::Raster;
 use crate::method::seen::Window;
+
+/// The per-photo half, as each photo comes: its block medians registered against the photo before's.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Registration {
+    /// The texture of the last photo's block medians, to match the next one against.
+    previous: Option<Texture>,
+}
+
+impl Registration {
+    /// Where the step is `on`: the shift of the ground from the last photo to this one, in blocks, by phase
+    /// correlation of the block medians' textures (`None`: no match, or the step is off).
+    pub(crate) fn step(&mut self, low: &Raster, on: bool) -> Option<(f64, f64)> {
+        if !on {
+            return None;
+        }
+        let t = texture(low, reduction(low.width, low.height));
+        let m = self.previous.as_ref().map(|p| match_pair(p, &t));
+        self.previous = Some(t);
+        m.filter(|m| m.accepted).map(|m| m.shift)
+    }
+
+    /// Start again from the next photo (the photos held are seen again, in order).
+    pub(crate) fn restart(&mut self) {
+        self.previous = None;
+    }
+}
 
 /// `m` bent to the overlaps' `F` where the step is on and the window's photos were registered.
 pub(crate) fn shape(w: &Window, mut m: Raster) -> Raster {
