@@ -89,7 +89,8 @@ pub fn find_dives(cruise: &Path) -> Result<Vec<Dive>> {
                 name,
                 survey: dir.join(SURVEY),
                 water_column: wc.is_dir().then_some(wc),
-                navigation: nav.is_file().then_some(nav),
+                // Whatever is there by that name: a folder or a FIFO is that dive's error (named), not passed over.
+                navigation: std::fs::symlink_metadata(&nav).is_ok().then_some(nav),
             }
         })
         .collect())

@@ -60,6 +60,10 @@ const PATHS: &[&str] = &[
     "navigation",
 ];
 
+/// Fields of `Options` that a config file and `correct()` take but that `Options::default()` leaves out when
+/// serialised (left at their default, a report does not name them).
+const UNLISTED_WHEN_DEFAULT: &[&str] = &["navigation_columns", "navigation_clock_offset"];
+
 /// Keyword arguments of `correct()` that are not fields of `Options`.
 const CORRECT_EXTRAS: &[&str] = &["config", "cruise"];
 
@@ -225,6 +229,7 @@ fn accepted(scope: Scope) -> Vec<String> {
     names.push("seafloor_color".into());
     if scope == Scope::Correct {
         names.extend(CORRECT_EXTRAS.iter().map(|s| s.to_string()));
+        names.extend(UNLISTED_WHEN_DEFAULT.iter().map(|s| s.to_string()));
     }
     names.sort();
     names
