@@ -178,7 +178,8 @@ pub(crate) fn recorded_dives(out: &Path) -> Option<Vec<String>> {
             continue;
         }
         found = true;
-        let listed = std::fs::read_to_string(e.path())
+        // A list of dive names: a regular file of at most 16 MiB, or as good as none.
+        let listed = crate::io::whole::read_text(&e.path(), 16 << 20, "list of a cruise's dives")
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .and_then(|v| {

@@ -72,9 +72,10 @@ Examples:
   One of 16 array jobs, S computed once with `abysslight scatter`:
     abysslight correct --scatter scatter.png --survey survey --out corrected --resume --shard 3/16
 
-  A towed sledge or an ROV whose altitude swings: windows among photos lit from similar heights, from the
-  vehicle's log (by file name, or by time at each photo's EXIF time; see docs/guide.md, Your vehicle's log):
-    abysslight correct --water-column descent --survey survey --out corrected --navigation nav.csv
+  Windows among photos lit from similar heights, from the vehicle's log (a towed sledge,
+  an ROV whose altitude swings; docs/guide.md, \"Your vehicle's log\"):
+    abysslight correct --water-column descent --survey survey --out corrected \\
+        --navigation nav.csv
 
   Options from a file, one flag overridden:
     abysslight correct --config dive042.toml --window 9

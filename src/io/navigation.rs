@@ -47,7 +47,7 @@ pub const MAX_GAP_S: f64 = 10.0;
 pub const MAX_ALTITUDE_M: f32 = 1000.0;
 
 /// The fewest usable rows of a log by time (two rows bracket a photo).
-pub const MIN_TIME_ROWS: usize = 2;
+pub(crate) const MIN_TIME_ROWS: usize = 2;
 
 /// Column names of the photo's file, in any case.
 const FILE_COLUMNS: [&str; 9] = [
@@ -772,7 +772,7 @@ pub fn parse_offset(text: &str) -> Option<f64> {
 }
 
 /// A time as a reader sees it: `2023-06-03 16:27:01Z` (UTC, to the second).
-pub fn iso(t: f64) -> String {
+pub(crate) fn iso(t: f64) -> String {
     match jiff::Timestamp::from_second(t.floor() as i64) {
         Ok(s) => s.strftime("%Y-%m-%d %H:%M:%SZ").to_string(),
         Err(_) => format!("{t:.0} s since 1970"),

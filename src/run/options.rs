@@ -491,7 +491,8 @@ impl Options {
             return usage("give either --water-column or --scatter, not both".into());
         }
         // A year either way: a clock set to another day, not a photo's whole mission.
-        if !(self.navigation_clock_offset.abs() <= 366.0 * 86_400.0) {
+        let offset = self.navigation_clock_offset;
+        if offset.is_nan() || offset.abs() > 366.0 * 86_400.0 {
             return usage(format!(
                 "--navigation-clock-offset {}: seconds, at most a year either way",
                 self.navigation_clock_offset
