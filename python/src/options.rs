@@ -319,6 +319,21 @@ fn json(key: &str, name: &str, v: &Bound<'_, PyAny>) -> PyResult<Value> {
             .collect::<PyResult<Vec<_>>>()?;
         return Ok(Value::String(parts.join(",")));
     }
+    // The log's columns as a dict of names ({"time": "t_log", "altitude": "range"}), as a config file's table.
+    if name == "navigation_columns" {
+        if let Ok(d) = v.downcast::<PyDict>() {
+            let mut table = Map::new();
+            for (k, n) in d.iter() {
+                let (Ok(k), Ok(n)) = (k.extract::<String>(), n.extract::<String>()) else {
+                    return Err(PyTypeError::new_err(format!(
+                        "{key} must map file, time or altitude to a column name (str), e.g. {{\"time\": \"t_log\"}}"
+                    )));
+                };
+                table.insert(k, Value::String(n));
+            }
+            return Ok(Value::Object(table));
+        }
+    }
     type_error()
 }
 
