@@ -89,7 +89,8 @@ pub fn find_dives(cruise: &Path) -> Result<Vec<Dive>> {
                 name,
                 survey: dir.join(SURVEY),
                 water_column: wc.is_dir().then_some(wc),
-                navigation: nav.is_file().then_some(nav),
+                // Whatever is there by that name: a folder or a FIFO is that dive's error (named), not passed over.
+                navigation: std::fs::symlink_metadata(&nav).is_ok().then_some(nav),
             }
         })
         .collect())
@@ -177,7 +178,8 @@ pub(crate) fn recorded_dives(out: &Path) -> Option<Vec<String>> {
             continue;
         }
         found = true;
-        let listed = std::fs::read_to_string(e.path())
+        // A list of dive names: a regular file of at most 16 MiB, or as good as none.
+        let listed = crate::io::whole::read_text(&e.path(), 16 << 20, "list of a cruise's dives")
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
             .and_then(|v| {

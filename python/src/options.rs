@@ -60,6 +60,10 @@ const PATHS: &[&str] = &[
     "navigation",
 ];
 
+/// Fields of `Options` that a config file and `correct()` take but that `Options::default()` leaves out when
+/// serialised (left at their default, a report does not name them).
+const UNLISTED_WHEN_DEFAULT: &[&str] = &["navigation_columns", "navigation_clock_offset"];
+
 /// Keyword arguments of `correct()` that are not fields of `Options`.
 const CORRECT_EXTRAS: &[&str] = &["config", "cruise"];
 
@@ -225,6 +229,7 @@ fn accepted(scope: Scope) -> Vec<String> {
     names.push("seafloor_color".into());
     if scope == Scope::Correct {
         names.extend(CORRECT_EXTRAS.iter().map(|s| s.to_string()));
+        names.extend(UNLISTED_WHEN_DEFAULT.iter().map(|s| s.to_string()));
     }
     names.sort();
     names
@@ -313,6 +318,21 @@ fn json(key: &str, name: &str, v: &Bound<'_, PyAny>) -> PyResult<Value> {
             })
             .collect::<PyResult<Vec<_>>>()?;
         return Ok(Value::String(parts.join(",")));
+    }
+    // The log's columns as a dict of names ({"time": "t_log", "altitude": "range"}), as a config file's table.
+    if name == "navigation_columns" {
+        if let Ok(d) = v.downcast::<PyDict>() {
+            let mut table = Map::new();
+            for (k, n) in d.iter() {
+                let (Ok(k), Ok(n)) = (k.extract::<String>(), n.extract::<String>()) else {
+                    return Err(PyTypeError::new_err(format!(
+                        "{key} must map file, time or altitude to a column name (str), e.g. {{\"time\": \"t_log\"}}"
+                    )));
+                };
+                table.insert(k, Value::String(n));
+            }
+            return Ok(Value::Object(table));
+        }
     }
     type_error()
 }

@@ -432,6 +432,17 @@ def test_altitudes_choose_the_windows_in_the_engine_as_in_the_command(tmp_path):
     assert [read_png(p).tobytes() for p in pngs(py_out) if "_abysslight" not in p.parts] == \
         [got[i].image.tobytes() for i in range(len(photos))]
 
+    # A log whose columns have names of their own, named by keyword (as a dict or as the command's text).
+    renamed = tmp_path / "renamed.csv"
+    renamed.write_text("frame;range\n" + "".join(f"{n};{a}\n" for n, a in altitudes.items()))
+    for columns in ({"file": "frame", "altitude": "range"}, "file=frame,altitude=range"):
+        named_out = tmp_path / f"named{len(str(columns))}"
+        abysslight.correct(water_column=root / "water", survey=root / "survey", out=named_out, navigation=renamed,
+                           navigation_columns=columns, navigation_clock_offset=0.0)
+        assert [f.get("altitude") for f in _report(named_out)["frames"]] == [f["altitude"] for f in frames]
+    with pytest.raises(ValueError, match="no column names the photo's file"):
+        abysslight.correct(survey=root / "survey", out=tmp_path / "unnamed", navigation=renamed)
+
     # Errors: a list of altitudes of another length, an altitude that is not a positive number, a log for an
     # engine (it has no files to match), a log beside a cruise (each dive has its own).
     with pytest.raises(ValueError, match="altitudes lists 2 photos"):

@@ -72,6 +72,11 @@ Examples:
   One of 16 array jobs, S computed once with `abysslight scatter`:
     abysslight correct --scatter scatter.png --survey survey --out corrected --resume --shard 3/16
 
+  Windows among photos lit from similar heights, from the vehicle's log (a towed sledge,
+  an ROV whose altitude swings; docs/guide.md, \"Your vehicle's log\"):
+    abysslight correct --water-column descent --survey survey --out corrected \\
+        --navigation nav.csv
+
   Options from a file, one flag overridden:
     abysslight correct --config dive042.toml --window 9
 
@@ -429,12 +434,16 @@ struct CorrectArgs {
 
     /// Navigation log (CSV) of each photo's altitude: windows are chosen among photos lit from similar heights.
     ///
-    /// A header row, then a row per photo; the photo's column is named file, filename, image, photo,
-    /// relative_path or path, the altitude's starts with "altitude" (metres; oplab's "altitude [m]" reads as it
-    /// is). Photos are matched by file name (else by name without the extension). A log without a file column
-    /// but with a time column (time, timestamp, datetime, epoch, utc: seconds since 1970 UTC or dates such as
-    /// 2023-06-03T16:27:01.5Z) is read at each photo's EXIF time (DateTimeOriginal, its sub-seconds and offset),
-    /// interpolated between rows at most 10 s apart. Where the altitude swings along
+    /// A header row, then a row per photo; cells separated by commas, semicolons or tabs, quoted or not; lines
+    /// starting with # are comments; a units row under the header (s,deg,m) is passed over. The photo's column is
+    /// named file, filename, image, photo, relative_path or path, the altitude's contains "altitude" (metres;
+    /// oplab's "altitude [m]", dvl_altitude_m) or is alt; --navigation-columns names others. Photos are matched
+    /// by file name (else by name without the extension). A log without a file column but with a time column
+    /// (time, timestamp, datetime, date time, epoch, utc: seconds since 1970 UTC or dates such as
+    /// 2023-06-03T16:27:01.5Z, with an offset or in UTC) is read at each photo's EXIF time (DateTimeOriginal, its
+    /// sub-seconds and offset; --navigation-clock-offset for a log on another clock), interpolated between rows
+    /// at most 10 s apart. Rows without an altitude (empty, NaN, 0, negative: a DVL without bottom lock) are
+    /// passed over and counted in a warning; an altitude over 1000 m is refused. Where the altitude swings along
     /// the track (more than 15 % over a window), each photo's window is taken among the photos around it lit from
     /// the nearest heights, half before and half after it, instead of the photos nearest in time: a towed sledge
     /// or an ROV over rough ground. Photos not in the log keep the window over time. --method abyss; each photo
@@ -442,6 +451,21 @@ struct CorrectArgs {
     /// window took.
     #[arg(long, value_name = "FILE.csv", help_heading = H_IN)]
     navigation: Option<PathBuf>,
+
+    /// The navigation log's columns where their names are unusual: KEY=NAME pairs, keys file, time, altitude.
+    ///
+    /// E.g. --navigation-columns "time=Date Time,altitude=dvl_range". Names are matched in any case. A column not
+    /// named is found by its name (see --navigation). Config file: navigation-columns = "time=…,altitude=…" or a
+    /// table { time = "…", altitude = "…" }.
+    #[arg(long, value_name = "KEY=NAME,…", help_heading = H_IN)]
+    navigation_columns: Option<abysslight::io::navigation::Columns>,
+
+    /// Seconds added to the navigation log's times to put them on the camera's clock [default: 0].
+    ///
+    /// The camera's clock minus the log's: -7200 for a log kept 2 h ahead of the camera (UTC against local
+    /// time). When no photo's time falls in the log, the error gives both spans and the offset that aligns them.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true, help_heading = H_IN)]
+    navigation_clock_offset: Option<f64>,
 
     /// How stored values relate to light: auto, srgb (most JPEGs), linear or gamma:G [default: auto].
     ///
@@ -823,6 +847,12 @@ fn set_run_flags(args: &CorrectArgs, o: &mut Options) {
     }
     if let Some(v) = args.png_compression {
         o.png_compression = v;
+    }
+    if let Some(v) = &args.navigation_columns {
+        o.navigation_columns = v.clone();
+    }
+    if let Some(v) = args.navigation_clock_offset {
+        o.navigation_clock_offset = v;
     }
 }
 

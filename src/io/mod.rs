@@ -14,6 +14,7 @@ pub(crate) mod paths;
 pub(crate) mod pnm;
 pub(crate) mod scatter;
 pub(crate) mod transfer;
+pub(crate) mod whole;
 
 use std::fs::File;
 use std::io::{BufWriter, Write};

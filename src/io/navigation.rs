@@ -1,23 +1,38 @@
 //! A navigation log: each photo's altitude above the seafloor, read from a CSV file (`--navigation`), matched to
 //! the photos by file name or by time.
 //!
-//! The first row names the columns; commas, semicolons or tabs separate them (the header's first of these). The
-//! altitude's column is the first whose name starts with `altitude` (`altitude`, `Altitude [m]`, `altitude_m`:
-//! metres). Other columns are ignored. Values may be quoted; `#` starts a comment line.
+//! The log is a table ([`csv`]): the first row names the columns; commas, semicolons or tabs separate them (the
+//! header's first of these); cells may be quoted; lines starting with `#` are comments; a units row right under
+//! the header (`s,deg,m`: no cell a number) is passed over. The altitude's column (metres) is the one the user
+//! names ([`Columns`], `--navigation-columns altitude=NAME`), or else the first whose name starts with `altitude`
+//! (`Altitude [m]`), or else contains it (`dvl_altitude_m`), or is `alt` (`alt_m`, `alt [m]`). Other columns are
+//! ignored. Names are compared in any case, with spaces, `-` and `/` read as `_`.
 //!
-//! - **By file name**, one row per photo: the photo's column is the first named `file`, `filename`, `file_name`,
-//!   `image`, `image_name`, `imagename`, `photo`, `relative_path` or `path` (any case). oplab's navigation CSVs
-//!   (`relative_path`, `altitude [m]`) read as they are. A photo is matched by its file name, or else by its name
-//!   without the extension (a log written for the raw frames of converted photos).
+//! - **By file name**, one row per photo: the photo's column is the one named, or the first named `file`,
+//!   `filename`, `file_name`, `image`, `image_name`, `imagename`, `photo`, `relative_path` or `path`. oplab's
+//!   navigation CSVs (`relative_path`, `altitude [m]`) read as they are. A photo is matched by its file name, or
+//!   else by its name without the extension (a log written for the raw frames of converted photos).
 //! - **By time**, a log without a file column, as a vehicle writes it (rows at any rate, in any order): the time's
-//!   column is the first whose name starts with `time`, `datetime`, `date_time`, `epoch` or `unix`, or is `utc`.
-//!   Times are seconds since 1970-01-01 00:00 UTC, or dates as `2023-06-03T16:27:01.5Z` (a space for the `T`, an
-//!   offset such as `+02:00`, or none: UTC). A photo's time is its EXIF `DateTimeOriginal`
-//!   ([`crate::Metadata::time_taken`]); its altitude is interpolated between the rows around it, where they lie at
-//!   most [`MAX_GAP_S`] apart.
+//!   column is the one named, or the first whose name starts with `time`, `datetime`, `date_time` (`Date Time`),
+//!   `epoch` or `unix`, or is `utc`. Times are seconds since 1970-01-01 00:00 UTC, or dates as
+//!   `2023-06-03T16:27:01.5Z` (a space for the `T`, an offset such as `+02:00`, or none: UTC). A photo's time is
+//!   its EXIF `DateTimeOriginal` ([`crate::Metadata::time_taken`]); the log's times plus the clock offset
+//!   (`--navigation-clock-offset`, the camera's clock minus the log's) are on the camera's clock. A photo's
+//!   altitude is interpolated between the rows around it, where they lie at most [`MAX_GAP_S`] apart.
+//!
+//! Rows without a usable altitude (empty, `NaN`, `0`, negative: a DVL without bottom lock) are passed over and
+//! counted ([`Navigation::notes`]); between the rows around them the gap rule decides. A log with too few usable
+//! rows, or an altitude no camera is flown at ([`MAX_ALTITUDE_M`]: a no-data marker or another column), is refused.
+//!
+//! The log is joined to the photos once, when they are listed ([`Navigation::join`], in parallel: for a log by
+//! time it reads each photo's EXIF time); the lookups after it ([`Navigation::altitude_by_name`],
+//! [`Navigation::altitude_at`]) read no file.
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
@@ -26,6 +41,13 @@ pub const MAX_BYTES: u64 = 1 << 30;
 
 /// Rows of a log by time further apart than this (seconds) give no altitude between them (a gap in the log).
 pub const MAX_GAP_S: f64 = 10.0;
+
+/// An altitude above this (metres) is refused: no camera lights the seafloor from there (a no-data marker such
+/// as 9999, a depth column, or millimetres).
+pub const MAX_ALTITUDE_M: f32 = 1000.0;
+
+/// The fewest usable rows of a log by time (two rows bracket a photo).
+pub(crate) const MIN_TIME_ROWS: usize = 2;
 
 /// Column names of the photo's file, in any case.
 const FILE_COLUMNS: [&str; 9] = [
@@ -40,164 +62,347 @@ const FILE_COLUMNS: [&str; 9] = [
     "path",
 ];
 
+/// The log's columns as the user names them (`--navigation-columns time=Date Time,altitude=dvl_alt`, or a
+/// `[navigation-columns]` table in a config file); a column not named is found by its name (the module's doc).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields, try_from = "ColumnsIn")]
+pub struct Columns {
+    /// The photo's file (a log by file name).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// The time (a log by time).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time: Option<String>,
+    /// The altitude above the seafloor, metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub altitude: Option<String>,
+}
+
+/// A config file's or Python's `navigation-columns`: the command line's text, or a table.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum ColumnsIn {
+    Text(String),
+    Table {
+        #[serde(default)]
+        file: Option<String>,
+        #[serde(default)]
+        time: Option<String>,
+        #[serde(default)]
+        altitude: Option<String>,
+    },
+}
+
+impl TryFrom<ColumnsIn> for Columns {
+    type Error = String;
+    fn try_from(c: ColumnsIn) -> std::result::Result<Self, String> {
+        match c {
+            ColumnsIn::Text(t) => t.parse(),
+            ColumnsIn::Table {
+                file,
+                time,
+                altitude,
+            } => Columns {
+                file,
+                time,
+                altitude,
+            }
+            .checked(),
+        }
+    }
+}
+
+impl Columns {
+    /// No column named.
+    pub fn is_empty(&self) -> bool {
+        *self == Columns::default()
+    }
+
+    fn checked(self) -> std::result::Result<Self, String> {
+        if self.file.is_some() && self.time.is_some() {
+            return Err(
+                "navigation columns: name the file's column (a log by file name) or the time's (a log by \
+                        time), not both"
+                    .into(),
+            );
+        }
+        for name in [&self.file, &self.time, &self.altitude]
+            .into_iter()
+            .flatten()
+        {
+            if name.trim().is_empty() {
+                return Err("navigation columns: an empty column name".into());
+            }
+        }
+        Ok(self)
+    }
+}
+
+impl FromStr for Columns {
+    type Err = String;
+    /// `KEY=NAME` pairs separated by commas, keys `file`, `time` and `altitude`: `time=Date Time,altitude=alt_m`.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let mut c = Columns::default();
+        for pair in s.split(',').filter(|p| !p.trim().is_empty()) {
+            let (key, name) = pair.split_once('=').ok_or_else(|| {
+                format!(
+                    "navigation columns {s:?}: expected KEY=NAME pairs separated by commas, keys file, time and \
+                     altitude (e.g. time=Date Time,altitude=dvl_altitude_m)"
+                )
+            })?;
+            let slot = match key.trim().to_lowercase().as_str() {
+                "file" => &mut c.file,
+                "time" => &mut c.time,
+                "altitude" => &mut c.altitude,
+                k => {
+                    return Err(format!(
+                        "navigation columns: unknown key {k:?} (file, time or altitude)"
+                    ))
+                }
+            };
+            *slot = Some(name.trim().to_string());
+        }
+        c.checked()
+    }
+}
+
+/// How a log is read: the columns the user named and the clock offset.
+#[derive(Debug, Clone, Default)]
+pub struct ReadAs {
+    /// Columns named by the user.
+    pub columns: Columns,
+    /// Seconds added to the log's times to put them on the camera's clock (the camera's clock minus the log's).
+    pub clock_offset: f64,
+}
+
+/// A photo joined to the log ([`Navigation::join`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Joined {
+    /// Its altitude, where the log gives one.
+    pub altitude: Option<f32>,
+    /// A log by time: the photo's EXIF time (seconds since 1970 UTC), where it has one.
+    pub time: Option<f64>,
+}
+
 /// Each photo's altitude from a navigation log ([`Navigation::read`]).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Navigation {
     /// The file it was read from.
     pub path: PathBuf,
-    by_name: HashMap<String, f32>,
-    by_stem: HashMap<String, Option<f32>>,
-    /// A log by time: (seconds, altitude), in time order.
-    by_time: Vec<(f64, f32)>,
-    /// A log by time: the altitude found for each photo read so far.
-    found: std::sync::Mutex<HashMap<PathBuf, Option<f32>>>,
+    /// The SHA-256 of the file's content, in hex (empty for a log not read from a file).
+    pub sha256: String,
+    rows: Rows,
+    /// What reading found that the user should know (dropout rows passed over, conflicting duplicate times).
+    notes: Vec<String>,
+}
+
+/// The rows of a log.
+#[derive(Debug)]
+enum Rows {
+    /// By file name, sorted by name.
+    ByName(Names),
+    /// By time: (seconds on the camera's clock, altitude, line), in time order (rows of one time in file order).
+    ByTime(Vec<(f64, f32, u32)>),
+}
+
+/// A log by file name: every name in one string, and the rows sorted by name and by stem (a million rows take
+/// tens of megabytes, with no allocation per row).
+#[derive(Debug, Default)]
+struct Names {
+    text: String,
+    rows: Vec<NameRow>,
+    /// Indices into `rows`, sorted by stem.
+    by_stem: Vec<u32>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct NameRow {
+    start: u32,
+    len: u32,
+    stem_len: u32,
+    altitude: f32,
+    line: u32,
+}
+
+impl Names {
+    fn name(&self, r: &NameRow) -> &str {
+        &self.text[r.start as usize..(r.start + r.len) as usize]
+    }
+
+    fn stem(&self, r: &NameRow) -> &str {
+        &self.text[r.start as usize..(r.start + r.stem_len) as usize]
+    }
+
+    fn push(&mut self, name: &str, altitude: f32, line: u32) {
+        let start = self.text.len() as u32;
+        self.text.push_str(name);
+        self.rows.push(NameRow {
+            start,
+            len: name.len() as u32,
+            stem_len: stem(name).len() as u32,
+            altitude,
+            line,
+        });
+    }
+
+    /// Sort the rows; a name listed twice is an error naming both lines.
+    fn sort(&mut self) -> std::result::Result<(), String> {
+        let mut rows = std::mem::take(&mut self.rows);
+        rows.par_sort_unstable_by(|a, b| self.name(a).cmp(self.name(b)).then(a.line.cmp(&b.line)));
+        let twice = rows
+            .windows(2)
+            .filter(|w| self.name(&w[0]) == self.name(&w[1]))
+            .min_by_key(|w| w[1].line);
+        if let Some(w) = twice {
+            return Err(format!(
+                "line {}: {} is listed twice (also on line {})",
+                w[1].line,
+                self.name(&w[1]),
+                w[0].line
+            ));
+        }
+        let mut by_stem: Vec<u32> = (0..rows.len() as u32).collect();
+        by_stem.par_sort_unstable_by(|&a, &b| {
+            self.stem(&rows[a as usize])
+                .cmp(self.stem(&rows[b as usize]))
+        });
+        self.rows = rows;
+        self.by_stem = by_stem;
+        Ok(())
+    }
+
+    /// The altitude of the photo named `name`, else of the one row of its stem.
+    fn get(&self, name: &str) -> Option<f32> {
+        if let Ok(k) = self.rows.binary_search_by(|r| self.name(r).cmp(name)) {
+            return Some(self.rows[k].altitude);
+        }
+        let s = stem(name);
+        let at = |k: usize| self.by_stem.get(k).map(|&i| &self.rows[i as usize]);
+        let k = self
+            .by_stem
+            .partition_point(|&i| self.stem(&self.rows[i as usize]) < s);
+        match (at(k), at(k + 1)) {
+            (Some(r), next) if self.stem(r) == s => {
+                // Two files of one stem (a.jpg, a.png) leave the stem unmatched.
+                (next.is_none_or(|n| self.stem(n) != s)).then_some(r.altitude)
+            }
+            _ => None,
+        }
+    }
 }
 
 impl Navigation {
-    /// Read a navigation CSV. Errors name the file and, for a bad row, its line: no header, no photo or altitude
-    /// column, an altitude that is not a positive number of metres, a photo listed twice, no row at all.
-    pub fn read(path: &Path) -> Result<Navigation> {
-        let bad = |reason: String| Error::Config {
+    /// Read a navigation CSV (a regular file of at most [`MAX_BYTES`]). Errors name the file and, for a bad row,
+    /// its line: no header, no photo or altitude column, a time that does not read, an implausible altitude, a
+    /// photo listed twice, too few usable rows.
+    pub fn read(path: &Path, how: &ReadAs) -> Result<Navigation> {
+        let bytes = crate::io::whole::read_whole(path, MAX_BYTES, "navigation log")?;
+        let mut nav = Navigation::parse(path, &bytes, how).map_err(|reason| Error::Config {
             path: path.to_path_buf(),
             reason,
-        };
-        let size = std::fs::metadata(path)
-            .map_err(|e| Error::io(path, e))?
-            .len();
-        if size > MAX_BYTES {
-            return Err(bad(format!(
-                "navigation file of {size} bytes; at most {MAX_BYTES} are read (one row per photo)"
-            )));
-        }
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let text = String::from_utf8_lossy(&bytes);
-        Navigation::parse(path, &text).map_err(bad)
-    }
-
-    /// [`Navigation::read`] of a text already in memory; the error is the reason alone.
-    fn parse(path: &Path, text: &str) -> std::result::Result<Navigation, String> {
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(k, l)| (k + 1, l.trim_start_matches('\u{feff}').trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-        let (header_line, header) = lines.next().ok_or(
-            "empty: a header row naming a file and an altitude column, then a row per photo",
-        )?;
-        let sep = [',', ';', '\t']
-            .into_iter()
-            .find(|&c| header.contains(c))
-            .unwrap_or(',');
-        let names: Vec<String> = split(header, sep)
-            .into_iter()
-            .map(|c| c.to_lowercase())
-            .collect();
-        let file_col = names
-            .iter()
-            .position(|c| FILE_COLUMNS.contains(&c.as_str()));
-        let time_col = names.iter().position(|c| {
-            ["time", "datetime", "date_time", "epoch", "unix"]
-                .iter()
-                .any(|p| c.starts_with(p))
-                || c == "utc"
-        });
-        let (file_col, time_col) = match (file_col, time_col) {
-            (Some(f), _) => (f, None),
-            (None, Some(t)) => (0, Some(t)),
-            (None, None) => {
-                return Err(format!(
-                    "line {header_line}: no column names the photo's file (one of {}) or the time (time, \
-                     timestamp, datetime, epoch, utc); the header is {header:?}",
-                    FILE_COLUMNS.join(", ")
-                ))
-            }
-        };
-        let alt_col = names
-            .iter()
-            .position(|c| c.starts_with("altitude"))
-            .ok_or_else(|| {
-                format!(
-                    "line {header_line}: no altitude column (a name starting with \"altitude\", in metres); the \
-                     header is {header:?}"
-                )
-            })?;
-        let mut nav = Navigation {
-            path: path.to_path_buf(),
-            ..Navigation::default()
-        };
-        let mut first_line: HashMap<String, usize> = HashMap::new();
-        for (line, row) in lines {
-            let cells = split(row, sep);
-            let cell = |c: usize| cells.get(c).map(String::as_str).unwrap_or("");
-            if let Some(t) = time_col {
-                let time = parse_time(cell(t)).ok_or_else(|| {
-                    format!("line {line}: time {:?} does not read as a time", cell(t))
-                })?;
-                let text = cell(alt_col);
-                let altitude = positive(text).ok_or_else(|| {
-                    format!("line {line}: altitude {text:?} is not a positive number of metres")
-                })?;
-                nav.by_time.push((time, altitude));
-                continue;
-            }
-            let file = file_name(cell(file_col));
-            if file.is_empty() {
-                return Err(format!(
-                    "line {line}: no photo file in column {}",
-                    file_col + 1
-                ));
-            }
-            let text = cell(alt_col);
-            let altitude = positive(text).ok_or_else(|| {
-                format!(
-                    "line {line}: altitude {text:?} of {file} is not a positive number of metres"
-                )
-            })?;
-            if let Some(was) = first_line.insert(file.clone(), line) {
-                return Err(format!(
-                    "line {line}: {file} is listed twice (also on line {was})"
-                ));
-            }
-            // Two files of one stem (a.jpg, a.png) leave the stem unmatched.
-            let stem = stem(&file);
-            nav.by_stem
-                .entry(stem)
-                .and_modify(|a| *a = None)
-                .or_insert(Some(altitude));
-            nav.by_name.insert(file, altitude);
-        }
-        if nav.by_name.is_empty() && nav.by_time.is_empty() {
-            return Err("no rows: a row per photo (or per time) after the header".into());
-        }
-        nav.by_time.sort_by(|a, b| a.0.total_cmp(&b.0));
+        })?;
+        nav.sha256 = crate::io::whole::sha256(&bytes);
         Ok(nav)
     }
 
-    /// The altitude of the photo at `path`: matched by its file name, else by its name without the extension; or,
-    /// for a log by time, at the time the photo's EXIF gives (read once per photo).
-    pub fn altitude_of(&self, path: &Path) -> Option<f32> {
-        if !self.by_time.is_empty() {
-            let mut found = self.found.lock().unwrap_or_else(|e| e.into_inner());
-            return *found.entry(path.to_path_buf()).or_insert_with(|| {
-                let t = crate::Metadata::read(path).ok()?.time_taken()?;
-                self.altitude_at(t)
-            });
+    /// [`Navigation::read`] of a text already in memory; the error is the reason alone.
+    fn parse(path: &Path, bytes: &[u8], how: &ReadAs) -> std::result::Result<Navigation, String> {
+        let bytes = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(bytes);
+        let header_text = bytes
+            .split(|&b| b == b'\n')
+            .map(|l| String::from_utf8_lossy(l).trim().to_string())
+            .find(|l| !l.is_empty() && !l.starts_with('#'))
+            .ok_or(
+                "empty: a header row naming a file and an altitude column, then a row per photo",
+            )?;
+        let sep = [b',', b';', b'\t']
+            .into_iter()
+            .find(|&c| header_text.as_bytes().contains(&c))
+            .unwrap_or(b',');
+        let mut reader = csv::ReaderBuilder::new()
+            .delimiter(sep)
+            .has_headers(false)
+            .flexible(true)
+            .comment(Some(b'#'))
+            .trim(csv::Trim::All)
+            .from_reader(bytes);
+        let mut record = csv::ByteRecord::new();
+        let mut header = None;
+        while reader.read_byte_record(&mut record).map_err(csv_error)? {
+            if !blank(&record) {
+                header = Some(record.clone());
+                break;
+            }
         }
-        let name = path.file_name()?.to_string_lossy();
-        self.by_name
-            .get(name.as_ref())
-            .copied()
-            .or_else(|| self.by_stem.get(&stem(&name)).copied().flatten())
+        let header = header.ok_or("empty: a header row naming a file and an altitude column")?;
+        let header_line = line_of(&header);
+        let names: Vec<String> = header.iter().map(|c| normal(&cell_text(c))).collect();
+        let key = Key::choose(&names, &how.columns, header_line, &header_text)?;
+        let alt_col = altitude_column(&names, &how.columns, header_line, &header_text)?;
+        let mut table = Table::default();
+        let mut first_row = true;
+        while reader.read_byte_record(&mut record).map_err(csv_error)? {
+            if blank(&record) {
+                continue;
+            }
+            let line = line_of(&record);
+            let cell = |c: usize| cell_text(record.get(c).unwrap_or(b""));
+            if std::mem::take(&mut first_row) && units_row(&record, &key, alt_col) {
+                continue;
+            }
+            table.rows += 1;
+            let Some(altitude) = table.altitude(&cell(alt_col), line)? else {
+                continue;
+            };
+            match key {
+                Key::Time(t) => {
+                    let text = cell(t);
+                    if text.is_empty() {
+                        table.dropout(line);
+                        continue;
+                    }
+                    let time = parse_time(&text).ok_or_else(|| {
+                        format!(
+                            "line {line}: time {text:?} does not read as a time (seconds since 1970, or a date \
+                             and time such as 2023-06-03T16:27:01Z)"
+                        )
+                    })?;
+                    table
+                        .times
+                        .push((time + how.clock_offset, altitude, line as u32));
+                }
+                Key::File(f) => {
+                    let cell = cell(f);
+                    let file = file_name(&cell);
+                    if file.is_empty() {
+                        return Err(format!("line {line}: no photo file in column {}", f + 1));
+                    }
+                    table.names.push(file, altitude, line as u32);
+                }
+            }
+        }
+        table.finish(path, matches!(key, Key::Time(_)))
     }
 
-    /// A log by time: the altitude at `t` (seconds since 1970 UTC), interpolated between the rows around it where
-    /// they lie at most [`MAX_GAP_S`] apart; `None` outside the log and in its gaps.
+    /// The altitude of the photo named `file_name` in a log by file name (matched by its name, else by its name
+    /// without the extension); `None` for a log by time.
+    pub fn altitude_by_name(&self, file_name: &str) -> Option<f32> {
+        match &self.rows {
+            Rows::ByName(names) => names.get(file_name),
+            Rows::ByTime(_) => None,
+        }
+    }
+
+    /// A log by time: the altitude at `t` (seconds since 1970 UTC on the camera's clock), interpolated between the
+    /// rows around it where they lie at most [`MAX_GAP_S`] apart; `None` outside the log and in its gaps.
     pub fn altitude_at(&self, t: f64) -> Option<f32> {
-        let rows = &self.by_time;
+        let Rows::ByTime(rows) = &self.rows else {
+            return None;
+        };
         let k = rows.partition_point(|r| r.0 < t);
         match (k.checked_sub(1).map(|j| rows[j]), rows.get(k)) {
-            (_, Some(&(t1, a1))) if t1 == t => Some(a1),
-            (Some((t0, a0)), Some(&(t1, a1))) if t1 - t0 <= MAX_GAP_S => {
+            (_, Some(&(t1, a1, _))) if t1 == t => Some(a1),
+            (Some((t0, a0, _)), Some(&(t1, a1, _))) if t1 - t0 <= MAX_GAP_S => {
                 let w = ((t - t0) / (t1 - t0)) as f32;
                 Some(a0 + w * (a1 - a0))
             }
@@ -205,9 +410,37 @@ impl Navigation {
         }
     }
 
+    /// The photo at `path` joined to the log: by its file name, or for a log by time at its EXIF time (read from
+    /// the file: the one read of this module besides the log's).
+    pub fn photo(&self, path: &Path) -> Joined {
+        match &self.rows {
+            Rows::ByName(names) => Joined {
+                altitude: names.get(&path.file_name().unwrap_or_default().to_string_lossy()),
+                time: None,
+            },
+            Rows::ByTime(_) => {
+                let time = crate::Metadata::read(path)
+                    .ok()
+                    .and_then(|m| m.time_taken());
+                Joined {
+                    altitude: time.and_then(|t| self.altitude_at(t)),
+                    time,
+                }
+            }
+        }
+    }
+
+    /// The photos at `paths` joined to the log ([`Navigation::photo`]), in parallel, in their order.
+    pub fn join(&self, paths: &[&Path]) -> Vec<Joined> {
+        paths.par_iter().map(|p| self.photo(p)).collect()
+    }
+
     /// Rows read: photos listed, or times of a log by time.
     pub fn len(&self) -> usize {
-        self.by_name.len() + self.by_time.len()
+        match &self.rows {
+            Rows::ByName(n) => n.rows.len(),
+            Rows::ByTime(t) => t.len(),
+        }
     }
 
     /// No row (never, for a navigation that was read).
@@ -217,15 +450,255 @@ impl Navigation {
 
     /// Whether photos are matched by their time (a log without a file column).
     pub fn by_time(&self) -> bool {
-        !self.by_time.is_empty()
+        matches!(self.rows, Rows::ByTime(_))
+    }
+
+    /// A log by time: its first and last time (seconds since 1970 UTC, on the camera's clock).
+    pub fn time_span(&self) -> Option<(f64, f64)> {
+        match &self.rows {
+            Rows::ByTime(t) => Some((t.first()?.0, t.last()?.0)),
+            Rows::ByName(_) => None,
+        }
+    }
+
+    /// What reading the log found that the user should know, each a sentence (no file name): dropout rows passed
+    /// over, times listed twice with different altitudes.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 }
 
-/// A positive, finite number of metres.
-fn positive(text: &str) -> Option<f32> {
-    text.parse()
-        .ok()
-        .filter(|a: &f32| a.is_finite() && *a > 0.0)
+/// The column photos are matched by.
+#[derive(Debug, Clone, Copy)]
+enum Key {
+    File(usize),
+    Time(usize),
+}
+
+impl Key {
+    /// The file's column (a log by name) or else the time's, as named by the user or found by name.
+    fn choose(
+        names: &[String],
+        given: &Columns,
+        line: usize,
+        header: &str,
+    ) -> std::result::Result<Key, String> {
+        if let Some(f) = &given.file {
+            return named(names, f, "file", line, header).map(Key::File);
+        }
+        if let Some(t) = &given.time {
+            return named(names, t, "time", line, header).map(Key::Time);
+        }
+        if let Some(f) = names
+            .iter()
+            .position(|c| FILE_COLUMNS.contains(&c.as_str()))
+        {
+            return Ok(Key::File(f));
+        }
+        let time = names.iter().position(|c| {
+            ["time", "datetime", "date_time", "epoch", "unix"]
+                .iter()
+                .any(|p| c.starts_with(p))
+                || c == "utc"
+        });
+        time.map(Key::Time).ok_or_else(|| {
+            format!(
+                "line {line}: no column names the photo's file (one of {}) or the time (time, timestamp, \
+                 datetime, date time, epoch, utc); the header is {header:?}: name them with \
+                 --navigation-columns (e.g. time=NAME,altitude=NAME)",
+                FILE_COLUMNS.join(", ")
+            )
+        })
+    }
+}
+
+/// The column the user named `name` (compared as [`normal`]).
+fn named(
+    names: &[String],
+    name: &str,
+    what: &str,
+    line: usize,
+    header: &str,
+) -> std::result::Result<usize, String> {
+    let want = normal(name);
+    names.iter().position(|c| *c == want).ok_or_else(|| {
+        format!(
+            "line {line}: no column named {name:?} (--navigation-columns {what}={name}); the header is {header:?}"
+        )
+    })
+}
+
+/// The altitude's column: named by the user, or the first whose name starts with `altitude`, or contains it, or
+/// is `alt` (alone or before `_`, ` ` or `[`).
+fn altitude_column(
+    names: &[String],
+    given: &Columns,
+    line: usize,
+    header: &str,
+) -> std::result::Result<usize, String> {
+    if let Some(a) = &given.altitude {
+        return named(names, a, "altitude", line, header);
+    }
+    let short = |c: &str| c == "alt" || c.starts_with("alt_") || c.starts_with("alt[");
+    let found = (names.iter().position(|c| c.starts_with("altitude")))
+        .or_else(|| names.iter().position(|c| c.contains("altitude")))
+        .or_else(|| names.iter().position(|c| short(c)));
+    found.ok_or_else(|| {
+        format!(
+            "line {line}: no altitude column (a name containing \"altitude\", in metres); the header is \
+             {header:?}: name it with --navigation-columns altitude=NAME"
+        )
+    })
+}
+
+/// A column's name as it is compared: trimmed, lower case, spaces, `-` and `/` as `_`.
+fn normal(name: &str) -> String {
+    name.trim()
+        .to_lowercase()
+        .chars()
+        .map(|c| if matches!(c, ' ' | '-' | '/') { '_' } else { c })
+        .collect()
+}
+
+/// The rows of a log as they are read, and what was passed over.
+#[derive(Default)]
+struct Table {
+    names: Names,
+    times: Vec<(f64, f32, u32)>,
+    /// Rows after the header (and the units row).
+    rows: usize,
+    dropouts: usize,
+    dropout_lines: Vec<usize>,
+}
+
+impl Table {
+    /// The altitude of a cell: `Ok(None)` for a dropout (empty, not a number, `NaN`, zero or negative: counted),
+    /// an error for an implausible one.
+    fn altitude(&mut self, text: &str, line: usize) -> std::result::Result<Option<f32>, String> {
+        match text.parse::<f32>() {
+            Ok(a) if a > MAX_ALTITUDE_M => Err(format!(
+                "line {line}: altitude {text:?} is not a camera's height over the seafloor (at most \
+                 {MAX_ALTITUDE_M} m): a no-data marker or another column? Remove such rows, or name the \
+                 altitude's column with --navigation-columns altitude=NAME"
+            )),
+            Ok(a) if a > 0.0 => Ok(Some(a)),
+            _ => {
+                self.dropout(line);
+                Ok(None)
+            }
+        }
+    }
+
+    fn dropout(&mut self, line: usize) {
+        self.dropouts += 1;
+        if self.dropout_lines.len() < 3 {
+            self.dropout_lines.push(line);
+        }
+    }
+
+    /// The log, or why it cannot be used (too few usable rows).
+    fn finish(mut self, path: &Path, by_time: bool) -> std::result::Result<Navigation, String> {
+        let usable = self.names.rows.len() + self.times.len();
+        let least = if by_time { MIN_TIME_ROWS } else { 1 };
+        let lines = |l: &[usize]| {
+            l.iter()
+                .map(|k| k.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if self.rows == 0 {
+            return Err("no rows: a row per photo (or per time) after the header".into());
+        }
+        if usable < least {
+            return Err(format!(
+                "{usable} of {} rows give a usable altitude (a positive number of metres; e.g. line {} has \
+                 none): a log {} needs at least {least}; is the altitude's column the right one \
+                 (--navigation-columns altitude=NAME)?",
+                self.rows,
+                lines(&self.dropout_lines),
+                if by_time { "by time" } else { "by file name" }
+            ));
+        }
+        let mut notes = Vec::new();
+        if self.dropouts > 0 {
+            notes.push(format!(
+                "{} of {} rows give no altitude (empty, NaN, zero or negative: a dropout, e.g. line {}) and were \
+                 passed over{}",
+                self.dropouts,
+                self.rows,
+                lines(&self.dropout_lines),
+                if by_time {
+                    format!(
+                        "; photos between the rows around them have an altitude where those lie at most {MAX_GAP_S} s \
+                         apart"
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        let rows = if by_time {
+            // Stable: rows of one time stay in file order, and the first is the one read at that time.
+            self.times.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let conflicts: Vec<_> = self
+                .times
+                .windows(2)
+                .filter(|w| w[0].0 == w[1].0 && w[0].1 != w[1].1)
+                .collect();
+            if let Some(w) = conflicts.first() {
+                notes.push(format!(
+                    "{} time(s) are listed twice with different altitudes (e.g. lines {} and {}: {} m and {} m); \
+                     the first row of each is taken",
+                    conflicts.len(),
+                    w[0].2,
+                    w[1].2,
+                    w[0].1,
+                    w[1].1
+                ));
+            }
+            Rows::ByTime(self.times)
+        } else {
+            self.names.sort()?;
+            Rows::ByName(self.names)
+        };
+        Ok(Navigation {
+            path: path.to_path_buf(),
+            sha256: String::new(),
+            rows,
+            notes,
+        })
+    }
+}
+
+/// The first row under the header is a units row (`s,deg,m`): no cell reads as a number, the altitude's cell is
+/// not empty, and (a log by time) the time's cell does not read as a time.
+fn units_row(record: &csv::ByteRecord, key: &Key, alt_col: usize) -> bool {
+    let cell = |c: usize| cell_text(record.get(c).unwrap_or(b""));
+    let no_number = record.iter().all(|c| cell_text(c).parse::<f64>().is_err());
+    let key_reads = match *key {
+        Key::Time(t) => parse_time(&cell(t)).is_some(),
+        Key::File(_) => false,
+    };
+    no_number && !cell(alt_col).is_empty() && !key_reads
+}
+
+fn blank(record: &csv::ByteRecord) -> bool {
+    record.iter().all(|c| c.is_empty())
+}
+
+fn line_of(record: &csv::ByteRecord) -> usize {
+    record.position().map_or(0, |p| p.line() as usize)
+}
+
+fn cell_text(cell: &[u8]) -> std::borrow::Cow<'_, str> {
+    String::from_utf8_lossy(cell)
+}
+
+fn csv_error(e: csv::Error) -> String {
+    match e.position() {
+        Some(p) => format!("line {}: {e}", p.line()),
+        None => e.to_string(),
+    }
 }
 
 /// A time as seconds since 1970-01-01 00:00 UTC: a number (those seconds), or a date and time, `YYYY-MM-DD` (or
@@ -236,34 +709,45 @@ pub fn parse_time(text: &str) -> Option<f64> {
     if let Ok(v) = text.parse::<f64>() {
         return v.is_finite().then_some(v);
     }
-    let (date, rest) = text.split_at_checked(10)?;
-    let rest = rest.strip_prefix(['T', 't', ' '])?;
-    let d: Vec<&str> = date.split(['-', ':', '/']).collect();
-    let [y, m, day] = d[..] else { return None };
-    let (y, m, day): (i64, u32, u32) = (y.parse().ok()?, m.parse().ok()?, day.parse().ok()?);
-    if !(1..=12).contains(&m) || day == 0 || day > days_in_month(y, m) {
+    // A date alone is no time.
+    let b = text.as_bytes();
+    if b.len() <= 11 {
         return None;
     }
-    // The clock, then the zone.
-    let zone_at = rest.find(['Z', 'z', '+', '-']).unwrap_or(rest.len());
-    let (clock, zone) = rest.split_at(zone_at);
-    let c: Vec<&str> = clock.split(':').collect();
-    let [hh, mm, ss] = c[..] else { return None };
-    let (hh, mm): (u32, u32) = (hh.parse().ok()?, mm.parse().ok()?);
-    let ss: f64 = ss.parse().ok()?;
-    if hh > 23 || mm > 59 || !(0.0..61.0).contains(&ss) {
-        return None;
+    let mut iso = text.to_string();
+    if matches!(b[4], b':' | b'/') && b[7] == b[4] {
+        iso.replace_range(4..5, "-");
+        iso.replace_range(7..8, "-");
     }
-    let offset = if zone.is_empty() {
-        0.0
-    } else {
-        parse_offset(zone)?
+    let stamp = match iso.parse::<jiff::Timestamp>() {
+        Ok(t) => t,
+        Err(_) => {
+            let civil: jiff::civil::DateTime = iso.parse().ok()?;
+            jiff::tz::Offset::UTC.to_timestamp(civil).ok()?
+        }
     };
-    let days = days_from_civil(y, m, day) as f64;
-    Some(days * 86_400.0 + (hh * 3600 + mm * 60) as f64 + ss - offset)
+    Some(stamp.as_second() as f64 + f64::from(stamp.subsec_nanosecond()) * 1e-9)
 }
 
-/// A time zone's offset from UTC in seconds: `Z`, or `+HH:MM`, `-HH:MM`, `+HHMM`, `+HH`.
+/// Seconds since 1970-01-01 00:00 UTC of a date and time of the proleptic Gregorian calendar (second 60, a leap
+/// second, counts as the next minute's 0); `None` for a date or time that does not exist.
+pub(crate) fn utc_seconds(y: i32, month: u32, day: u32, h: u32, m: u32, s: u32) -> Option<f64> {
+    let date = jiff::civil::Date::new(
+        i16::try_from(y).ok()?,
+        i8::try_from(month).ok()?,
+        i8::try_from(day).ok()?,
+    )
+    .ok()?;
+    if h > 23 || m > 59 || s > 60 {
+        return None;
+    }
+    let midnight = jiff::tz::Offset::UTC
+        .to_timestamp(date.to_datetime(jiff::civil::Time::midnight()))
+        .ok()?;
+    Some((midnight.as_second() + i64::from(h * 3600 + m * 60 + s)) as f64)
+}
+
+/// A time zone's offset from UTC in seconds: `Z`, or `+HH:MM`, `-HH:MM`, `+HHMM`, `+HH` (EXIF's `OffsetTime`).
 pub fn parse_offset(text: &str) -> Option<f64> {
     let text = text.trim();
     if text.eq_ignore_ascii_case("z") {
@@ -287,51 +771,24 @@ pub fn parse_offset(text: &str) -> Option<f64> {
     (h <= 18.0 && m < 60.0).then_some(sign * (h * 3600.0 + m * 60.0))
 }
 
-/// Days from 1970-01-01 to the date (proleptic Gregorian calendar).
-fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = if y >= 0 { y } else { y - 399 } / 400;
-    let yoe = y - era * 400;
-    let mp = (m as i64 + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + d as i64 - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
-fn days_in_month(y: i64, m: u32) -> u32 {
-    match m {
-        2 if (y % 4 == 0 && y % 100 != 0) || y % 400 == 0 => 29,
-        2 => 28,
-        4 | 6 | 9 | 11 => 30,
-        _ => 31,
+/// A time as a reader sees it: `2023-06-03 16:27:01Z` (UTC, to the second).
+pub(crate) fn iso(t: f64) -> String {
+    match jiff::Timestamp::from_second(t.floor() as i64) {
+        Ok(s) => s.strftime("%Y-%m-%d %H:%M:%SZ").to_string(),
+        Err(_) => format!("{t:.0} s since 1970"),
     }
-}
-
-/// The cells of one row, trimmed, with surrounding double quotes removed (a quoted cell may hold the separator).
-fn split(row: &str, sep: char) -> Vec<String> {
-    let mut cells = Vec::new();
-    let (mut cell, mut quoted) = (String::new(), false);
-    for c in row.chars() {
-        match c {
-            '"' => quoted = !quoted,
-            c if c == sep && !quoted => cells.push(std::mem::take(&mut cell).trim().to_string()),
-            c => cell.push(c),
-        }
-    }
-    cells.push(cell.trim().to_string());
-    cells
 }
 
 /// The file name of a path in the log, with `/` or `\` between folders.
-fn file_name(cell: &str) -> String {
-    cell.rsplit(['/', '\\']).next().unwrap_or("").to_string()
+fn file_name(cell: &str) -> &str {
+    cell.rsplit(['/', '\\']).next().unwrap_or("")
 }
 
 /// A file name without its extension.
-fn stem(name: &str) -> String {
+fn stem(name: &str) -> &str {
     match name.rsplit_once('.') {
-        Some((s, _)) if !s.is_empty() => s.to_string(),
-        _ => name.to_string(),
+        Some((s, _)) if !s.is_empty() => s,
+        _ => name,
     }
 }
 
@@ -339,39 +796,48 @@ fn stem(name: &str) -> String {
 mod tests {
     use super::*;
 
+    fn parse_as(text: &str, how: &ReadAs) -> std::result::Result<Navigation, String> {
+        Navigation::parse(Path::new("nav.csv"), text.as_bytes(), how)
+    }
+
     fn parse(text: &str) -> std::result::Result<Navigation, String> {
-        Navigation::parse(Path::new("nav.csv"), text)
+        parse_as(text, &ReadAs::default())
+    }
+
+    fn altitude_of(nav: &Navigation, path: &str) -> Option<f32> {
+        nav.photo(Path::new(path)).altitude
     }
 
     #[test]
     fn reads_plain_and_oplab_logs() {
         let nav = parse("file,altitude\n0001.jpg,3.5\n0002.jpg,4.25\n").unwrap();
         assert_eq!(nav.len(), 2);
-        assert_eq!(nav.altitude_of(Path::new("/dive/0002.jpg")), Some(4.25));
-        assert_eq!(nav.altitude_of(Path::new("0003.jpg")), None);
+        assert_eq!(altitude_of(&nav, "/dive/0002.jpg"), Some(4.25));
+        assert_eq!(altitude_of(&nav, "0003.jpg"), None);
         // oplab's columns, a path with folders, a byte-order mark and quoted cells.
         let oplab = "\u{feff}Imagenumber,Northing [m],Easting [m],Depth [m],Roll [deg],Pitch [deg],Heading [deg],\
                      Altitude [m],Timestamp,Latitude [deg],Longitude [deg],relative_path\n\
                      1,0.1,0.2,4000.0,0.5,-1.0,90.0,2.93,1.6e9,-10.0,-120.0,\"image/PR_001_LC16.tif\"\n";
         let nav = parse(oplab).unwrap();
-        assert_eq!(nav.altitude_of(Path::new("x/PR_001_LC16.tif")), Some(2.93));
+        assert_eq!(altitude_of(&nav, "x/PR_001_LC16.tif"), Some(2.93));
         // By the name without the extension (a log of the raw frames, photos converted to PNG).
-        assert_eq!(
-            nav.altitude_of(Path::new("out/PR_001_LC16.png")),
-            Some(2.93)
-        );
+        assert_eq!(altitude_of(&nav, "out/PR_001_LC16.png"), Some(2.93));
         // Semicolons, tabs, comments and blank lines.
         let nav = parse("# sledge\n\nimage;Altitude_m\nA.JPG;2.0\n").unwrap();
-        assert_eq!(nav.altitude_of(Path::new("A.JPG")), Some(2.0));
+        assert_eq!(altitude_of(&nav, "A.JPG"), Some(2.0));
         let nav = parse("photo\taltitude\nb.png\t1.5\n").unwrap();
-        assert_eq!(nav.altitude_of(Path::new("b.png")), Some(1.5));
+        assert_eq!(altitude_of(&nav, "b.png"), Some(1.5));
+        // A quoted cell holding the separator.
+        let nav = parse("file,altitude\n\"a,b.png\",1.25\n").unwrap();
+        assert_eq!(altitude_of(&nav, "a,b.png"), Some(1.25));
     }
 
     #[test]
     fn a_stem_of_two_files_matches_neither_by_stem() {
-        let nav = parse("file,altitude\na.jpg,3\na.png,4\n").unwrap();
-        assert_eq!(nav.altitude_of(Path::new("a.png")), Some(4.0));
-        assert_eq!(nav.altitude_of(Path::new("a.tif")), None);
+        let nav = parse("file,altitude\na.jpg,3\na.png,4\nc.jpg,5\n").unwrap();
+        assert_eq!(altitude_of(&nav, "a.png"), Some(4.0));
+        assert_eq!(altitude_of(&nav, "a.tif"), None);
+        assert_eq!(altitude_of(&nav, "c.tif"), Some(5.0));
     }
 
     #[test]
@@ -379,15 +845,8 @@ mod tests {
         let err = |t: &str| parse(t).unwrap_err();
         assert!(err("").contains("empty"));
         assert!(err("name,altitude\na.jpg,3\n").contains("no column names the photo's file"));
-        assert!(err("time,altitude\nnoon,3\n").contains("line 2"));
+        assert!(err("time,altitude\n100,3\nnoon,3\n").contains("line 3"));
         assert!(err("file,depth\na.jpg,3\n").contains("no altitude column"));
-        let e = err("file,altitude\na.jpg,3\nb.jpg,-1\n");
-        assert!(
-            e.contains("line 3") && e.contains("b.jpg") && e.contains("\"-1\""),
-            "{e}"
-        );
-        assert!(err("file,altitude\na.jpg,NaN\n").contains("line 2"));
-        assert!(err("file,altitude\na.jpg\n").contains("line 2"));
         let e = err("file,altitude\na.jpg,3\nd/a.jpg,4\n");
         assert!(
             e.contains("line 3") && e.contains("twice") && e.contains("line 2"),
@@ -395,6 +854,86 @@ mod tests {
         );
         assert!(err("file,altitude\n").contains("no rows"));
         assert!(err("file,altitude\n,3\n").contains("line 2"));
+        let e = err("file,altitude\na.jpg,3\nb.jpg,9999\n");
+        assert!(e.contains("line 3") && e.contains("9999"), "{e}");
+        assert!(err("file,altitude\na.jpg,1e30\n").contains("line 2"));
+        let e = err("file,altitude\na.jpg,0\nb.jpg,NaN\n");
+        assert!(e.contains("0 of 2 rows") && e.contains("line 2, 3"), "{e}");
+        let e = err("time,altitude\n1,3\n2,-1\n");
+        assert!(e.contains("1 of 2 rows") && e.contains("at least 2"), "{e}");
+    }
+
+    #[test]
+    fn dropouts_are_passed_over_and_counted() {
+        let nav = parse("time,altitude\n0,2\n1,0\n2,NaN\n3,\n4,-1\n5,3\n").unwrap();
+        assert_eq!(nav.len(), 2);
+        // Bridged by the gap rule: 5 s apart.
+        assert_eq!(nav.altitude_at(2.5), Some(2.5));
+        let note = &nav.notes()[0];
+        assert!(
+            note.starts_with("4 of 6 rows") && note.contains("line 3, 4, 5"),
+            "{note}"
+        );
+        // A photo's row without an altitude leaves that photo unlisted.
+        let nav = parse("file,altitude\na.jpg,2\nb.jpg,0\n").unwrap();
+        assert_eq!(altitude_of(&nav, "b.jpg"), None);
+        assert_eq!(nav.notes().len(), 1);
+    }
+
+    #[test]
+    fn a_units_row_and_names_as_vehicles_write_them() {
+        let nav = parse("Date Time;lat;dvl_altitude_m\ns;deg;m\n2023-06-03T18:27:00+02:00;1;3\n2023-06-03T16:27:02Z;1;5\n")
+            .unwrap();
+        assert!(nav.by_time() && nav.notes().is_empty());
+        assert_eq!(nav.altitude_at(1_685_809_621.0), Some(4.0));
+        let nav = parse("file,alt_m\n-,m\na.jpg,2\n").unwrap();
+        assert_eq!(altitude_of(&nav, "a.jpg"), Some(2.0));
+        // A units row anywhere else is a bad time.
+        assert!(parse("time,altitude\n1,2\ns,m\n")
+            .unwrap_err()
+            .contains("line 3"));
+    }
+
+    #[test]
+    fn columns_named_by_the_user() {
+        let how = |c: &str| ReadAs {
+            columns: c.parse().unwrap(),
+            clock_offset: 0.0,
+        };
+        let text = "t_log,height,range\n10,9,2\n11,9,4\n";
+        assert!(parse(text).unwrap_err().contains("--navigation-columns"));
+        let nav = parse_as(text, &how("time=T_LOG, altitude=range")).unwrap();
+        assert_eq!(nav.altitude_at(10.5), Some(3.0));
+        let e = parse_as(text, &how("time=when")).unwrap_err();
+        assert!(e.contains("no column named \"when\""), "{e}");
+        assert!("file=a,time=b".parse::<Columns>().is_err());
+        assert!("depth=a".parse::<Columns>().is_err());
+        assert_eq!(
+            "altitude=Alt [m]"
+                .parse::<Columns>()
+                .unwrap()
+                .altitude
+                .as_deref(),
+            Some("Alt [m]")
+        );
+    }
+
+    #[test]
+    fn a_clock_offset_moves_the_log_and_conflicting_times_are_said() {
+        let how = ReadAs {
+            clock_offset: -7200.0,
+            ..ReadAs::default()
+        };
+        let nav = parse_as("time,altitude\n7200,2\n7201,4\n", &how).unwrap();
+        assert_eq!(nav.altitude_at(0.5), Some(3.0));
+        assert_eq!(nav.time_span(), Some((0.0, 1.0)));
+        let nav = parse("time,altitude\n1,2\n2,4\n1,3\n2,4\n").unwrap();
+        assert_eq!(nav.altitude_at(1.0), Some(2.0), "the first row of a time");
+        let note = &nav.notes()[0];
+        assert!(
+            note.starts_with("1 time(s)") && note.contains("lines 2 and 4"),
+            "{note}"
+        );
     }
 
     #[test]
@@ -404,6 +943,7 @@ mod tests {
             ("2023-06-03T16:27:01Z", 1_685_809_621.0),
             ("2023-06-03 16:27:01", 1_685_809_621.0),
             ("2023:06:03 16:27:01", 1_685_809_621.0),
+            ("2023/06/03 16:27:01", 1_685_809_621.0),
             ("2023-06-03T16:27:01+02:00", 1_685_802_421.0),
             ("2023-06-03T16:27:01-0130", 1_685_815_021.0),
             ("2024-05-06T07:08:09.25Z", 1_714_979_289.25),
@@ -424,6 +964,9 @@ mod tests {
         }
         assert_eq!(parse_offset("+05:30"), Some(19_800.0));
         assert_eq!(parse_offset("5:30"), None);
+        assert_eq!(utc_seconds(2023, 6, 3, 16, 27, 1), Some(1_685_809_621.0));
+        assert_eq!(utc_seconds(2023, 2, 29, 0, 0, 0), None);
+        assert_eq!(iso(1_685_809_621.7), "2023-06-03 16:27:01Z");
     }
 
     #[test]
@@ -452,11 +995,17 @@ mod tests {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("nav.csv");
         std::fs::write(&p, "file,depth\n").unwrap();
-        let e = Navigation::read(&p).unwrap_err().to_string();
+        let e = Navigation::read(&p, &ReadAs::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with(&p.display().to_string()), "{e}");
-        let e = Navigation::read(&d.path().join("none.csv"))
+        let e = Navigation::read(&d.path().join("none.csv"), &ReadAs::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("none.csv"), "{e}");
+        let e = Navigation::read(d.path(), &ReadAs::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a folder"), "{e}");
     }
 }

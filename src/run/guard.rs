@@ -91,6 +91,9 @@ fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
             // The window in effect, however it was given (--window, --contamination or auto).
             let flag = match k.as_str() {
                 "window-in-effect" => "--window".to_string(),
+                // Recorded by the run: the file's content (edited, or another file of the same name).
+                "navigation-sha256" => "the content (SHA-256) of --navigation".to_string(),
+                "mask-sha256" => "the content (SHA-256) of --mask".to_string(),
                 k => format!("--{k}"),
             };
             format!(

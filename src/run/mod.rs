@@ -46,6 +46,25 @@ pub fn correct_mission(opts: &Options, progress: &dyn Progress) -> Result<Report
     }
 }
 
+/// The mask's and the navigation log's paths resolved and their contents' SHA-256 in the options the run records
+/// (report.json, the lock): a shard or a resumed run that reads another file, or the same file edited, is refused
+/// by the options check instead of mixed, and `./nav.csv` is `nav.csv`.
+fn record_inputs(opts: &mut Options, plan: &Plan) -> Result<()> {
+    if let Some(m) = &opts.mask {
+        opts.mask_sha256 = Some(crate::io::whole::sha256_of(
+            m,
+            crate::io::navigation::MAX_BYTES,
+            "--mask file",
+        )?);
+        opts.mask = Some(crate::io::paths::resolve(m));
+    }
+    opts.navigation_sha256 = plan.navigation.as_ref().map(|n| n.sha256.clone());
+    if let Some(n) = &opts.navigation {
+        opts.navigation = Some(crate::io::paths::resolve(n));
+    }
+    Ok(())
+}
+
 /// Plan, prepare the engine, stream the survey, report.
 fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let started = Instant::now();
@@ -55,7 +74,8 @@ fn run(opts: &Options, progress: &dyn Progress) -> Result<Report> {
     let plan = Plan::new(opts, progress)?;
     let (params, transfer_assumed) = resolve(opts, &plan, progress)?;
     // The options with every `auto` resolved, so the report and the lock record what ran.
-    let resolved = opts.with_resolved(&params);
+    let mut resolved = opts.with_resolved(&params);
+    record_inputs(&mut resolved, &plan)?;
     let opts = &resolved;
     plan.create_work_dir()?;
     // One run per --out (per shard), the same options as earlier runs there, stale temp files removed

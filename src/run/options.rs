@@ -149,6 +149,24 @@ pub struct Options {
     /// EXIF time (`io::navigation`): where the altitude swings along the track, each photo's window is chosen among the
     /// photos around it lit from the nearest heights (`method::altitude`). `method = abyss` only. Default: none.
     pub navigation: Option<PathBuf>,
+    /// The navigation log's columns, where their names are unusual: `file`, `time` and `altitude` as the log's
+    /// header names them (`--navigation-columns time=Date Time,altitude=dvl_alt`; in a config file the same text
+    /// or a table `navigation-columns = { time = "Date Time", altitude = "dvl_alt" }`). A column not named is found
+    /// by its name (`io::navigation`). Default: all found by name.
+    #[serde(skip_serializing_if = "crate::io::navigation::Columns::is_empty")]
+    pub navigation_columns: crate::io::navigation::Columns,
+    /// Seconds added to the times of a navigation log by time to put them on the camera's clock (the camera's
+    /// clock minus the log's: `-7200` for a log 2 h ahead of the camera). Default: 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub navigation_clock_offset: f64,
+    /// The SHA-256 of the navigation log's content, recorded by the run (report.json, the lock) with the log's
+    /// path resolved: runs that read another log, or the same file edited, are not mixed (shards, `--resume`).
+    /// Not an option to give: a run sets it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub navigation_sha256: Option<String>,
+    /// The SHA-256 of the mask file's content, recorded by the run as [`Options::navigation_sha256`] is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mask_sha256: Option<String>,
     /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
     /// `refine`), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
     /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
@@ -293,6 +311,10 @@ impl Default for Options {
             mask: None,
             mask_auto: false,
             navigation: None,
+            navigation_columns: Default::default(),
+            navigation_clock_offset: 0.0,
+            navigation_sha256: None,
+            mask_sha256: None,
             method: p.method,
             degree: p.degree,
             watch: false,
@@ -315,6 +337,13 @@ impl Default for Options {
 
 /// The breakdown probability `P_half` accepted when `--contamination` chooses the window (the paper's 1 %).
 pub const DEFAULT_RISK: f64 = 0.01;
+
+/// The largest config file read (a config file is a page of settings).
+pub const CONFIG_MAX_BYTES: u64 = 1 << 20;
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
 
 /// The switches the command line turns off with `--no-…`, by their config-file keys.
 const SWITCHES: [&str; 5] = [
@@ -353,7 +382,7 @@ fn negated_switches(table: &mut toml::Table) -> Result<bool, String> {
 impl Options {
     /// Read options from a TOML file. Relative paths in it are taken relative to the file's folder.
     pub fn from_toml_file(path: &Path) -> Result<Options, Error> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::io::whole::read_text(path, CONFIG_MAX_BYTES, "config file")?;
         let config = |reason: String| Error::Config {
             path: path.to_owned(),
             reason,
@@ -461,6 +490,14 @@ impl Options {
         if self.scatter.is_some() && self.water_column.is_some() {
             return usage("give either --water-column or --scatter, not both".into());
         }
+        // A year either way: a clock set to another day, not a photo's whole mission.
+        let offset = self.navigation_clock_offset;
+        if offset.is_nan() || offset.abs() > 366.0 * 86_400.0 {
+            return usage(format!(
+                "--navigation-clock-offset {}: seconds, at most a year either way",
+                self.navigation_clock_offset
+            ));
+        }
         if self.navigation.is_some() {
             if stdin {
                 return usage(
@@ -552,6 +589,10 @@ impl Options {
             mask: _,
             mask_auto: _,
             navigation: _,
+            navigation_columns: _,
+            navigation_clock_offset: _,
+            navigation_sha256: _,
+            mask_sha256: _,
             watch: _,
             idle_timeout: _,
             poll_interval: _,

@@ -57,6 +57,9 @@ pub struct Plan {
     pub warnings: Vec<String>,
     /// The navigation log (`--navigation`), read.
     pub navigation: Option<Navigation>,
+    /// The survey photos' altitudes in the navigation log, joined once when the photos were listed (those the log
+    /// gives an altitude).
+    pub altitudes: std::collections::HashMap<PathBuf, f32>,
     /// The write gate of the run (src/io/gate.rs), open while the plan lives.
     pub _gate: crate::io::gate::Gate,
 }
@@ -81,9 +84,12 @@ impl Plan {
         let window = opts.window_choice()?;
         let found = list_survey(opts, &survey, &out, streaming)?;
         let mut warnings = folder_warnings(opts, &survey, &found);
-        let navigation = match &opts.navigation {
-            Some(p) => Some(navigation(p, &found, streaming, &mut warnings)?),
-            None => None,
+        let (navigation, altitudes) = match &opts.navigation {
+            Some(p) => {
+                let (nav, altitudes) = navigation(p, opts, &found, streaming, &mut warnings)?;
+                (Some(nav), altitudes)
+            }
+            None => Default::default(),
         };
         for m in &warnings {
             progress.warn(m);
@@ -143,13 +149,19 @@ impl Plan {
             work_dir,
             warnings,
             navigation,
+            altitudes,
             _gate: gate,
         })
     }
 
-    /// The altitude of the photo at `path` in the navigation log (`--navigation`), where one is given and lists it.
+    /// The altitude of the photo at `path` in the navigation log (`--navigation`), where one is given and lists it:
+    /// as joined when the photos were listed, or for a photo a watched folder gained since, joined now.
     pub fn altitude_of(&self, path: &Path) -> Option<f32> {
-        self.navigation.as_ref()?.altitude_of(path)
+        let nav = self.navigation.as_ref()?;
+        match self.streaming {
+            false => self.altitudes.get(path).copied(),
+            true => nav.photo(path).altitude,
+        }
     }
 
     /// Create `<out>/_abysslight`: the first thing a run writes.
@@ -312,16 +324,19 @@ impl Plan {
         }
         line(self.describe_window(opts, &params));
         if let Some(nav) = &self.navigation {
-            let listed = self
-                .found
-                .photos
-                .iter()
-                .filter(|e| nav.altitude_of(&e.path).is_some())
-                .count();
+            let listed = self.altitudes.len();
+            let (lo, hi) = (self.altitudes.values())
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &a| {
+                    (lo.min(a), hi.max(a))
+                });
+            let range = match listed {
+                0 => String::new(),
+                _ => format!(" ({lo:.2} to {hi:.2} m)"),
+            };
             line(format!(
-                "windows by altitude: {} gives the altitude of {listed} of the {} survey photos; where a window's \
-                 altitudes span {:.0} % or more of their mean, it is chosen among the photos lit from the nearest \
-                 heights",
+                "windows by altitude: {} gives the altitude of {listed} of the {} survey photos{range}; where a \
+                 window's altitudes span {:.0} % or more of their mean, it is chosen among the photos lit from the \
+                 nearest heights",
                 nav.path.display(),
                 self.found.photos.len(),
                 100.0 * crate::method::altitude::ALTITUDE_SPAN
@@ -502,23 +517,34 @@ impl Plan {
     }
 }
 
-/// The survey photos found (none when streaming), or why there are none to correct.
-/// The input folders and files of a run are there, each named by its flag where not (the path checks after it
-/// name only the path).
-/// The navigation log at `path`, read, with a warning for the survey's photos it does not list; none listed is an
-/// error (the wrong log, or names that do not match). Photos still to come (`--watch`) are not counted.
+/// The navigation log at `path`, read (as `opts` says: columns, clock offset), and joined to the survey's photos
+/// (in parallel: a log by time reads each photo's EXIF time), with a warning for what reading it found and for the
+/// photos it gives no altitude, and what that costs; none given an altitude is an error that says why (the wrong
+/// log, names that do not match, or clocks apart). Photos still to come (`--watch`) are not counted.
 fn navigation(
     path: &Path,
+    opts: &Options,
     found: &Found,
     streaming: bool,
     warnings: &mut Vec<String>,
-) -> Result<Navigation> {
-    let nav = Navigation::read(path)?;
+) -> Result<(Navigation, std::collections::HashMap<PathBuf, f32>)> {
+    let how = crate::io::navigation::ReadAs {
+        columns: opts.navigation_columns.clone(),
+        clock_offset: opts.navigation_clock_offset,
+    };
+    let nav = Navigation::read(path, &how)?;
+    for note in nav.notes() {
+        warnings.push(format!("{}: {note}", path.display()));
+    }
     let photos = &found.photos;
-    let unlisted = photos
-        .iter()
-        .filter(|e| nav.altitude_of(&e.path).is_none())
-        .count();
+    let paths: Vec<&Path> = photos.iter().map(|e| e.path.as_path()).collect();
+    let joined = nav.join(&paths);
+    let altitudes = (photos.iter().zip(&joined))
+        .filter_map(|(e, j)| Some((e.path.clone(), j.altitude?)))
+        .collect::<std::collections::HashMap<_, _>>();
+    let unlisted: Vec<usize> = (0..photos.len())
+        .filter(|&i| joined[i].altitude.is_none())
+        .collect();
     let (none, some) = match nav.by_time() {
         true => (
             "gives no altitude at the time of any",
@@ -526,23 +552,16 @@ fn navigation(
         ),
         false => ("lists none of the", "does not list"),
     };
-    if !streaming && !photos.is_empty() && unlisted == photos.len() {
-        let first = &photos[0].path;
+    if !streaming && !photos.is_empty() && unlisted.len() == photos.len() {
         let how = match nav.by_time() {
-            true => match crate::Metadata::read(first).ok().and_then(|m| m.time_taken()) {
-                Some(t) => format!(
-                    "photos are matched by the time in their EXIF, e.g. {} at {t:.0} s since 1970 UTC; the log's \
-                     times must be on the camera's clock",
-                    first.display()
-                ),
-                None => format!(
-                    "photos are matched by the time in their EXIF (DateTimeOriginal), and {} has none",
-                    first.display()
-                ),
-            },
+            true => clocks_apart(&nav, opts.navigation_clock_offset, &joined, &photos[0].path),
             false => format!(
                 "photos are matched by file name, e.g. {}",
-                first.file_name().unwrap_or_default().to_string_lossy()
+                photos[0]
+                    .path
+                    .file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
             ),
         };
         return Err(Error::Config {
@@ -550,17 +569,76 @@ fn navigation(
             reason: format!("{none} {} survey photos ({how})", photos.len()),
         });
     }
-    if unlisted > 0 {
+    if let Some(&first) = unlisted.first() {
+        let n = opts
+            .window_choice()
+            .map_or(crate::method::params::BASE_WINDOW, |w| w.n);
         warnings.push(format!(
-            "{}: {some} {unlisted} of the {} survey photos; they keep the window over time and are not chosen \
-             into others' windows",
+            "{}: {some} {} of the {} survey photos (e.g. {}); windows over time that hold one are not chosen by \
+             altitude: {} photos lose windows by altitude (windows of {n} photos)",
             path.display(),
-            photos.len()
+            unlisted.len(),
+            photos.len(),
+            photos[first].relative.display(),
+            windows_holding(&unlisted, photos.len(), n),
         ));
     }
-    Ok(nav)
+    Ok((nav, altitudes))
 }
 
+/// How many of `total` photos have a window over time of `n` (centred, shifted at the mission's ends) that holds
+/// one of `unlisted` (sorted photo numbers): the photos whose window stays the window over time.
+fn windows_holding(unlisted: &[usize], total: usize, n: usize) -> usize {
+    let n = n.clamp(1, total.max(1));
+    (0..total)
+        .filter(|&i| {
+            let start = i.saturating_sub(n / 2).min(total - n);
+            let k = unlisted.partition_point(|&u| u < start);
+            unlisted.get(k).is_some_and(|&u| u < start + n)
+        })
+        .count()
+}
+
+/// Why a log by time gives no photo an altitude: both spans as times, and the clock offset that would align them;
+/// or that the photos have no EXIF time.
+fn clocks_apart(
+    nav: &Navigation,
+    offset: f64,
+    joined: &[crate::io::navigation::Joined],
+    first: &Path,
+) -> String {
+    use crate::io::navigation::iso;
+    let times = joined.iter().filter_map(|j| j.time);
+    let (lo, hi) = times.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+        (lo.min(t), hi.max(t))
+    });
+    let Some((a, b)) = nav.time_span().filter(|_| lo.is_finite()) else {
+        return format!(
+            "photos are matched by the time in their EXIF (DateTimeOriginal), and {} has none",
+            first.display()
+        );
+    };
+    // Midpoint to midpoint: the offset that lays the photos' span in the middle of the log's.
+    let apart = (lo + hi) / 2.0 - (a + b) / 2.0;
+    let words = match apart.abs() {
+        d if d >= 3600.0 => format!("{:.1} h", d / 3600.0),
+        d if d >= 60.0 => format!("{:.0} min", d / 60.0),
+        d => format!("{d:.0} s"),
+    };
+    format!(
+        "photos are matched by the time in their EXIF: log {} to {}, photos {} to {}: {words} apart? If the \
+         camera's clock is off, --navigation-clock-offset {} puts the log on it",
+        iso(a),
+        iso(b),
+        iso(lo),
+        iso(hi),
+        (offset + apart).round()
+    )
+}
+
+/// The input folders and files of a run are there, each named by its flag where not (the path checks after it
+/// name only the path); the files read whole or decoded (mask, scatter image, navigation log) are regular files,
+/// not a FIFO that would block the run or a device that never ends.
 fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     let inputs = [
         ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
@@ -578,9 +656,19 @@ fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
             ));
         }
     }
+    for (what, path) in [
+        ("--mask file", &opts.mask),
+        ("--scatter image", &opts.scatter),
+        ("--navigation log", &opts.navigation),
+    ] {
+        if let Some(p) = path {
+            crate::io::whole::check_regular(p, what)?;
+        }
+    }
     Ok(())
 }
 
+/// The survey photos found (none when streaming), or why there are none to correct.
 fn list_survey(opts: &Options, survey: &Path, out: &Path, streaming: bool) -> Result<Found> {
     // Baseline `--method mean` needs the whole mission's mean before the stream.
     if streaming && opts.method == Method::Mean {

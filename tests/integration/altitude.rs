@@ -237,11 +237,11 @@ fn bad_logs_and_runs_that_cannot_use_one_are_refused_by_name() {
         "{}",
         stderr(&o)
     );
-    // A bad value: the line and the photo.
-    std::fs::write(&nav, "file,altitude\nx.png,3\ny.png,high\n").unwrap();
+    // A value no camera is flown at: the line and the value.
+    std::fs::write(&nav, "file,altitude\nx.png,3\ny.png,9999\n").unwrap();
     let o = run(&["--navigation", s(&nav)]);
     assert!(
-        stderr(&o).contains("line 3") && stderr(&o).contains("y.png"),
+        stderr(&o).contains("line 3") && stderr(&o).contains("9999"),
         "{}",
         stderr(&o)
     );

@@ -614,3 +614,210 @@ fn library_run_refuses_the_same_paths() {
     });
     assert!(matches!(e, abysslight::Error::Usage(_)), "{e}");
 }
+
+// --- files read whole: regular files within their limit; inputs recorded by content ----------------------------
+
+/// `abysslight correct -q ARGS` in `cwd`, stopped after `secs`: a run that blocks fails the test instead of
+/// hanging it.
+fn run_within(args: &[&str], cwd: &Path, secs: u64) -> Output {
+    use std::process::Stdio;
+    let mut child = Command::new(BIN)
+        .arg("correct")
+        .arg("-q")
+        .args(args)
+        .current_dir(cwd)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() >= secs {
+            let _ = child.kill();
+            let o = child.wait_with_output().unwrap();
+            panic!("blocked for {secs} s: {args:?}: {}", stderr(&o));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+#[cfg(unix)]
+fn mkfifo(p: &Path) {
+    let ok = Command::new("mkfifo").arg(p).status().unwrap().success();
+    assert!(ok, "mkfifo {}", p.display());
+}
+
+#[cfg(unix)]
+#[test]
+fn a_fifo_or_a_device_given_as_a_file_is_refused_by_name() {
+    let d = tempfile::tempdir().unwrap();
+    let (survey, _) = tiny_mission(d.path(), 4);
+    let fifo = d.path().join("nav.csv");
+    mkfifo(&fifo);
+    let zero = d.path().join("zero.csv");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let out = d.path().join("out");
+    let base = ["--survey", s(&survey), "--out", s(&out)];
+    fn with<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+        [base, extra].concat()
+    }
+    for (flag, file, kind) in [
+        ("--navigation", &fifo, "a FIFO"),
+        ("--navigation", &zero, "a device"),
+        ("--config", &fifo, "a FIFO"),
+        ("--config", &zero, "a device"),
+        ("--mask", &fifo, "a FIFO"),
+        ("--scatter", &zero, "a device"),
+    ] {
+        let o = run_within(&with(&base, &[flag, s(file)]), d.path(), 60);
+        assert_eq!(code(&o), 2, "{flag} {}: {}", file.display(), stderr(&o));
+        assert!(
+            stderr(&o).contains(s(file)) && stderr(&o).contains(kind),
+            "{flag}: {}",
+            stderr(&o)
+        );
+    }
+    // A config file past its limit (1 MiB) is refused, not read on.
+    let cfg = d.path().join("big.toml");
+    std::fs::write(&cfg, "#".repeat((1 << 20) + 1)).unwrap();
+    let o = run_within(&with(&base, &["--config", s(&cfg)]), d.path(), 60);
+    assert!(
+        code(&o) == 2 && stderr(&o).contains("longer than 1048576 bytes"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists(), "nothing written");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_cruise_log_that_is_a_folder_or_a_fifo_is_that_dives_error() {
+    let d = tempfile::tempdir().unwrap();
+    let cruise = d.path().join("cruise");
+    tiny_mission(&cruise.join("d1"), 4);
+    let nav = cruise.join("d1").join("navigation.csv");
+    std::fs::create_dir(&nav).unwrap();
+    let dives = abysslight::cruise::find_dives(&cruise).unwrap();
+    assert_eq!(dives[0].navigation.as_deref(), Some(nav.as_path()));
+    let out = d.path().join("out");
+    let o = run_within(&["--cruise", s(&cruise), "--out", s(&out)], d.path(), 60);
+    assert_ne!(code(&o), 0, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(s(&nav)) && stderr(&o).contains("a folder"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_dir(&nav).unwrap();
+    mkfifo(&nav);
+    let o = run_within(
+        &["--cruise", s(&cruise), "--out", s(&d.path().join("out2"))],
+        d.path(),
+        60,
+    );
+    assert_ne!(code(&o), 0, "{}", stderr(&o));
+    assert!(stderr(&o).contains("a FIFO"), "{}", stderr(&o));
+}
+
+#[test]
+fn shards_that_read_other_logs_or_masks_do_not_mix() {
+    let d = tempfile::tempdir().unwrap();
+    let (survey, _) = tiny_mission(d.path(), 8);
+    let names: Vec<String> = (0..8).map(|i| format!("IMG_{i:04}.png")).collect();
+    let log = |phase: usize| {
+        let rows: String = (names.iter().enumerate())
+            .map(|(i, n)| format!("{n},{}\n", 2 + (i + phase) % 2))
+            .collect();
+        format!("file,altitude\n{rows}")
+    };
+    // Two folders, each with its own nav.csv.
+    let (a, b) = (d.path().join("a"), d.path().join("b"));
+    for (dir, phase) in [(&a, 0), (&b, 1)] {
+        std::fs::create_dir_all(dir).unwrap();
+        std::fs::write(dir.join("nav.csv"), log(phase)).unwrap();
+    }
+    let out = d.path().join("out");
+    let shard = |cwd: &Path, nav: &str, k: &str, extra: &[&str]| {
+        let args = [
+            &["--survey", s(&survey), "--out", s(&out), "--window", "3"][..],
+            &["--navigation", nav, "--shard", k],
+            extra,
+        ]
+        .concat();
+        run_within(&args, cwd, 300)
+    };
+    let merge = || {
+        Command::new(BIN)
+            .args(["merge-shards", s(&out)])
+            .output()
+            .unwrap()
+    };
+    // The same name in two folders: two logs.
+    let o = shard(&a, "nav.csv", "1/2", &[]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let o = shard(&b, "nav.csv", "2/2", &[]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(stderr(&o).contains("--navigation"), "{}", stderr(&o));
+    // `./nav.csv` is `nav.csv`: the shards merge.
+    let o = shard(&a, "./nav.csv", "2/2", &[]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let m = merge();
+    assert!(m.status.success(), "{}", stderr(&m));
+    let r = report(&out);
+    assert_eq!(
+        r["options"]["navigation"].as_str(),
+        Some(s(&std::fs::canonicalize(a.join("nav.csv")).unwrap()))
+    );
+    assert_eq!(
+        r["options"]["navigation-sha256"].as_str().map(str::len),
+        Some(64)
+    );
+    // The log edited between the shards: refused by the run, and by the merge where the record is gone.
+    std::fs::write(a.join("nav.csv"), log(1)).unwrap();
+    let o = shard(&a, "nav.csv", "2/2", &[]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("the content (SHA-256) of --navigation"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_file(out.join("_abysslight/options.json")).unwrap();
+    let o = shard(&a, "nav.csv", "2/2", &[]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let m = merge();
+    assert!(!m.status.success(), "{}", stderr(&m));
+    assert!(stderr(&m).contains("navigation-sha256"), "{}", stderr(&m));
+
+    // A mask edited between the shards.
+    let mask = d.path().join("mask.png");
+    image::GrayImage::new(32, 24).save(&mask).unwrap();
+    let out2 = d.path().join("out2");
+    let masked = |k: &str| {
+        run_within(
+            &[
+                "--survey",
+                s(&survey),
+                "--out",
+                s(&out2),
+                "--mask",
+                "mask.png",
+                "--shard",
+                k,
+            ],
+            d.path(),
+            300,
+        )
+    };
+    let o = masked("1/2");
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    image::GrayImage::from_fn(32, 24, |x, _| image::Luma([if x < 3 { 255 } else { 0 }]))
+        .save(&mask)
+        .unwrap();
+    let o = masked("2/2");
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("the content (SHA-256) of --mask"),
+        "{}",
+        stderr(&o)
+    );
+}

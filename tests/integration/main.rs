@@ -34,4 +34,5 @@ mod real_photos;
 mod run_locks;
 mod simulate_evaluate;
 mod threads_identical;
+mod vehicle_logs;
 mod write_gate;

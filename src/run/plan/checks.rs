@@ -252,21 +252,13 @@ pub(crate) fn name_time(p: &Path) -> Option<f64> {
             && mi < 60
             && sec < 61;
         if valid {
-            let days = days_from_civil(y as i64, mo as i64, d as i64);
-            return Some((days * 86400 + (h * 3600 + mi * 60 + sec) as i64) as f64);
+            match crate::io::navigation::utc_seconds(y as i32, mo, d, h, mi, sec) {
+                Some(t) => return Some(t),
+                None => continue 'start,
+            }
         }
     }
     None
-}
-
-/// Days from 1970-01-01 to a date of the proleptic Gregorian calendar (H. Hinnant's `days_from_civil`).
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let doy = (153 * (m + if m > 2 { -3 } else { 9 }) + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146097 + doe - 719468
 }
 
 /// The photos' capture times in seconds and where they come from: the times in their file names when every name
@@ -583,6 +575,7 @@ mod tests {
         for none in [
             "IMG_0042.jpg",
             "20231303162738.jpg",
+            "20230230162738.jpg",
             "120230603162738.jpg",
             "x.jpg",
         ] {
