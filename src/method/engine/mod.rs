@@ -22,8 +22,8 @@
 //! chosen by altitude (photos pushed with an altitude, [`PhotoIn::altitude`]) the ring holds the `2n + 1` photos
 //! each window is chosen among, and up to `n + 1` photos wait (`2n + 1` at the start). With the window chosen per
 //! stretch ([`Window::Auto`](crate::Window::Auto)) as photos come, a photo also waits for the survey's decision:
-//! up to [`crate::Survey::FIRST_DECIDED`]` + 1` (41) photos at the start of a mission and 26 after, or with
-//! altitudes up to 63 at the start and 32 after (the longest window, 31, chosen by altitude).
+//! up to 41 photos at the start of a mission (until [`crate::Survey::FIRST_DECIDED`] is pushed) and 26 after, or
+//! with altitudes up to 63 at the start and 32 after (the longest window, 31, chosen by altitude).
 
 use std::ops::Range;
 use std::time::Instant;
