@@ -22,7 +22,6 @@
 //! chosen by altitude ([`Engine::push_at`]) the ring holds the `2n + 1` photos each window is chosen among, and up
 //! to `n + 1` photos wait.
 
-use std::ops::Range;
 use std::time::Instant;
 
 mod estimate;
@@ -69,11 +68,9 @@ pub struct Corrected<T> {
     pub tag: T,
     /// Position among the photos the engine accepted (0-based).
     pub index: usize,
-    /// Photos (by `index`) whose median gave this photo's `F`: the window, or where it was chosen by altitude
-    /// (`by_altitude`), the span of the photos chosen.
-    pub window: Range<usize>,
-    /// Where the window was chosen by altitude ([`crate::method::altitude`]): its photos (by `index`, in order).
-    pub by_altitude: Option<Vec<usize>>,
+    /// The photos (by `index`) whose median gave this photo's `F`, and whether altitude chose them
+    /// ([`crate::method::altitude`]).
+    pub window: crate::method::members::Members,
     /// The altitude the photo was pushed with ([`Engine::push_at`]).
     pub altitude: Option<f32>,
     /// The corrected photo (`None` for photos pushed with [`Use::Estimate`]).
