@@ -524,7 +524,7 @@ fn main() {
 }
 
 /// Each photo's flags (their kinds) in the order of `names`, matched by the output's file name.
-fn flags_by_name(report: &abysslight::Report, names: &[String]) -> Vec<Vec<&'static str>> {
+fn flags_by_name(report: &abysslight::Report, names: &[String]) -> Vec<Vec<String>> {
     names
         .iter()
         .map(|n| {
@@ -537,7 +537,7 @@ fn flags_by_name(report: &abysslight::Report, names: &[String]) -> Vec<Vec<&'sta
                         .is_some_and(|o| o.to_string_lossy() == *n)
                 })
                 .map_or_else(Vec::new, |f| {
-                    f.health.flags.iter().map(|k| k.kind()).collect()
+                    f.health.flags.iter().map(|k| k.kind.clone()).collect()
                 })
         })
         .collect()
@@ -554,7 +554,7 @@ struct Monitor {
     /// Flagged and wrong.
     caught: usize,
     /// Per flag kind: photos flagged with it, and of those the wrong ones.
-    kinds: std::collections::BTreeMap<&'static str, (usize, usize)>,
+    kinds: std::collections::BTreeMap<String, (usize, usize)>,
 }
 
 impl Monitor {
@@ -564,7 +564,7 @@ impl Monitor {
         self.flagged += o.flagged;
         self.caught += o.caught;
         for (k, (n, w)) in &o.kinds {
-            let e = self.kinds.entry(k).or_default();
+            let e = self.kinds.entry(k.clone()).or_default();
             e.0 += n;
             e.1 += w;
         }
@@ -608,7 +608,7 @@ impl Monitor {
 /// [`Monitor`] of one dive's default output.
 fn judge(
     photos: &[Raster],
-    flags: &[Vec<&'static str>],
+    flags: &[Vec<String>],
     dive: &Dive,
     signal: &[Vec<bool>],
     (bar_albedo, bar_pattern): (f64, f64),
@@ -647,11 +647,7 @@ fn flag_summary(report: &abysslight::Report) -> String {
             *kinds.entry(k.kind()).or_default() += 1;
         }
     }
-    let lens: Vec<usize> = report
-        .frames
-        .iter()
-        .map(|f| f.window[1] + 1 - f.window[0])
-        .collect();
+    let lens: Vec<usize> = report.frames.iter().map(|f| f.window.len()).collect();
     format!(
         "flagged {} of {} photos {:?}; windows {}..{} photos",
         flagged,

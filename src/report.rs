@@ -1,14 +1,15 @@
 //! The run report (`_abysslight/report.json`) and the [`Progress`] hooks a front end uses to show a run.
 
-pub use crate::method::monitor::{Flag, Health, Summary};
+pub use crate::method::monitor::{Flag, FlagNote, Health, Summary};
 pub use crate::method::window::WindowChoice;
 use std::path::{Path, PathBuf};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
+use crate::method::members::{null_is_nan, nulls_are_nan, Members};
 use crate::method::raster::Layout;
-use crate::run::options::Options;
+use crate::options::Options;
 
 /// Receives what happens during a run. The library prints nothing itself; the CLI draws a progress bar on a
 /// terminal and plain log lines otherwise.
@@ -45,7 +46,7 @@ impl Progress for Silent {
 }
 
 /// One file that could not be used.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct FileError {
     /// The file.
     pub path: PathBuf,
@@ -67,7 +68,7 @@ impl FileError {
 }
 
 /// What happened to one survey photo.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameReport {
     /// The survey photo.
     pub input: PathBuf,
@@ -75,15 +76,14 @@ pub struct FrameReport {
     pub output: PathBuf,
     /// Position among the usable photos of the mission.
     pub index: usize,
-    /// Usable photos `[first, last]` whose median gave this photo's `F` (where its window was chosen by
-    /// altitude, the first and last of `window_by_altitude`).
-    pub window: [usize; 2],
+    /// The usable photos whose median gave this photo's `F`, and whether altitude chose them (`--navigation`). In
+    /// JSON `"window": [first, last]`, and where altitude chose them also `"window_by_altitude"`: the photos it
+    /// took, in order.
+    #[serde(flatten)]
+    pub window: Members,
     /// The photo's altitude in the navigation log (`--navigation`), metres.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub altitude: Option<f32>,
-    /// Where its window was chosen by altitude (`--navigation`): the usable photos it took, in order.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub window_by_altitude: Option<Vec<usize>>,
     /// Milliseconds spent decoding the photo.
     pub decode_ms: f64,
     /// Block median, temporal median and `F`.
@@ -100,17 +100,20 @@ pub struct FrameReport {
     /// it was not written again (its timings and pixel counts are 0).
     pub resumed: bool,
     /// Contamination, change of F, and flags when the estimate is likely broken.
-    pub health: crate::method::monitor::Health,
+    pub health: Health<FlagNote>,
     /// `--method abyss`: the scale applied to the water-column `S` per channel (estimated per window unless
     /// `--backscatter-scale` fixed it); empty otherwise.
+    #[serde(deserialize_with = "nulls_are_nan")]
     pub backscatter_scale: Vec<f32>,
     /// `--method abyss`: the sensor noise measured on the photo, standard deviation per channel in linear light
     /// (`[0, 1]` = black to white) at the level of its dimmest blocks (the noise grows with the level: the blend
     /// uses it at each block's); empty without `denoise`.
+    #[serde(deserialize_with = "nulls_are_nan")]
     pub noise_sigma: Vec<f32>,
     /// `--method abyss`: the seafloor texture measured on the photo, standard deviation of the albedo within a
     /// block per channel, in the units of the seafloor colour (at most three times the median channel's relative
     /// texture); empty without `denoise`.
+    #[serde(deserialize_with = "nulls_are_nan")]
     pub texture_sigma: Vec<f32>,
     /// `--window auto`: the window, quantile and near window chosen for this photo, its stretch's dark share and
     /// photos per independent sample, and why (`None` when the window was given).
@@ -118,21 +121,21 @@ pub struct FrameReport {
 }
 
 impl FrameReport {
-    /// A frame known only by its paths, index and health, as the run pictures read it: no window, timings or pixel
-    /// counts (all 0), no per-channel measurements.
+    /// A frame known only by its paths, index and health, as the run pictures read it: a window of the photo alone,
+    /// no timings or pixel counts (all 0), no per-channel measurements.
+    #[cfg(test)]
     pub(crate) fn pictured(
         input: PathBuf,
         output: PathBuf,
         index: usize,
-        health: crate::method::monitor::Health,
+        health: Health<FlagNote>,
     ) -> FrameReport {
         FrameReport {
             input,
             output,
             index,
-            window: [0, 0],
+            window: Members::over_time(index..index + 1),
             altitude: None,
-            window_by_altitude: None,
             decode_ms: 0.0,
             estimate_ms: 0.0,
             correct_ms: 0.0,
@@ -150,7 +153,7 @@ impl FrameReport {
 }
 
 /// What `--window auto` chose for one photo (`method::stretch::Choice`), and why in words.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WindowAuto {
     /// The choice.
     #[serde(flatten)]
@@ -169,7 +172,7 @@ impl From<crate::method::stretch::Choice> for WindowAuto {
 }
 
 /// How a run's windows were chosen, and the lengths its photos used.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WindowSummary {
     /// `auto` (per stretch of the mission, by the survey), `fixed` (`--window`) or `contamination` (the paper's rule
     /// for `--contamination`).
@@ -177,44 +180,52 @@ pub struct WindowSummary {
     /// The window given, or the paper's rule's for the contamination given (`None` under `auto`).
     pub n: Option<usize>,
     /// The breakdown probability `P_half` of `n` at the contamination given (NaN, in JSON `null`, without one).
+    #[serde(deserialize_with = "null_is_nan")]
     pub p_half: f64,
     /// The shortest window a photo of the run used (0: no photo).
     pub shortest: usize,
     /// The longest window a photo of the run used (0: no photo).
     pub longest: usize,
     /// With a navigation log (`--navigation`): the photos whose window was chosen by altitude (`None`: no log).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub by_altitude: Option<usize>,
 }
 
 impl WindowSummary {
-    /// The summary of a run whose windows were chosen by `params` (resolved), its photos having used windows of
-    /// `used` photos each.
+    /// The summary of a run whose windows were chosen by `params` (resolved), with the windows its `frames` used
+    /// ([`WindowSummary::count`]).
     pub fn of(
         params: &crate::method::params::Params,
         opts: &Options,
-        used: impl Iterator<Item = usize>,
+        frames: &[FrameReport],
     ) -> Self {
         use crate::method::params::Window;
-        let (mut shortest, mut longest) = (usize::MAX, 0);
-        for n in used {
-            shortest = shortest.min(n);
-            longest = longest.max(n);
-        }
         let fixed = opts.window_choice().ok();
         let (rule, n) = match params.window {
             _ if params.window_is_auto() => ("auto", None),
             Window::Contamination { .. } => ("contamination", fixed.map(|w| w.n)),
             _ => ("fixed", fixed.map(|w| w.n)),
         };
-        WindowSummary {
+        let mut summary = WindowSummary {
             rule: rule.into(),
             n,
             p_half: fixed.map_or(f64::NAN, |w| w.p_half),
-            shortest: if longest == 0 { 0 } else { shortest },
-            longest,
+            shortest: 0,
+            longest: 0,
             by_altitude: None,
-        }
+        };
+        summary.count(frames, opts.navigation.is_some());
+        summary
+    }
+
+    /// Count the windows `frames` used (a run's, or a mission's merged from shards): the shortest and the longest
+    /// (0: no photo), and with a navigation log how many altitude chose.
+    pub fn count(&mut self, frames: &[FrameReport], navigation: bool) {
+        let lengths = frames.iter().map(|f| f.window.len());
+        self.shortest = lengths.clone().min().unwrap_or(0);
+        self.longest = lengths.max().unwrap_or(0);
+        self.by_altitude =
+            navigation.then(|| frames.iter().filter(|f| f.window.by_altitude()).count());
     }
 
     /// In words, for the console: `windows 7..31 photos, chosen per stretch` or `window n = 9`.
@@ -242,7 +253,7 @@ impl WindowSummary {
 }
 
 /// Where `S` came from.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ScatterInfo {
     /// `water-column`, `file` or `none`.
     pub source: String,
@@ -256,8 +267,8 @@ pub struct ScatterInfo {
     pub saved_to: Option<PathBuf>,
 }
 
-/// Everything about one `correct` run.
-#[derive(Debug, Clone, Serialize)]
+/// Everything about one `correct` run (or a mission merged from shards), as `report.json` holds it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     /// `abysslight`.
     pub tool: String,
@@ -293,7 +304,7 @@ pub struct Report {
     /// Samples clipped to the output range, over all photos.
     pub clipped_samples: u64,
     /// How many photos were flagged, by reason.
-    pub monitor: crate::method::monitor::Summary,
+    pub monitor: Summary,
     /// Every photo corrected (and, with `--resume`, found corrected), in mission order.
     pub frames: Vec<FrameReport>,
     /// Every file that failed, with the reason.
@@ -358,21 +369,12 @@ impl Report {
 mod report_fallback_tests {
     use super::*;
 
-    /// A report that cannot be written (its folder cannot be made, as on a lost or full disk) is an error, and the whole
-    /// report is printed instead: valid JSON after the line that says why.
-    #[test]
-    fn a_report_that_cannot_be_written_is_printed() {
-        let d = tempfile::tempdir().unwrap();
-        // A file where the report's folder should be: no folder can be made there.
-        std::fs::write(d.path().join("gone"), b"").unwrap();
-        let opts = Options {
-            report: Some(d.path().join("gone/report.json")),
-            ..Options::default()
-        };
-        let mut r = Report {
+    /// A report of 41 photos and none in its frames, with these options.
+    pub(super) fn a_report(opts: Options) -> Report {
+        Report {
             tool: "abysslight".into(),
             version: String::new(),
-            options: opts.clone(),
+            options: opts,
             transfer_assumed: None,
             window: WindowSummary {
                 rule: "auto".into(),
@@ -405,7 +407,21 @@ mod report_fallback_tests {
             warnings: Vec::new(),
             elapsed_s: 0.0,
             report_path: None,
+        }
+    }
+
+    /// A report that cannot be written (its folder cannot be made, as on a lost or full disk) is an error, and the whole
+    /// report is printed instead: valid JSON after the line that says why.
+    #[test]
+    fn a_report_that_cannot_be_written_is_printed() {
+        let d = tempfile::tempdir().unwrap();
+        // A file where the report's folder should be: no folder can be made there.
+        std::fs::write(d.path().join("gone"), b"").unwrap();
+        let opts = Options {
+            report: Some(d.path().join("gone/report.json")),
+            ..Options::default()
         };
+        let mut r = a_report(opts.clone());
         assert!(r.write(&opts, None).is_err());
         assert_eq!(r.report_path, None);
         let mut printed = Vec::new();
@@ -415,5 +431,138 @@ mod report_fallback_tests {
         assert!(line.contains("gone/report.json"), "{line}");
         let back: serde_json::Value = serde_json::from_str(json).unwrap();
         assert_eq!(back["corrected"], 41);
+    }
+}
+
+#[cfg(test)]
+mod typed_report_tests {
+    use super::report_fallback_tests::a_report;
+    use super::*;
+    use crate::method::monitor::Flag;
+    use crate::method::stretch::{Choice, Rule};
+
+    fn frame(index: usize, window: Members, health: Health) -> FrameReport {
+        FrameReport {
+            input: format!("survey/img{index}.png").into(),
+            output: format!("out/img{index}.png").into(),
+            index,
+            window,
+            altitude: Some(2.5 + index as f32 / 8.0),
+            decode_ms: 1.5,
+            estimate_ms: 2.25,
+            correct_ms: 0.125,
+            encode_ms: 3.0,
+            floored_pixels: 7,
+            clipped_samples: 11,
+            resumed: false,
+            health: health.noted(),
+            backscatter_scale: vec![0.75, 1.0, 1.25],
+            noise_sigma: vec![0.01, 0.02, 0.03],
+            texture_sigma: Vec::new(),
+            window_auto: None,
+        }
+    }
+
+    /// Report → JSON → report: the same report, and the frames' windows as `report.json` has always written them.
+    #[test]
+    fn a_report_comes_back_from_its_json_the_same() {
+        let mut r = a_report(Options {
+            navigation: Some("nav.csv".into()),
+            ..Options::default()
+        });
+        r.window.p_half = 0.03125;
+        r.layout = Some(Layout {
+            width: 64,
+            height: 48,
+            channels: 3,
+        });
+        let flagged = Health {
+            contamination: 0.5,
+            level: 1.25,
+            texture_kept: 0.75,
+            motion: Some(1.5),
+            flags: vec![
+                Flag::Contamination { share: 0.5 },
+                Flag::ExposureJump { level: 1.25 },
+            ],
+            exposure_absorbed: true,
+            ..Health::default()
+        };
+        r.frames = vec![
+            frame(0, Members::over_time(0..5), flagged),
+            frame(
+                1,
+                Members::new(vec![0, 1, 3, 6, 8], true),
+                Health::default(),
+            ),
+        ];
+        r.frames[1].window_auto = Some(WindowAuto::from(Choice {
+            window: 5,
+            quantile: 0.5,
+            near: Some(3),
+            coverage: 0.25,
+            photos_per_sample: 1.5,
+            samples: 4,
+            needed: 3,
+            rule: Rule::Sparse,
+        }));
+        r.window.count(&r.frames, true);
+        r.monitor = Summary::of(r.frames.iter().map(|f| &f.health));
+        r.errors = vec![FileError {
+            path: "survey/bad.png".into(),
+            kind: "decode".into(),
+            message: "survey/bad.png: not a PNG".into(),
+        }];
+        r.warnings = vec!["a warning".into()];
+        r.report_path = Some("out/_abysslight/report.json".into());
+
+        let json = serde_json::to_string_pretty(&r).unwrap();
+        let back: Report = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, r);
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(v["frames"][0]["window"], serde_json::json!([0, 4]));
+        assert!(v["frames"][0].get("window_by_altitude").is_none());
+        assert_eq!(v["frames"][1]["window"], serde_json::json!([0, 8]));
+        assert_eq!(
+            v["frames"][1]["window_by_altitude"],
+            serde_json::json!([0, 1, 3, 6, 8])
+        );
+        assert_eq!(v["frames"][1]["window_auto"]["rule"], "sparse");
+        assert_eq!(
+            v["frames"][0]["health"]["flags"][1]["kind"],
+            "exposure-jump"
+        );
+        // The one counter of the windows: 5 photos each, one chosen by altitude; the flags by kind.
+        assert_eq!(
+            (r.window.shortest, r.window.longest, r.window.by_altitude),
+            (5, 5, Some(1))
+        );
+        assert_eq!(
+            (
+                r.monitor.flagged,
+                r.monitor.contamination,
+                r.monitor.exposure_jump
+            ),
+            (1, 1, 1)
+        );
+        assert_eq!(r.monitor.exposure_absorbed, 1);
+    }
+
+    /// What is not measured (NaN, in JSON `null`) is read back as NaN.
+    #[test]
+    fn unmeasured_figures_come_back_as_nan() {
+        let mut r = a_report(Options::default());
+        r.frames = vec![frame(
+            0,
+            Members::over_time(0..1),
+            Health {
+                factor_change: f32::NAN,
+                ..Health::default()
+            },
+        )];
+        let json = serde_json::to_string(&r).unwrap();
+        let back: Report = serde_json::from_str(&json).unwrap();
+        assert!(back.window.p_half.is_nan() && back.frames[0].health.factor_change.is_nan());
+        assert_eq!(serde_json::to_string(&back).unwrap(), json);
     }
 }

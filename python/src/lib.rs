@@ -464,9 +464,9 @@ fn corrected(
         image,
         factor: array_from_raster(py, &c.factor)?.unbind(),
         health: to_dict(py, &c.health)?,
-        window: (c.window.start, c.window.end),
+        window: (c.window.span().start, c.window.span().end),
         altitude: c.altitude,
-        by_altitude: c.by_altitude,
+        by_altitude: c.window.chosen_by_altitude().map(<[usize]>::to_vec),
     })
 }
 

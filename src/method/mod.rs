@@ -31,6 +31,7 @@ pub mod factor;
 pub mod mask;
 pub mod matching;
 pub mod median;
+pub mod members;
 pub mod monitor;
 pub mod outliers;
 pub mod overlap;

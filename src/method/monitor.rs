@@ -3,7 +3,9 @@
 //! when its estimate is likely wrong. The paper: a seafloor colour change "can only be detected by monitoring the
 //! multiplicative image".
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+use crate::method::members::null_is_nan;
 
 use crate::method::raster::Raster;
 
@@ -264,26 +266,34 @@ impl Serialize for Flag {
     }
 }
 
-/// Health figures of one photo, in the run report.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct Health {
+/// Health figures of one photo, in the run report. The figures are `NaN` (in JSON `null`) where they could not be
+/// measured. The flags are the [`Flag`]s as the monitor raised them, or in a report as it records them
+/// ([`FlagNote`]: [`Health::noted`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Health<F = Flag> {
     /// Share of blocks whose corrected value is far from the seafloor colour once the photo's overall level is
     /// removed (not seafloor, or a broken `F`).
+    #[serde(deserialize_with = "null_is_nan")]
     pub contamination: f32,
     /// The photo's overall level relative to its window's `M` (median over blocks of `(I − S)/(M − S)`; 1 when
     /// only the factor-image figures were observed).
+    #[serde(deserialize_with = "null_is_nan")]
     pub level: f32,
     /// Share of the photo's fine structure (texture) left after the correction: about 1 when `F` is smooth,
     /// small when `F` copies the scene (see `PhotoFit`).
+    #[serde(deserialize_with = "null_is_nan")]
     pub texture_kept: f32,
     /// Mean relative change of `F` from the previous photo.
+    #[serde(deserialize_with = "null_is_nan")]
     pub factor_change: f32,
     /// Largest relative change of `F`'s channel shares (each channel's mean over the mean of all channels; a
     /// channel below the average share in units of the average) against what the mission so far predicts from
     /// `F`'s overall level (altitude changes the level and, through attenuation, the colour together).
+    #[serde(deserialize_with = "null_is_nan")]
     pub colour_shift: f32,
     /// Fine structure in `F` (its roughness): lights make smooth patterns, a window short of seafloor leaves
     /// the scene in `F`.
+    #[serde(deserialize_with = "null_is_nan")]
     pub roughness: f32,
     /// Shift from the previous photo, in blocks, found by phase correlation of the block medians' texture
     /// (see `register`); `None` for the first photo or images too small.
@@ -294,10 +304,97 @@ pub struct Health {
     /// few trusted matches times `n − 1`); `None` until enough photos were seen.
     pub window_span: Option<f32>,
     /// Why this photo's correction is likely wrong (empty: no reason to doubt it).
-    pub flags: Vec<Flag>,
+    pub flags: Vec<F>,
     /// The photo's exposure differs from its window's by more than the exposure-jump threshold and the per-photo
     /// gain absorbed it (information, not a flag).
     pub exposure_absorbed: bool,
+}
+
+impl<F> Default for Health<F> {
+    fn default() -> Self {
+        Health {
+            contamination: 0.0,
+            level: 0.0,
+            texture_kept: 0.0,
+            factor_change: 0.0,
+            colour_shift: 0.0,
+            roughness: 0.0,
+            motion: None,
+            motion_ncc: None,
+            window_span: None,
+            flags: Vec::new(),
+            exposure_absorbed: false,
+        }
+    }
+}
+
+impl Health {
+    /// The health as the run report records it: each flag by its kind and message.
+    pub fn noted(self) -> Health<FlagNote> {
+        Health {
+            flags: self.flags.iter().map(FlagNote::from).collect(),
+            contamination: self.contamination,
+            level: self.level,
+            texture_kept: self.texture_kept,
+            factor_change: self.factor_change,
+            colour_shift: self.colour_shift,
+            roughness: self.roughness,
+            motion: self.motion,
+            motion_ncc: self.motion_ncc,
+            window_span: self.window_span,
+            exposure_absorbed: self.exposure_absorbed,
+        }
+    }
+}
+
+/// A [`Flag`] as the run report records it (and reads it back): its kind, for scripts ([`Flag::kind`]), and its
+/// message, for people (its [`Display`](std::fmt::Display) text, also this note's).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FlagNote {
+    /// [`Flag::kind`].
+    pub kind: String,
+    /// The flag's text.
+    pub message: String,
+}
+
+impl From<&Flag> for FlagNote {
+    fn from(f: &Flag) -> Self {
+        FlagNote {
+            kind: f.kind().to_string(),
+            message: f.to_string(),
+        }
+    }
+}
+
+impl FlagNote {
+    /// [`Flag::kind`].
+    pub fn kind(&self) -> &str {
+        &self.kind
+    }
+}
+
+impl std::fmt::Display for FlagNote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+/// A flag's kind, as [`Summary`] counts it: a [`Flag`]'s or a [`FlagNote`]'s.
+pub trait FlagKind {
+    /// The kind ([`Flag::kind`]).
+    fn flag_kind(&self) -> &str;
+}
+
+impl FlagKind for Flag {
+    fn flag_kind(&self) -> &str {
+        self.kind()
+    }
+}
+
+impl FlagKind for FlagNote {
+    fn flag_kind(&self) -> &str {
+        &self.kind
+    }
 }
 
 /// Share of blocks of `low` (the photo's own block medians, linear) whose ratio to `M − S` (i.e. the corrected
@@ -1103,7 +1200,7 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
 }
 
 /// Count of flagged photos per kind of reason, for the end-of-run summary.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Summary {
     /// Photos with at least one flag (a photo with several flags counts once here).
     pub flagged: usize,
@@ -1130,23 +1227,34 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// Count one photo with these flags (nothing if it has none).
-    pub fn add(&mut self, flags: &[Flag]) {
+    /// The summary of photos with these healths: the flags by kind, and the exposures absorbed.
+    pub fn of<'a, F: FlagKind + 'a>(healths: impl IntoIterator<Item = &'a Health<F>>) -> Self {
+        let mut s = Summary::default();
+        for h in healths {
+            s.add(&h.flags);
+            s.exposure_absorbed += usize::from(h.exposure_absorbed);
+        }
+        s
+    }
+
+    /// Count one photo with these flags (nothing if it has none), by their kinds ([`Flag::kind`]).
+    pub fn add<F: FlagKind>(&mut self, flags: &[F]) {
         if flags.is_empty() {
             return;
         }
         self.flagged += 1;
         for f in flags {
-            match f {
-                Flag::Contamination { .. } => self.contamination += 1,
-                Flag::FactorChange { .. } => self.factor_change += 1,
-                Flag::ColourShift { .. } => self.colour_shift += 1,
-                Flag::SceneInFactor { .. } => self.roughness += 1,
-                Flag::ExposureJump { .. } => self.exposure_jump += 1,
-                Flag::CameraStill { .. } => self.camera_still += 1,
-                Flag::ShortMission { .. } => self.short_mission += 1,
-                Flag::FewSamples { .. } => self.few_samples += 1,
-                Flag::StructureAdded { .. } => self.structure_added += 1,
+            match f.flag_kind() {
+                "contamination" => self.contamination += 1,
+                "factor-change" => self.factor_change += 1,
+                "colour-shift" => self.colour_shift += 1,
+                "scene-in-factor" => self.roughness += 1,
+                "exposure-jump" => self.exposure_jump += 1,
+                "camera-still" => self.camera_still += 1,
+                "short-mission" => self.short_mission += 1,
+                "few-samples" => self.few_samples += 1,
+                "structure-added" => self.structure_added += 1,
+                _ => {}
             }
         }
     }
@@ -1336,7 +1444,7 @@ mod tests {
         assert!(h.colour_shift > 0.2);
         let mut s = Summary::default();
         s.add(&h.flags);
-        s.add(&[]);
+        s.add::<Flag>(&[]);
         assert_eq!(s.flagged, 1);
         assert!(s.line(2).contains("1 of 2"));
     }

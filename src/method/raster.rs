@@ -119,7 +119,7 @@ impl Samples {
 }
 
 /// What must agree between all photos of one mission (and the scatter image).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Layout {
     /// Width in pixels.
     pub width: usize,

@@ -17,7 +17,7 @@
 use std::collections::VecDeque;
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::method::matching::box_blur;
 use crate::method::median::quantile;
@@ -336,7 +336,7 @@ fn correlation(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// Why a photo has the window it has.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Rule {
     /// Little dark seafloor and a camera that moves on: the default window 7 and its median.
@@ -352,17 +352,20 @@ pub enum Rule {
 }
 
 /// What `--window auto` chose for one photo.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Choice {
     /// Photos in its window (odd).
     pub window: usize,
     /// The quantile its window's `M` and its per-photo gain take.
+    #[serde(deserialize_with = "crate::method::members::null_is_nan")]
     pub quantile: f32,
     /// Its near window (`None`: off).
     pub near: Option<usize>,
     /// Its stretch's coverage by dark patches.
+    #[serde(deserialize_with = "crate::method::members::null_is_nan")]
     pub coverage: f32,
     /// Photos per independent sample in its window.
+    #[serde(deserialize_with = "crate::method::members::null_is_nan")]
     pub photos_per_sample: f32,
     /// Independent samples its window holds.
     pub samples: usize,

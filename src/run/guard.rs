@@ -63,6 +63,20 @@ pub fn fingerprint(opts: &Options) -> serde_json::Value {
     v
 }
 
+/// The names of the options of [`fingerprint`] whose values differ between `a` and `b`, in order (none: they
+/// make the same photos).
+pub fn differing_options(a: &Options, b: &Options) -> Vec<String> {
+    let (a, b) = (fingerprint(a), fingerprint(b));
+    let (Some(a), Some(b)) = (a.as_object(), b.as_object()) else {
+        return vec!["all options".into()];
+    };
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .cloned()
+        .collect()
+}
+
 /// The options whose values differ between two fingerprints (`a` the earlier run's), each as a user gave it: the
 /// flag, with the earlier and this run's value (`--window 9 before, 5 now`).
 fn differing(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {

@@ -6,7 +6,7 @@
 //! that decide the output pixels: [`fingerprint`]), the same version and the same survey; then it writes
 //! `_abysslight/report.json` with every photo counted once (the shards' frames, in mission order), the errors and
 //! warnings of every shard (those every shard saw, such as a bad water-column frame, once), the counts summed,
-//! and `overview.png` and `flagged.png`.
+//! and `overview.png` and `flagged.png`. The shards' reports are read as [`Report`]s and merged field by field.
 //!
 //! The flagged sheet needs each flagged photo's `F·C`, which lives only in memory during a run: a shard writes
 //! the ones it kept for its own sheet to `_abysslight/flagged-lit-shard-K-of-N/<index>.f32` ([`save_flagged`]).
@@ -17,15 +17,13 @@
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::{Path, PathBuf};
 
-use serde_json::Value;
-
 use crate::error::{Error, Result};
 use crate::io::WORK_DIR;
-use crate::method::monitor::{Flag, Health, Summary, Thresholds};
+use crate::method::monitor::{Summary, Thresholds};
 use crate::method::raster::Raster;
-use crate::report::FrameReport;
-use crate::run::guard::fingerprint;
-use crate::run::options::{Options, Shard};
+use crate::report::{FileError, FrameReport, Report};
+use crate::run::guard::differing_options;
+use crate::run::options::Shard;
 
 /// What [`merge_shards`] wrote.
 #[derive(Debug, Clone)]
@@ -56,10 +54,11 @@ impl Merged {
 }
 
 /// One shard's report, read.
+/// One shard's report, read.
 struct ShardReport {
     shard: Shard,
     path: PathBuf,
-    json: Value,
+    report: Report,
 }
 
 /// Merge the shard reports under `out` (the shards' `--out`) into `out/_abysslight/report.json`, `overview.png`
@@ -75,7 +74,7 @@ pub fn merge_shards(out: &Path) -> Result<Merged> {
     let shards = read_shards(&work)?;
     check_same(&shards)?;
     check_complete(&shards, out)?;
-    let (report, frames) = merged_report(&shards, &work)?;
+    let report = merged_report(&shards, &work)?;
     let report_path = work.join("report.json");
     crate::io::write_with(&report_path, |w| {
         serde_json::to_writer_pretty(w, &report).map_err(|e| Error::Encode {
@@ -83,16 +82,15 @@ pub fn merge_shards(out: &Path) -> Result<Merged> {
             reason: e.to_string(),
         })
     })?;
-    save_pictures(&work, &frames, &report["frames"], &shards)?;
-    let count = |k: &str| report[k].as_u64().unwrap_or(0) as usize;
+    save_pictures(&work, &report.frames, &shards)?;
     Ok(Merged {
         shards: shards.len(),
-        survey_photos: count("survey_photos"),
-        frames: frames.len(),
-        corrected: count("corrected"),
-        failed: count("failed"),
-        water_column_failed: count("water_column_failed"),
-        flagged: frames.iter().filter(|f| !f.health.flags.is_empty()).count(),
+        survey_photos: report.survey_photos,
+        frames: report.frames.len(),
+        corrected: report.corrected,
+        failed: report.failed,
+        water_column_failed: report.water_column_failed,
+        flagged: report.monitor.flagged,
         report_path,
     })
 }
@@ -155,17 +153,23 @@ fn read_shards(work: &Path) -> Result<Vec<ShardReport>> {
         .into_iter()
         .map(|((count, index), path)| {
             let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-            let json: Value = serde_json::from_str(&text).map_err(|e| Error::Config {
+            let report: Report = serde_json::from_str(&text).map_err(|e| Error::Config {
                 path: path.clone(),
                 reason: format!("unreadable shard report: {e}"),
             })?;
             Ok(ShardReport {
                 shard: Shard { index, count },
                 path,
-                json,
+                report,
             })
         })
         .collect()
+}
+
+/// Who holds a lock file, as [`crate::run::guard`] records it (its options are left unread).
+#[derive(serde::Deserialize)]
+struct Holder {
+    pid: u64,
 }
 
 /// Why shard `k` of `n` cannot be merged, if it cannot.
@@ -179,9 +183,8 @@ fn shard_problem(
     if let Some(lock) = lock.filter(|l| unfinished(l, report)) {
         let pid = std::fs::read_to_string(lock)
             .ok()
-            .and_then(|t| serde_json::from_str::<Value>(&t).ok())
-            .and_then(|v| v.get("pid").and_then(Value::as_u64))
-            .map_or(String::new(), |p| format!(" by pid {p}"));
+            .and_then(|t| serde_json::from_str::<Holder>(&t).ok())
+            .map_or(String::new(), |h| format!(" by pid {}", h.pid));
         return Some(format!(
             "shard {k}/{n} has not finished: its lock {} is still there (taken{pid} on the machine that ran it): \
              wait for it, or, if that task was killed or timed out, {rerun}",
@@ -206,59 +209,44 @@ fn unfinished(lock: &Path, report: Option<&PathBuf>) -> bool {
     }
 }
 
-/// The fingerprint of a report's options, or why it cannot be read.
-fn options_of(s: &ShardReport) -> Result<Value> {
-    let opts: Options =
-        serde_json::from_value(s.json["options"].clone()).map_err(|e| Error::Config {
-            path: s.path.clone(),
-            reason: format!("unreadable options in the shard report: {e}"),
-        })?;
-    Ok(fingerprint(&opts))
-}
-
 /// The shards ran with the same options, version and survey; the first difference is an error naming the shards.
 fn check_same(shards: &[ShardReport]) -> Result<()> {
     let Some(first) = shards.first() else {
         return Ok(());
     };
-    let fp = options_of(first)?;
     for s in &shards[1..] {
-        let other = options_of(s)?;
-        let diff: Vec<&String> = match (fp.as_object(), other.as_object()) {
-            (Some(a), Some(b)) => {
-                let keys: BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-                keys.into_iter()
-                    .filter(|k| a.get(*k) != b.get(*k))
-                    .collect()
-            }
-            _ => Vec::new(),
-        };
+        let diff = differing_options(&first.report.options, &s.report.options);
         if !diff.is_empty() {
-            let names: Vec<&str> = diff.iter().map(|s| s.as_str()).collect();
             return Err(Error::Usage(format!(
                 "shard {} ran with other options than shard {} ({} differ: {} against {}): rerun it with the \
                  options of the others",
                 s.shard,
                 first.shard,
-                names.join(", "),
+                diff.join(", "),
                 s.path.display(),
                 first.path.display()
             )));
         }
-        for (key, what) in [
-            ("version", "another version of abysslight"),
+        let (a, b) = (&s.report, &first.report);
+        for (key, what, differs, values) in [
+            (
+                "version",
+                "another version of abysslight",
+                a.version != b.version,
+                format!("{:?} against {:?}", a.version, b.version),
+            ),
             (
                 "survey_photos",
                 "another count of survey photos (the survey folder changed between the runs)",
+                a.survey_photos != b.survey_photos,
+                format!("{} against {}", a.survey_photos, b.survey_photos),
             ),
         ] {
-            if s.json[key] != first.json[key] {
+            if differs {
                 return Err(Error::Usage(format!(
-                    "shard {} ran with {what} than shard {}: {key} {} against {} ({}); rerun it",
+                    "shard {} ran with {what} than shard {}: {key} {values} ({}); rerun it",
                     s.shard,
                     first.shard,
-                    s.json[key],
-                    first.json[key],
                     s.path.display()
                 )));
             }
@@ -278,23 +266,18 @@ fn some_names(paths: &[String]) -> String {
 
 /// `" (it ran with --limit N)"` for a shard run with `--limit`, else nothing.
 fn limit_note(s: &ShardReport) -> String {
-    s.json["options"]["limit"]
-        .as_u64()
+    s.report
+        .options
+        .limit
         .map_or(String::new(), |l| format!(" (it ran with --limit {l})"))
 }
 
 /// The survey's photos as the shards' run listed them (the folder its options name, read again on this machine), when
 /// that list still has the mission's `total` photos; `None` where it cannot be read here.
-fn survey_list(first: &ShardReport, total: usize, out: &Path) -> Option<Vec<String>> {
-    first.json["options"]["survey"]
-        .as_str()
-        .and_then(|s| crate::io::find_photos_excluding(Path::new(s), &[out]).ok())
-        .map(|f| {
-            f.photos
-                .into_iter()
-                .map(|e| e.path.to_string_lossy().into_owned())
-                .collect::<Vec<_>>()
-        })
+fn survey_list(first: &ShardReport, total: usize, out: &Path) -> Option<Vec<PathBuf>> {
+    (first.report.options.survey.as_deref())
+        .and_then(|s| crate::io::find_photos_excluding(s, &[out]).ok())
+        .map(|f| f.photos.into_iter().map(|e| e.path).collect::<Vec<_>>())
         .filter(|v| v.len() == total)
 }
 
@@ -308,28 +291,23 @@ fn check_complete(shards: &[ShardReport], out: &Path) -> Result<()> {
     let Some(first) = shards.first() else {
         return Ok(());
     };
-    let total = first.json["survey_photos"].as_u64().unwrap_or(0) as usize;
+    let total = first.report.survey_photos;
     let survey = survey_list(first, total, out);
     let mut problems = Vec::new();
     for s in shards {
-        let frames = s.json["frames"].as_array().cloned().unwrap_or_default();
-        let errors = s.json["errors"].as_array().cloned().unwrap_or_default();
-        let count = |k: &str| s.json[k].as_u64().unwrap_or(0) as usize;
+        let r = &s.report;
         let rerun = format!("rerun it (--shard {})", s.shard);
         let limit = limit_note(s);
-        let resumed = frames
-            .iter()
-            .filter(|f| f["resumed"].as_bool() == Some(true))
-            .count();
-        let photo_errors = errors.len().saturating_sub(count("water_column_failed"));
-        if count("corrected") != frames.len() - resumed || count("failed") != photo_errors {
+        let resumed = r.frames.iter().filter(|f| f.resumed).count();
+        let photo_errors = r.errors.len().saturating_sub(r.water_column_failed);
+        if r.corrected != r.frames.len() - resumed || r.failed != photo_errors {
             problems.push(format!(
                 "shard {}: its counts ({} corrected, {} failed) disagree with its lists ({} photos corrected, {} \
                  failed) in {}: the report was edited or damaged; {rerun}",
                 s.shard,
-                count("corrected"),
-                count("failed"),
-                frames.len() - resumed,
+                r.corrected,
+                r.failed,
+                r.frames.len() - resumed,
                 photo_errors,
                 s.path.display()
             ));
@@ -338,16 +316,13 @@ fn check_complete(shards: &[ShardReport], out: &Path) -> Result<()> {
         let range = s.shard.range(total);
         match &survey {
             Some(list) => {
-                let text = |v: &Value| v.as_str().map(str::to_owned);
-                let seen: HashSet<String> = frames
-                    .iter()
-                    .filter_map(|f| text(&f["input"]))
-                    .chain(errors.iter().filter_map(|e| text(&e["path"])))
+                let seen: HashSet<&Path> = (r.frames.iter().map(|f| f.input.as_path()))
+                    .chain(r.errors.iter().map(|e| e.path.as_path()))
                     .collect();
                 let missing: Vec<String> = list[range.clone()]
                     .iter()
-                    .filter(|p| !seen.contains(*p))
-                    .cloned()
+                    .filter(|p| !seen.contains(p.as_path()))
+                    .map(|p| p.to_string_lossy().into_owned())
                     .collect();
                 if !missing.is_empty() {
                     problems.push(format!(
@@ -361,7 +336,7 @@ fn check_complete(shards: &[ShardReport], out: &Path) -> Result<()> {
                 }
             }
             None => {
-                let accounted = frames.len() + photo_errors;
+                let accounted = r.frames.len() + photo_errors;
                 if accounted < range.len() {
                     problems.push(format!(
                         "shard {}: {} of its {} photos are neither corrected nor failed in {}{limit}; {rerun}",
@@ -390,190 +365,80 @@ impl std::fmt::Display for Shard {
     }
 }
 
-/// The values of `key` in every shard's report, in shard order, once each (a file every shard saw, such as a
-/// bad water-column frame, is reported by each).
-fn union(shards: &[ShardReport], key: &str) -> Vec<Value> {
+/// The entries of every shard's list `of`, in shard order, once each (a file every shard saw, such as a bad
+/// water-column frame, is reported by each).
+fn union<T: Clone + Eq + std::hash::Hash>(
+    shards: &[ShardReport],
+    of: impl Fn(&Report) -> &Vec<T>,
+) -> Vec<T> {
     let mut seen = HashSet::new();
-    let mut all = Vec::new();
-    for s in shards {
-        for v in s.json[key].as_array().into_iter().flatten() {
-            if seen.insert(v.to_string()) {
-                all.push(v.clone());
-            }
-        }
-    }
-    all
+    (shards.iter().flat_map(|s| of(&s.report)))
+        .filter(|v| seen.insert(*v))
+        .cloned()
+        .collect()
 }
 
-/// The merged report (shard 1's, with every list and count over all shards) and its frames for the pictures.
-fn merged_report(shards: &[ShardReport], work: &Path) -> Result<(Value, Vec<FrameReport>)> {
-    let mut frames_json = Vec::new();
+/// The merged report: shard 1's, with every list and count over all shards, and the summaries of the run
+/// ([`Summary::of`], [`WindowSummary::count`](crate::report::WindowSummary::count)) over the mission's frames.
+fn merged_report(shards: &[ShardReport], work: &Path) -> Result<Report> {
+    let mut frames = Vec::new();
     let mut inputs = HashSet::new();
     for s in shards {
-        for f in s.json["frames"].as_array().into_iter().flatten() {
-            let input = f["input"].to_string();
-            if !inputs.insert(input.clone()) {
+        for f in &s.report.frames {
+            if !inputs.insert(&f.input) {
                 return Err(Error::Usage(format!(
-                    "{input} is in the report of shard {} and of an earlier shard ({}): the shards overlap",
+                    "{:?} is in the report of shard {} and of an earlier shard ({}): the shards overlap",
+                    f.input,
                     s.shard,
                     s.path.display()
                 )));
             }
-            frames_json.push(mission_numbered(f, frames_json.len()));
+            frames.push(mission_numbered(f, frames.len(), s)?);
         }
     }
-    let frames: Vec<FrameReport> = frames_json.iter().map(frame_for_pictures).collect();
-    let sum = |k: &str| -> u64 { shards.iter().map(|s| s.json[k].as_u64().unwrap_or(0)).sum() };
-    let most = |k: &str| -> u64 {
-        shards
-            .iter()
-            .map(|s| s.json[k].as_u64().unwrap_or(0))
-            .max()
-            .unwrap_or(0)
+    let sum = |of: fn(&Report) -> u64| -> u64 { shards.iter().map(|s| of(&s.report)).sum() };
+    let most = |of: fn(&Report) -> usize| -> usize {
+        shards.iter().map(|s| of(&s.report)).max().unwrap_or(0)
     };
-    let errors = union(shards, "errors");
-    let water_column_failed = most("water_column_failed");
-    let mut r = shards[0].json.clone();
-    r["options"]["shard"] = Value::Null;
-    for k in [
-        "corrected",
-        "skipped_existing",
-        "floored_pixels",
-        "clipped_samples",
-    ] {
-        r[k] = sum(k).into();
-    }
-    r["peak_photos_in_memory"] = most("peak_photos_in_memory").into();
-    r["water_column_failed"] = water_column_failed.into();
-    r["failed"] = (errors.len() as u64)
-        .saturating_sub(water_column_failed)
-        .into();
-    if let Some(layout) = shards
-        .iter()
-        .map(|s| &s.json["layout"])
-        .find(|l| !l.is_null())
-    {
-        r["layout"] = layout.clone();
-    }
-    r["monitor"] = serde_json::to_value(summary_of(&frames_json)).unwrap_or(Value::Null);
-    // The windows the mission's photos used, over every shard (a window chosen by altitude: its photos).
-    let used: Vec<u64> = frames_json
-        .iter()
-        .filter_map(|f| match f["window_by_altitude"].as_array() {
-            Some(took) => Some(took.len() as u64),
-            None => Some(f["window"][1].as_u64()? + 1 - f["window"][0].as_u64()?),
-        })
-        .collect();
-    r["window"]["shortest"] = used.iter().min().copied().unwrap_or(0).into();
-    r["window"]["longest"] = used.iter().max().copied().unwrap_or(0).into();
-    if r["window"].get("by_altitude").is_some() {
-        let chosen = frames_json
-            .iter()
-            .filter(|f| f.get("window_by_altitude").is_some())
-            .count();
-        r["window"]["by_altitude"] = chosen.into();
-    }
-    r["frames"] = Value::Array(frames_json);
-    r["errors"] = Value::Array(errors);
-    r["warnings"] = Value::Array(union(shards, "warnings"));
-    r["elapsed_s"] = shards
-        .iter()
-        .map(|s| s.json["elapsed_s"].as_f64().unwrap_or(0.0))
-        .sum::<f64>()
-        .into();
-    r["report_path"] = serde_json::to_value(work.join("report.json")).unwrap_or(Value::Null);
-    Ok((r, frames))
+    let errors: Vec<FileError> = union(shards, |r| &r.errors);
+    let water_column_failed = most(|r| r.water_column_failed);
+    let mut r = shards[0].report.clone();
+    r.options.shard = None;
+    r.corrected = sum(|r| r.corrected as u64) as usize;
+    r.skipped_existing = sum(|r| r.skipped_existing as u64) as usize;
+    r.floored_pixels = sum(|r| r.floored_pixels);
+    r.clipped_samples = sum(|r| r.clipped_samples);
+    r.peak_photos_in_memory = most(|r| r.peak_photos_in_memory);
+    r.water_column_failed = water_column_failed;
+    r.failed = errors.len().saturating_sub(water_column_failed);
+    r.layout = shards.iter().find_map(|s| s.report.layout).or(r.layout);
+    r.monitor = Summary::of(frames.iter().map(|f| &f.health));
+    r.window.count(&frames, r.options.navigation.is_some());
+    r.frames = frames;
+    r.errors = errors;
+    r.warnings = union(shards, |r| &r.warnings);
+    r.elapsed_s = shards.iter().map(|s| s.report.elapsed_s).sum();
+    r.report_path = Some(work.join("report.json"));
+    Ok(r)
 }
 
-/// A shard's frame with its `index` (and `window`) counted from the mission's first photo, the frame being the
+/// A shard's frame with its `index` (and window) counted from the mission's first photo, the frame being the
 /// `position`-th of the mission: a shard counts from the first photo it read.
-fn mission_numbered(f: &Value, position: usize) -> Value {
-    let mut f = f.clone();
-    let shift = |v: &Value| {
-        v.as_u64()
-            .map(|i| i as i64 + position as i64 - f["index"].as_i64().unwrap_or(0))
-    };
-    let window: Vec<Value> = f["window"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|w| shift(w).map_or(Value::Null, Value::from))
-        .collect();
-    let chosen: Option<Vec<Value>> = f["window_by_altitude"].as_array().map(|c| {
-        c.iter()
-            .map(|w| shift(w).map_or(Value::Null, Value::from))
-            .collect()
-    });
-    if window.len() == 2 {
-        f["window"] = Value::Array(window);
-    }
-    if let Some(chosen) = chosen {
-        f["window_by_altitude"] = Value::Array(chosen);
-    }
-    f["index"] = position.into();
-    f
-}
-
-/// The monitor summary of the merged frames, counted from the flags' kinds.
-fn summary_of(frames: &[Value]) -> Summary {
-    let mut s = Summary::default();
-    for f in frames {
-        let kinds: Vec<&str> = f["health"]["flags"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter_map(|x| x["kind"].as_str())
-            .collect();
-        s.exposure_absorbed +=
-            usize::from(f["health"]["exposure_absorbed"].as_bool() == Some(true));
-        if kinds.is_empty() {
-            continue;
-        }
-        s.flagged += 1;
-        for k in kinds {
-            match k {
-                "contamination" => s.contamination += 1,
-                "factor-change" => s.factor_change += 1,
-                "colour-shift" => s.colour_shift += 1,
-                "scene-in-factor" => s.roughness += 1,
-                "exposure-jump" => s.exposure_jump += 1,
-                "camera-still" => s.camera_still += 1,
-                "short-mission" => s.short_mission += 1,
-                "few-samples" => s.few_samples += 1,
-                "structure-added" => s.structure_added += 1,
-                _ => {}
-            }
-        }
-    }
-    s
-}
-
-/// What the pictures read of a frame: paths, index, the health series (`null`, how JSON writes a NaN, back to
-/// NaN) and whether it is flagged (the flags' kinds do not matter to the pictures: the sheet draws the message).
-fn frame_for_pictures(f: &Value) -> FrameReport {
-    let h = &f["health"];
-    let num = |k: &str| h[k].as_f64().map_or(f32::NAN, |v| v as f32);
-    let flagged = h["flags"].as_array().is_some_and(|a| !a.is_empty());
-    let path = |k: &str| PathBuf::from(f[k].as_str().unwrap_or_default());
-    let health = Health {
-        contamination: num("contamination"),
-        level: num("level"),
-        texture_kept: num("texture_kept"),
-        factor_change: num("factor_change"),
-        colour_shift: num("colour_shift"),
-        roughness: num("roughness"),
-        flags: if flagged {
-            vec![Flag::ShortMission {
-                photos: 0,
-                window: 0,
-            }]
-        } else {
-            Vec::new()
-        },
-        ..Health::default()
-    };
-    let index = f["index"].as_u64().unwrap_or(0) as usize;
-    FrameReport::pictured(path("input"), path("output"), index, health)
+fn mission_numbered(f: &FrameReport, position: usize, s: &ShardReport) -> Result<FrameReport> {
+    let window = f.window.renumbered(f.index, position).ok_or_else(|| Error::Config {
+        path: s.path.clone(),
+        reason: format!(
+            "the window of photo {} ({:?}) starts before the first photo its shard read: the report was edited \
+             or damaged",
+            f.index,
+            f.window.photos()
+        ),
+    })?;
+    Ok(FrameReport {
+        index: position,
+        window,
+        ..f.clone()
+    })
 }
 
 /// Folder of a shard's kept `F·C` images of flagged photos.
@@ -653,11 +518,9 @@ fn kept_lit(work: &Path, shards: &[ShardReport]) -> Result<BTreeMap<usize, Raste
     let mut all = BTreeMap::new();
     let mut offset = 0;
     for s in shards {
-        let frames = s.json["frames"].as_array().cloned().unwrap_or_default();
-        let position: BTreeMap<u64, usize> = frames
-            .iter()
-            .enumerate()
-            .filter_map(|(j, f)| Some((f["index"].as_u64()?, offset + j)))
+        let frames = &s.report.frames;
+        let position: BTreeMap<usize, usize> = (frames.iter().enumerate())
+            .map(|(j, f)| (f.index, offset + j))
             .collect();
         offset += frames.len();
         let Ok(rd) = std::fs::read_dir(flagged_dir(work, s.shard)) else {
@@ -667,7 +530,7 @@ fn kept_lit(work: &Path, shards: &[ShardReport]) -> Result<BTreeMap<usize, Raste
             let name = e.file_name().to_string_lossy().into_owned();
             let local = name
                 .strip_suffix(".f32")
-                .and_then(|i| i.parse::<u64>().ok());
+                .and_then(|i| i.parse::<usize>().ok());
             if let Some(&p) = local.and_then(|i| position.get(&i)) {
                 all.insert(p, load_flagged(&e.path())?);
             }
@@ -677,12 +540,7 @@ fn kept_lit(work: &Path, shards: &[ShardReport]) -> Result<BTreeMap<usize, Raste
 }
 
 /// `overview.png` and `flagged.png` of the merged mission, as one run draws them.
-fn save_pictures(
-    work: &Path,
-    frames: &[FrameReport],
-    frames_json: &Value,
-    shards: &[ShardReport],
-) -> Result<()> {
+fn save_pictures(work: &Path, frames: &[FrameReport], shards: &[ShardReport]) -> Result<()> {
     if frames.is_empty() {
         return Ok(());
     }
@@ -707,10 +565,12 @@ fn save_pictures(
             .filter_map(|j| {
                 let index = pool[j];
                 let frame = frames.iter().find(|f| f.index == index)?.clone();
-                let reason = frames_json[index]["health"]["flags"][0]["message"]
-                    .as_str()
-                    .unwrap_or_default();
-                Some((frame, reason.to_string(), lit.get(&index)?))
+                let reason = frame
+                    .health
+                    .flags
+                    .first()
+                    .map_or(String::new(), |f| f.message.clone());
+                Some((frame, reason, lit.get(&index)?))
             })
             .collect();
     let sheet_path = work.join("flagged.png");

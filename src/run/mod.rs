@@ -12,7 +12,7 @@
 pub mod draw;
 pub mod guard;
 pub mod merge;
-pub mod options;
+pub(crate) use crate::options;
 pub mod pictures;
 pub mod plan;
 pub mod prepare;
@@ -228,32 +228,12 @@ fn report_of(
     errors.extend(outcome.errors);
     let mut warnings = before.warnings;
     warnings.extend(outcome.warnings);
-    let mut monitor = Summary::default();
-    for f in &outcome.frames {
-        monitor.add(&f.health.flags);
-        monitor.exposure_absorbed += usize::from(f.health.exposure_absorbed);
-    }
     Report {
         tool: "abysslight".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         options: opts.clone(),
         transfer_assumed: before.transfer_assumed,
-        window: WindowSummary {
-            by_altitude: opts.navigation.as_ref().map(|_| {
-                (outcome.frames.iter())
-                    .filter(|f| f.window_by_altitude.is_some())
-                    .count()
-            }),
-            ..WindowSummary::of(
-                params,
-                opts,
-                outcome.frames.iter().map(|f| {
-                    f.window_by_altitude
-                        .as_ref()
-                        .map_or(f.window[1] + 1 - f.window[0], Vec::len)
-                }),
-            )
-        },
+        window: WindowSummary::of(params, opts, &outcome.frames),
         layout: outcome.layout,
         scatter: before.scatter,
         survey_photos: if plan.streaming {
@@ -269,7 +249,7 @@ fn report_of(
         ignored_files: plan.found.ignored.len(),
         floored_pixels: outcome.totals.floored_pixels,
         clipped_samples: outcome.totals.clipped_samples,
-        monitor,
+        monitor: Summary::of(outcome.frames.iter().map(|f| &f.health)),
         frames: outcome.frames,
         errors,
         warnings,

@@ -344,9 +344,8 @@ impl Feed<'_> {
                 output: self.plan.output_path(entry),
                 input: entry.path.clone(),
                 index: c.index,
-                window: [c.window.start, c.window.end - 1],
+                window: c.window,
                 altitude: c.altitude,
-                window_by_altitude: c.by_altitude,
                 decode_ms: c.tag.decode_ms,
                 estimate_ms: c.estimate_ms,
                 correct_ms: c.correct_ms,
@@ -354,7 +353,7 @@ impl Feed<'_> {
                 floored_pixels: c.stats.floored_pixels,
                 clipped_samples: c.stats.clipped_samples,
                 resumed: c.photo.is_none(),
-                health: c.health,
+                health: c.health.noted(),
                 backscatter_scale: c.backscatter_scale,
                 noise_sigma: c.noise.as_ref().map_or(Vec::new(), |n| {
                     n.noise_var.iter().map(|v| v.sqrt()).collect()

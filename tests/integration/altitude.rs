@@ -176,7 +176,12 @@ fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
                 .map(|v| v.as_u64().unwrap() as usize)
                 .collect()
         });
-        assert_eq!(c.by_altitude, took, "photo {}", c.index);
+        assert_eq!(
+            c.window.chosen_by_altitude().map(<[usize]>::to_vec),
+            took,
+            "photo {}",
+            c.index
+        );
         let written = decode(&batch.join(&c.tag)).unwrap();
         assert!(
             c.photo.unwrap().samples == written.samples,
@@ -500,7 +505,7 @@ fn a_long_mission_keeps_every_photo_a_window_chooses_among() {
             let i = c.index;
             let n = c.choice.map_or(9, |ch| ch.window);
             let by_time = around(i, n);
-            let Some(took) = &c.by_altitude else {
+            let Some(took) = c.window.chosen_by_altitude() else {
                 panic!("photo {i}: the window over time, where the altitude spans 80 %");
             };
             let pool = around(i, 2 * n + 1);
@@ -509,7 +514,7 @@ fn a_long_mission_keeps_every_photo_a_window_chooses_among() {
                 took.contains(&i) && took.iter().all(|j| pool.contains(j)),
                 "photo {i}: {took:?}"
             );
-            assert_eq!(c.window, took[0]..took[n - 1] + 1);
+            assert_eq!(c.window.span(), took[0]..took[n - 1] + 1);
             // As many before it as the window over time has, each side the nearest in altitude of its side.
             let side = |before: bool| move |j: &usize| if before { *j < i } else { *j > i };
             assert_eq!(

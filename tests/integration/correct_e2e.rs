@@ -151,9 +151,9 @@ fn sixteen_bit_tree_is_mirrored_in_natural_order() {
         "factors are stored one pixel per block (4x4 for photos this small: --downsample auto)"
     );
     // Windows: shifted at the ends, centred in the middle.
-    assert_eq!(report.frames[0].window, [0, 4]);
-    assert_eq!(report.frames[5].window, [3, 7]);
-    assert_eq!(report.frames[11].window, [7, 11]);
+    assert_eq!(report.frames[0].window.span(), 0..5);
+    assert_eq!(report.frames[5].window.span(), 3..8);
+    assert_eq!(report.frames[11].window.span(), 7..12);
 }
 
 #[test]
@@ -204,7 +204,7 @@ fn short_mission_uses_all_photos_and_warns() {
         "{:?}",
         r.warnings
     );
-    assert!(r.frames.iter().all(|f| f.window == [0, 2]));
+    assert!(r.frames.iter().all(|f| f.window.span() == (0..3)));
 }
 
 /// `--downsample auto` (the default): blocks from the photos' size for `--method abyss` (about 160 across, 4 to 8

@@ -49,7 +49,7 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
     assert_eq!(tags, (0..15).collect::<Vec<_>>());
     for c in &out {
         assert_eq!(c.window.len(), n);
-        assert!(c.window.contains(&c.index));
+        assert!(c.window.span().contains(&c.index) && !c.window.by_altitude());
         // Params::default() blocks are auto, as the command line's: 4 for photos 128 wide.
         assert_eq!(
             c.factor.width,
@@ -57,9 +57,10 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
         );
         assert!(c.health.contamination < 0.4, "{:?}", c.health);
     }
-    assert_eq!(out[0].window, 0..5, "shifted at the start");
-    assert_eq!(out[7].window, 5..10, "centred");
-    assert_eq!(out[14].window, 10..15, "shifted at the end");
+    assert_eq!(out[0].window.span(), 0..5, "shifted at the start");
+    assert_eq!(out[7].window.span(), 5..10, "centred");
+    assert_eq!(out[14].window.span(), 10..15, "shifted at the end");
+    assert_eq!(out[7].window.photos(), &[5, 6, 7, 8, 9]);
     let got: Vec<Raster> = out
         .iter()
         .map(|c| Raster::from_photo(c.photo.as_ref().unwrap()))

@@ -380,3 +380,140 @@ fn an_edited_shard_report_is_not_merged() {
     std::fs::write(&first, &one).unwrap();
     assert_eq!(merge_shards(&root.join("out")).unwrap().frames, 23);
 }
+
+/// A report written as JSON is read back as the same [`abysslight::Report`], and the merge of two shards of a dive
+/// whose windows altitude chooses (a sledge swinging 1.2 m, with the simulator's navigation log) is, read back, the
+/// report of one run over the whole survey, field by field: only the fields listed differ by nature.
+#[test]
+fn merged_shards_are_one_runs_report_field_by_field_with_windows_by_altitude() {
+    use abysslight::Report;
+    let d = tempfile::tempdir().unwrap();
+    let dive = d.path().join("dive");
+    let o = abysslight(&[
+        "simulate",
+        "--out",
+        s(&dive),
+        "--altitude-swing",
+        "1.2",
+        "--frames",
+        "30",
+        "--size",
+        "160x120",
+        "--encode",
+        "srgb",
+        "--seed",
+        "4",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let opts = |out: &Path| Options {
+        water_column: Some(dive.join("water")),
+        survey: Some(dive.join("survey")),
+        out: Some(out.to_path_buf()),
+        navigation: Some(dive.join("navigation.csv")),
+        ..Options::default()
+    };
+    let (one_out, sharded) = (d.path().join("one"), d.path().join("sharded"));
+    let returned = correct_mission(&opts(&one_out), &Silent).unwrap();
+    let read = |out: &Path| -> (String, Report) {
+        let text = std::fs::read_to_string(out.join("_abysslight/report.json")).unwrap();
+        let r = serde_json::from_str(&text).unwrap();
+        (text, r)
+    };
+
+    // Report → JSON → report: the same report (compared as JSON, where a NaN is null), the same JSON.
+    let (text, one) = read(&one_out);
+    let (a, b) = (
+        serde_json::to_value(&one).unwrap(),
+        serde_json::to_value(&returned).unwrap(),
+    );
+    for (x, y) in a["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(b["frames"].as_array().unwrap())
+    {
+        for (k, v) in x.as_object().unwrap() {
+            assert_eq!(v, &y[k], "{k} of {}", x["input"]);
+        }
+    }
+    for (k, v) in a.as_object().unwrap() {
+        assert_eq!(v, &b[k], "{k}");
+    }
+    assert_eq!(serde_json::to_string_pretty(&one).unwrap(), text);
+    let windows = |r: &Report| {
+        r.frames
+            .iter()
+            .map(|f| f.window.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(windows(&one), windows(&returned));
+    let chosen = one.frames.iter().filter(|f| f.window.by_altitude()).count();
+    assert!(
+        chosen > 0 && one.window.by_altitude == Some(chosen),
+        "no window chosen by altitude: {:?}",
+        one.window
+    );
+    assert!(one.frames.iter().all(|f| f.altitude.is_some()));
+
+    for index in 1..=2 {
+        run_shard(&sharded, "", index, 2, opts(&sharded));
+    }
+    let m = merge_shards(&sharded).unwrap();
+    assert_eq!((m.shards, m.frames, m.corrected), (2, 30, 30));
+    assert_eq!(outputs(&one_out), outputs(&sharded));
+    let (_, merged) = read(&sharded);
+
+    // The one counter of flags counted both reports' frames.
+    let counted = |r: &Report| abysslight::report::Summary::of(r.frames.iter().map(|f| &f.health));
+    assert_eq!(
+        (counted(&one), counted(&merged)),
+        (one.monitor, merged.monitor)
+    );
+    // What differs by nature: times, where the report and the photos went, the memory a shard held; and what
+    // compares a photo with those before it, as each shard's monitor starts at its first photo (docs/cluster.md):
+    // the change of F, the motion, the ground span, the colour shift, the flags resting on them and their counts.
+    let before = ["factor-change", "colour-shift", "camera-still"];
+    let same_but = |r: &Report, out: &Path| -> serde_json::Value {
+        let mut r = r.clone();
+        r.elapsed_s = 0.0;
+        r.report_path = None;
+        r.peak_photos_in_memory = 0;
+        r.options.out = None;
+        let m = &mut r.monitor;
+        (m.flagged, m.factor_change, m.colour_shift, m.camera_still) = (0, 0, 0, 0);
+        for f in &mut r.frames {
+            (f.decode_ms, f.estimate_ms, f.correct_ms, f.encode_ms) = (0.0, 0.0, 0.0, 0.0);
+            f.output = f.output.strip_prefix(out).unwrap().to_path_buf();
+            let h = &mut f.health;
+            (h.factor_change, h.colour_shift) = (0.0, 0.0);
+            (h.motion, h.motion_ncc, h.window_span) = (None, None, None);
+            h.flags.retain(|g| !before.contains(&g.kind()));
+        }
+        serde_json::to_value(&r).unwrap()
+    };
+    let (a, b) = (same_but(&one, &one_out), same_but(&merged, &sharded));
+    let fields = a.as_object().unwrap();
+    assert_eq!(fields.len(), b.as_object().unwrap().len());
+    for (x, y) in a["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(b["frames"].as_array().unwrap())
+    {
+        for (k, v) in x.as_object().unwrap() {
+            assert_eq!(v, &y[k], "{k} of {}", x["input"]);
+        }
+    }
+    for (k, v) in fields {
+        assert_eq!(v, &b[k], "{k}");
+    }
+    // The typed frames too: every photo at its place with the window one run gave it.
+    for (x, y) in one.frames.iter().zip(&merged.frames) {
+        assert_eq!(
+            (&x.input, x.index, &x.window),
+            (&y.input, y.index, &y.window)
+        );
+    }
+    let windows = |r: &Report| (r.window.shortest, r.window.longest, r.window.by_altitude);
+    assert_eq!(windows(&merged), windows(&one));
+}

@@ -11,6 +11,7 @@ use crate::method::chain;
 use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
 use crate::method::estimate::Estimate;
 use crate::method::factor::{factor_filled, lit_seafloor};
+use crate::method::members::Members;
 use crate::method::monitor::{pool_factor, pooled, Flag, Health};
 use crate::method::raster::{Photo, Raster, Samples};
 use crate::method::seen::{Seen, Window};
@@ -75,9 +76,8 @@ impl<T> Engine<T> {
         Corrected {
             tag: w.tag,
             index: i,
-            window: members[0]..members[members.len() - 1] + 1,
+            window: Members::new(members, chosen),
             altitude: self.own(i).altitude,
-            by_altitude: chosen.then_some(members),
             photo,
             factor: f,
             lit,

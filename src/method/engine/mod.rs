@@ -25,7 +25,6 @@
 //! up to 41 photos at the start of a mission (until [`crate::Survey::FIRST_DECIDED`] is pushed) and 26 after, or
 //! with altitudes up to 63 at the start and 32 after (the longest window, 31, chosen by altitude).
 
-use std::ops::Range;
 use std::time::Instant;
 
 mod estimate;
@@ -64,11 +63,9 @@ pub struct Corrected<T> {
     pub tag: T,
     /// Position among the photos the engine accepted (0-based).
     pub index: usize,
-    /// Photos (by `index`) whose median gave this photo's `F`: the window, or where it was chosen by altitude
-    /// (`by_altitude`), the span of the photos chosen.
-    pub window: Range<usize>,
-    /// Where the window was chosen by altitude ([`crate::method::altitude`]): its photos (by `index`, in order).
-    pub by_altitude: Option<Vec<usize>>,
+    /// The photos (by `index`) whose median gave this photo's `F`, and whether altitude chose them
+    /// ([`crate::method::altitude`]).
+    pub window: crate::method::members::Members,
     /// The altitude the photo was pushed with ([`PhotoIn::altitude`]).
     pub altitude: Option<f32>,
     /// The corrected photo (`None` for photos pushed with [`Use::Estimate`]).
