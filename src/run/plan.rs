@@ -618,6 +618,17 @@ fn clocks_apart(
             first.display()
         );
     };
+    if lo <= b && hi >= a {
+        return format!(
+            "photos are matched by the time in their EXIF: log {} to {}, photos {} to {}: the photos fall in its \
+             gaps (rows more than {} s apart)",
+            iso(a),
+            iso(b),
+            iso(lo),
+            iso(hi),
+            crate::io::navigation::MAX_GAP_S
+        );
+    }
     // Midpoint to midpoint: the offset that lays the photos' span in the middle of the log's.
     let apart = (lo + hi) / 2.0 - (a + b) / 2.0;
     let words = match apart.abs() {
@@ -637,8 +648,8 @@ fn clocks_apart(
 }
 
 /// The input folders and files of a run are there, each named by its flag where not (the path checks after it
-/// name only the path); the files read whole or decoded (mask, scatter image, navigation log) are regular files,
-/// not a FIFO that would block the run or a device that never ends.
+/// name only the path); the mask and the navigation log are regular files, not a FIFO that would block the run or
+/// a device that never ends.
 fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     let inputs = [
         ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
@@ -658,7 +669,6 @@ fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     }
     for (what, path) in [
         ("--mask file", &opts.mask),
-        ("--scatter image", &opts.scatter),
         ("--navigation log", &opts.navigation),
     ] {
         if let Some(p) = path {

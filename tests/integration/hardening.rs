@@ -668,7 +668,7 @@ fn a_fifo_or_a_device_given_as_a_file_is_refused_by_name() {
         ("--config", &fifo, "a FIFO"),
         ("--config", &zero, "a device"),
         ("--mask", &fifo, "a FIFO"),
-        ("--scatter", &zero, "a device"),
+        ("--mask", &zero, "a device"),
     ] {
         let o = run_within(&with(&base, &[flag, s(file)]), d.path(), 60);
         assert_eq!(code(&o), 2, "{flag} {}: {}", file.display(), stderr(&o));

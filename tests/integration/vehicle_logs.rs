@@ -235,6 +235,20 @@ fn a_log_on_another_clock_says_both_spans_and_takes_an_offset() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!((altitudes(&out)[0].unwrap() - 2.02).abs() < 1e-4);
+    // Clocks that agree, but rows too far apart around every photo: the gaps are named, not the clocks.
+    std::fs::write(
+        &nav,
+        format!("time,altitude\n{},3\n{},3\n", T0 - 5.0, T0 + 15.0),
+    )
+    .unwrap();
+    let o = correct(&survey, &d.path().join("o4"), &["--navigation", s(&nav)]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("the photos fall in its gaps (rows more than 10 s apart)"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(&nav, format!("timestamp,altitude\n{rows}")).unwrap();
     // A config key too.
     let cfg = d.path().join("run.toml");
     std::fs::write(
