@@ -74,6 +74,22 @@ fn non_empty_out_note(out: &Path, resume: bool) -> Option<String> {
     })
 }
 
+/// A file-size limit (`ulimit -f`, `prlimit --fsize`, a scheduler passing on the submitting shell's limits) must
+/// cost the one file that outgrows it, not the run: by default the kernel kills the process with SIGXFSZ at the
+/// first write past the limit (exit 153, no report, a temporary file left). With a handler installed, the write
+/// fails with `EFBIG` instead and the run's per-file error handling takes over (the file is named, its temporary
+/// file removed, the run goes on and writes its report). The handler only sets a flag nobody reads
+/// (signal-hook's, async-signal-safe); unlike `SIG_IGN` it is not inherited by programs the command starts.
+/// Python ignores SIGXFSZ itself at start-up, so `correct()` from Python is covered without it.
+pub fn survive_file_size_limit() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        // Failing to install it leaves the kernel's default, as before: not worth refusing to run for.
+        let _ = signal_hook::flag::register(signal_hook::consts::SIGXFSZ, flag);
+    });
+}
+
 /// In a batch run, Ctrl-C (SIGINT) or SIGTERM (a scheduler's time limit) says how to go on before the process
 /// exits with 128 + the signal (130 for Ctrl-C). Outputs are only renamed into place when complete, so what is
 /// in the output folder is whole photos; `--resume` corrects the rest with the same result as one run.

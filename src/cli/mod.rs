@@ -1319,6 +1319,7 @@ pub fn run() -> ExitCode {
 
 /// The `abysslight` command with `args` (the first is the program's name).
 pub fn run_from(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
+    extras::survive_file_size_limit();
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
