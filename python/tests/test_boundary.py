@@ -86,10 +86,10 @@ def test_unknown_options_name_the_accepted_ones(tmp_path):
 def test_correct_takes_a_config_file_and_overrides_it(tmp_path):
     cfg = tmp_path / "dive.toml"
     cfg.write_text('window = 4\n')
-    with pytest.raises(ValueError, match="--window must be an odd number"):
+    with pytest.raises(ValueError, match="window must be an odd number"):
         abysslight.correct(config=cfg, survey=tmp_path, out=tmp_path / "o", progress=False)
     # A keyword overrides the file; a contamination given undoes the file's window, as the command's flag does.
-    with pytest.raises(ValueError, match="--survey"):
+    with pytest.raises(ValueError, match="survey is required"):
         abysslight.correct(config=cfg, window=5, progress=False)
     cfg.write_text('windw = 9\n')
     with pytest.raises(ValueError, match="windw"):
