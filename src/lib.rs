@@ -86,3 +86,4 @@ pub use report::{Progress, Report, Silent};
 pub use run::correct_mission;
 pub use run::merge::merge_shards;
 pub use run::options::{Options, Shard};
+pub use run::summary;

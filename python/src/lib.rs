@@ -677,11 +677,11 @@ fn log_summary(
         .out
         .as_deref()
         .filter(|o| *o != std::path::Path::new("-"));
-    let level = match abysslight::run::summary::flagged(report) > 0 || !report.all_ok() {
+    let level = match abysslight::summary::flagged(report) > 0 || !report.all_ok() {
         true => "warning",
         false => "info",
     };
-    for line in abysslight::run::summary::lines(report, opts, out) {
+    for line in abysslight::summary::lines(report, opts, out) {
         progress::log(py, level, &format!("{prefix}{line}"))?;
     }
     Ok(())

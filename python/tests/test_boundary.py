@@ -200,11 +200,11 @@ def test_simulate_and_evaluate_take_the_command_s_ranges(tmp_path):
     assert code == 0, (code, err[-2000:])
     lines = out.splitlines()
     assert lines == [
-        "ValueError --size (width) must be within 8..=16384, got 100000",
-        "ValueError --frames must be within 1..=1000000, got 1000000000",
-        "ValueError --size (width) must be within 8..=16384, got 4611686018427387904",
-        "ValueError --noise must be within 0..=100, got NaN",
-        "ValueError --cell must be within 1..=1000000, got 0.001",
+        "ValueError size (width) must be within 8..=16384, got 100000",
+        "ValueError frames must be within 1..=1000000, got 1000000000",
+        "ValueError size (width) must be within 8..=16384, got 4611686018427387904",
+        "ValueError noise must be within 0..=100, got NaN",
+        "ValueError cell must be within 1..=1000000, got 0.001",
     ], out
     # The command gives the same messages.
     r = subprocess.run([CLI, "simulate", "--out", tmp_path / "x", "--frames", "1000000000"], capture_output=True,

