@@ -471,7 +471,7 @@ fn a_file_size_limit_costs_the_files_that_outgrow_it_not_the_run() {
     );
     for line in &too_large {
         assert!(
-            line.contains(&*s(&out)),
+            line.contains(s(&out)),
             "the error names the output file: {line}"
         );
     }
