@@ -88,3 +88,4 @@ pub use options::{Options, Shard};
 pub use report::{Progress, Report, Silent};
 pub use run::correct_mission;
 pub use run::merge::merge_shards;
+pub use run::summary;

@@ -128,6 +128,11 @@ pub struct Options {
     /// complete). Their neighbours are still read for the windows, so results equal an uninterrupted run.
     /// Default: false.
     pub resume: bool,
+    /// Exit with a status of its own (3 in the command; an exception in Python) when any photo is flagged as
+    /// likely wrong, after the run has written everything. The library's run is the same either way: callers read
+    /// the flags from the report. Default: false.
+    #[serde(default)]
+    pub strict: bool,
     /// Write only chunk `K` of `N` contiguous chunks of the survey (reading the neighbours its windows need).
     /// The union of all shards' outputs equals a single run. Default: none (the whole survey).
     pub shard: Option<Shard>,
@@ -306,6 +311,7 @@ impl Default for Options {
             threads: None,
             scatter_memory_mib: 2048,
             resume: false,
+            strict: false,
             shard: None,
             transfer: p.transfer,
             mask: None,
@@ -585,6 +591,7 @@ impl Options {
             threads: _,
             scatter_memory_mib: _,
             resume: _,
+            strict: _,
             shard: _,
             mask: _,
             mask_auto: _,

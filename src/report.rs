@@ -321,6 +321,16 @@ impl Report {
     /// Write the report as JSON to `opts.report`, or else to `report.json` in `work_dir` (per shard:
     /// `report-shard-K-of-N.json`), and remember where.
     pub fn write(&mut self, opts: &Options, work_dir: Option<&Path>) -> Result<(), Error> {
+        self.write_or_print(opts, work_dir, &mut std::io::stderr().lock())
+    }
+
+    /// [`Report::write`], printing the report on `instead` when it cannot be written.
+    fn write_or_print(
+        &mut self,
+        opts: &Options,
+        work_dir: Option<&Path>,
+        instead: &mut dyn std::io::Write,
+    ) -> Result<(), Error> {
         let path = opts.report.clone().or_else(|| {
             work_dir.map(|w| {
                 w.join(match opts.shard {
@@ -342,7 +352,7 @@ impl Report {
         if written.is_err() {
             // A full disk or a lost folder must not lose the record of a mission: print it instead.
             self.report_path = None;
-            self.print_instead(&path, &mut std::io::stderr().lock());
+            self.print_instead(&path, instead);
         }
         written
     }
@@ -422,10 +432,10 @@ mod report_fallback_tests {
             ..Options::default()
         };
         let mut r = a_report(opts.clone());
-        assert!(r.write(&opts, None).is_err());
-        assert_eq!(r.report_path, None);
+        // Printed into a buffer, not onto the test's stderr (which `cargo test` does not capture).
         let mut printed = Vec::new();
-        r.print_instead(&d.path().join("gone/report.json"), &mut printed);
+        assert!(r.write_or_print(&opts, None, &mut printed).is_err());
+        assert_eq!(r.report_path, None);
         let text = String::from_utf8(printed).unwrap();
         let (line, json) = text.split_once('\n').unwrap();
         assert!(line.contains("gone/report.json"), "{line}");

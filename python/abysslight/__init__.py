@@ -24,7 +24,7 @@ Options are the command's options by the config file's names with ``_`` (``windo
 given are the command's defaults. See docs/python.md.
 """
 
-from typing import Any, Callable, Dict, Optional
+import typing as _t
 
 from . import _abysslight
 from ._abysslight import (
@@ -42,6 +42,7 @@ from ._abysslight import (
 __all__ = [
     "Corrected",
     "Engine",
+    "FlaggedPhotosError",
     "Mask",
     "Scatter",
     "correct",
@@ -52,10 +53,39 @@ __all__ = [
     "__version__",
 ]
 
-ProgressCallback = Callable[[int, int, str, bool], Any]
+_ProgressCallback = _t.Callable[[int, int, str, bool], _t.Any]
 
 
-def _tqdm_progress() -> "tuple[Optional[ProgressCallback], Callable[[], None]]":
+class FlaggedPhotosError(RuntimeError):
+    """Raised by ``correct(..., strict=True)`` (the command's ``--strict``, exit status 3) when the run flagged
+    photos as likely wrong. The run has written everything; ``report`` is the report ``correct()`` would have
+    returned (for a cruise: ``{"dives": ..., "failed": ...}``)."""
+
+    def __init__(self, message: str, report: _t.Dict[str, _t.Any]) -> None:
+        super().__init__(message)
+        self.report = report
+
+
+def _flagged(report: _t.Dict[str, _t.Any]) -> int:
+    return sum(1 for f in report.get("frames", []) if f.get("health", {}).get("flags"))
+
+
+def _strict_check(report: _t.Dict[str, _t.Any]) -> None:
+    """``FlaggedPhotosError`` when a strict run flagged photos (each dive of a cruise its own run)."""
+    runs = report["dives"].items() if "dives" in report else [("", report)]
+    said = []
+    for name, r in runs:
+        n = _flagged(r)
+        if n and r.get("options", {}).get("strict"):
+            where = f"{name}: " if name else ""
+            said.append(f"{where}{n} of {len(r['frames'])} photos flagged as likely wrong")
+    if said:
+        raise FlaggedPhotosError(
+            "strict: " + "; ".join(said) + " (every file was written; the flags are in the report)", report
+        )
+
+
+def _tqdm_progress() -> "tuple[_t.Optional[_ProgressCallback], _t.Callable[[], None]]":
     """A tqdm bar fed by the run's callback, if tqdm is installed."""
     try:
         from tqdm.auto import tqdm
@@ -77,13 +107,13 @@ def _tqdm_progress() -> "tuple[Optional[ProgressCallback], Callable[[], None]]":
 
 
 def correct(
-    survey: Optional[Any] = None,
-    out: Optional[Any] = None,
-    water_column: Optional[Any] = None,
+    survey: _t.Optional[_t.Any] = None,
+    out: _t.Optional[_t.Any] = None,
+    water_column: _t.Optional[_t.Any] = None,
     *,
-    progress: "Optional[ProgressCallback | bool]" = None,
-    **options: Any,
-) -> Dict[str, Any]:
+    progress: "_t.Optional[_ProgressCallback | bool]" = None,
+    **options: _t.Any,
+) -> _t.Dict[str, _t.Any]:
     """Run ``abysslight correct``: correct the photos of the folder ``survey`` into ``out``, with ``S`` from the
     water-column frames in ``water_column`` (or ``scatter="scatter.png"``), and return the run report (what
     ``out/_abysslight/report.json`` holds) as a dict. With ``cruise="CRUISE"`` (instead of ``survey`` and
@@ -95,7 +125,11 @@ def correct(
     given are the command's defaults. Switches are ``denoise=False`` or ``no_denoise=True``.
 
     ``progress``: a callable ``progress(done, total, path, ok)`` called after each photo; ``None`` (default) shows a
-    tqdm bar when tqdm is installed; ``False``: nothing. Stages and warnings go to the ``abysslight`` logger.
+    tqdm bar when tqdm is installed; ``False``: nothing. Stages and warnings go to the ``abysslight`` logger, and
+    the end-of-run summary as the command prints it (at WARNING when photos were flagged or files failed).
+
+    ``strict=True`` (``--strict``): raise ``FlaggedPhotosError`` (with the report) when photos were flagged as
+    likely wrong, after the run has written everything.
 
     The GIL is released while it runs. Ctrl-C (KeyboardInterrupt) stops it before the next photo; the photos
     written so far are complete and ``resume=True`` finishes the run. An exception raised by ``progress`` stops it
@@ -104,7 +138,7 @@ def correct(
     Raises TypeError for an unknown option (naming the accepted ones) or a value of the wrong type, ValueError for a
     bad value (with the command's message), OSError when a folder cannot be read.
     """
-    close: Callable[[], None] = lambda: None
+    close: _t.Callable[[], None] = lambda: None
     if progress is None:
         callback, close = _tqdm_progress()
     elif progress is False:
@@ -114,8 +148,10 @@ def correct(
     else:
         callback = progress
     try:
-        return _abysslight.correct(
+        report = _abysslight.correct(
             progress=callback, survey=survey, out=out, water_column=water_column, **options
         )
     finally:
         close()
+    _strict_check(report)
+    return report

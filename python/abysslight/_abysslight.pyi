@@ -67,7 +67,8 @@ class Corrected:
     health: Dict[str, Any]
     """Health figures and flags of the estimate (as in the run report's frames)."""
     window: Tuple[int, int]
-    """(first, end) indices of the photos whose median gave F."""
+    """(start, stop) of the photos whose median gave F, as Python's range: range(*window). report.json's
+    frames[].window lists the first and the last: [start, stop - 1]."""
     altitude: Optional[float]
     """The altitude the photo was pushed with (None: none)."""
     by_altitude: Optional[List[int]]
@@ -92,12 +93,15 @@ class Engine:
         self,
         scatter: Optional[Scatter] = None,
         mask: Optional[Mask] = None,
+        by_altitude: bool = False,
         **options: Any,
     ) -> None: ...
     def push(self, photo: PhotoArray, tag: Any = None, altitude: Optional[float] = None) -> List[Corrected]:
         """Give the next photo (and its altitude in metres, from a navigation log); returns the photos whose window
         became complete, in order (GIL released). With altitudes, where the altitude swings along the track, windows
-        are chosen among the photos lit from the nearest heights."""
+        are chosen among the photos lit from the nearest heights. Windows by altitude start with the first photo:
+        an altitude after a first photo without one is a ValueError unless the engine was made with
+        by_altitude=True."""
     def finish(self) -> List[Corrected]:
         """Every photo still waiting, corrected with the window shifted back from the end; the mission's end."""
     @property
@@ -115,12 +119,13 @@ def correct_arrays(
     photos: Iterable[PhotoArray],
     water_column: Union[None, Scatter, Iterable[PhotoArray]] = None,
     mask: Optional[Mask] = None,
-    altitudes: Optional[Sequence[float]] = None,
+    altitudes: Optional[Sequence[Optional[float]]] = None,
     **options: Any,
 ) -> List[PhotoArray]:
     """Correct a list of photos in one call through an Engine (the Engine's options); the corrected arrays in
     order, each of its photo's shape and dtype. water_column: water-column frames, a Scatter, or None (S = 0).
-    altitudes: each photo's altitude in metres (a navigation log), for windows chosen by altitude."""
+    altitudes: each photo's altitude in metres (a navigation log; None where it has none), for windows chosen by
+    altitude."""
 
 def correct(progress: Optional[Callable[[int, int, str, bool], Any]] = None, **options: Any) -> Dict[str, Any]:
     """abysslight correct: the run report; with cruise=, {"dives": {name: report}, "failed": {name: message}}."""

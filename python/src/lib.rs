@@ -29,16 +29,18 @@ use options::{correct_kwargs, engine_kwargs};
 /// any kind of error added later) a `ValueError`, with the command's message.
 pub(crate) fn to_py(e: abysslight::Error) -> PyErr {
     use std::io::ErrorKind;
+    // The library's messages name the command's flags: said as the keywords a Python caller gives.
+    let message = options::keyword_names(&e.to_string());
     match &e {
         abysslight::Error::Io { source, .. } => match source.kind() {
-            ErrorKind::OutOfMemory => PyMemoryError::new_err(e.to_string()),
-            ErrorKind::Interrupted => PyKeyboardInterrupt::new_err(e.to_string()),
+            ErrorKind::OutOfMemory => PyMemoryError::new_err(message),
+            ErrorKind::Interrupted => PyKeyboardInterrupt::new_err(message),
             _ => match source.raw_os_error() {
-                Some(errno) => PyOSError::new_err((errno, e.to_string())),
-                None => PyOSError::new_err(e.to_string()),
+                Some(errno) => PyOSError::new_err((errno, message)),
+                None => PyOSError::new_err(message),
             },
         },
-        _ => PyValueError::new_err(e.to_string()),
+        _ => PyValueError::new_err(message),
     }
 }
 
@@ -269,6 +271,8 @@ struct EngineState {
     shape: Option<Shape>,
     /// `finish()` was called: the mission is over.
     finished: bool,
+    /// Windows by altitude, from the first photo on (`by_altitude=True`, or the first photo had an altitude).
+    by_altitude: bool,
 }
 
 /// An engine from the keyword options of `caller`: the method's options, `method="mean"` refused.
@@ -294,26 +298,33 @@ fn new_engine<T>(
 #[pymethods]
 impl Engine {
     /// An engine with `correct`'s method options by their names with `_` (`window=9`, `method="paper"`,
-    /// `transfer="srgb"`); none given: the command's defaults.
+    /// `transfer="srgb"`); none given: the command's defaults. `by_altitude=True`: windows by altitude from the
+    /// first photo on, for a navigation log that starts after the first photo (photos pushed without an altitude
+    /// keep the window over time); without it they are chosen by altitude when the first photo has one.
     #[new]
-    #[pyo3(signature = (scatter = None, mask = None, **options))]
+    #[pyo3(signature = (scatter = None, mask = None, by_altitude = false, **options))]
     fn new(
         scatter: Option<PyRef<'_, Scatter>>,
         mask: Option<PyRef<'_, Mask>>,
+        by_altitude: bool,
         options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Engine> {
         let mask = mask.map(|m| m.inner.clone());
-        let (inner, method) = new_engine(
+        let (mut inner, method) = new_engine(
             "Engine()",
             scatter.as_ref().map(|s| &s.inner),
             mask,
             options,
         )?;
+        if by_altitude {
+            inner.expect_altitudes().map_err(to_py)?;
+        }
         Ok(Engine {
             state: Mutex::new(EngineState {
                 inner,
                 shape: None,
                 finished: false,
+                by_altitude,
             }),
             method,
         })
@@ -332,11 +343,22 @@ impl Engine {
         py: Python<'_>,
         photo: &Bound<'_, PyAny>,
         tag: Option<PyObject>,
-        altitude: Option<f32>,
+        altitude: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Vec<Corrected>> {
+        let altitude = altitude_of(altitude, "altitude")?;
         let mut state = self.state("push")?;
         if state.finished {
             return Err(finished("push"));
+        }
+        if altitude.is_some() && !state.by_altitude {
+            if state.shape.is_some() {
+                return Err(PyValueError::new_err(
+                    "an altitude after a first photo pushed without one: this engine chooses its windows over \
+                     time, and would ignore it. Windows by altitude are chosen from the mission's first photo on: \
+                     give the first photo's altitude, or make the engine with Engine(by_altitude=True) when the \
+                     log starts later (photos without an altitude then keep the window over time)",
+                ));
+            }
         }
         let (photo, shape) = photo_from_array(photo, "photo")?;
         if let Some(first) = state.shape {
@@ -353,6 +375,8 @@ impl Engine {
         let out = py
             .allow_threads(|| inner.push((photo, tag, altitude)))
             .map_err(to_py)?;
+        // The first photo's altitude: windows by altitude from here on (as the engine does).
+        state.by_altitude |= altitude.is_some();
         state.shape.get_or_insert(shape);
         out.into_iter().map(|c| corrected(py, c, shape)).collect()
     }
@@ -473,7 +497,8 @@ fn corrected(
 /// A list of photos corrected in one call, through an [`abysslight::Engine`] (which chooses the windows as it
 /// does for any stream): the corrected arrays in the photos' order, each of the shape and dtype of its photo.
 /// `water_column`: a `Scatter`, or water-column frames (a list of arrays), or None (`S = 0`). `altitudes`: each
-/// photo's altitude in metres (a navigation log), one per photo, for windows chosen by altitude.
+/// photo's altitude in metres (a navigation log), one per photo, None where the log has none, for windows chosen by
+/// altitude from the first photo on.
 #[pyfunction]
 #[pyo3(signature = (photos, water_column = None, mask = None, altitudes = None, **options))]
 fn correct_arrays(
@@ -481,9 +506,23 @@ fn correct_arrays(
     photos: &Bound<'_, PyAny>,
     water_column: Option<&Bound<'_, PyAny>>,
     mask: Option<PyRef<'_, Mask>>,
-    altitudes: Option<Vec<f32>>,
+    altitudes: Option<&Bound<'_, PyAny>>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Py<PyList>> {
+    let altitudes = match altitudes.filter(|a| !a.is_none()) {
+        None => None,
+        Some(a) if a.downcast::<pyo3::types::PyString>().is_ok() => {
+            return Err(pyo3::exceptions::PyTypeError::new_err(
+                "altitudes must be a list of numbers of metres (None: not in the log), one per photo",
+            ))
+        }
+        Some(a) => Some(
+            a.try_iter()?
+                .enumerate()
+                .map(|(i, v)| altitude_of(Some(&v?), &format!("altitudes[{i}]")))
+                .collect::<PyResult<Vec<Option<f32>>>>()?,
+        ),
+    };
     let scatter = match water_column {
         None => None,
         Some(w) => match w.downcast::<Scatter>() {
@@ -511,12 +550,12 @@ fn correct_arrays(
         shape = Some(s);
         out.push(None);
         let altitude = match &altitudes {
-            Some(a) => Some(*a.get(i).ok_or_else(|| {
+            Some(a) => *a.get(i).ok_or_else(|| {
                 PyValueError::new_err(format!(
                     "altitudes lists {} photos, photos has more",
                     a.len()
                 ))
-            })?),
+            })?,
             None => None,
         };
         let done = py
@@ -541,6 +580,28 @@ fn correct_arrays(
         .map(|o| o.unwrap_or_else(|| py.None()))
         .collect();
     Ok(PyList::new(py, images)?.unbind())
+}
+
+/// A photo's altitude as Python gives it: a number of metres, or None (not in the log). True and False are
+/// refused (True would read as 1 m).
+fn altitude_of(v: Option<&Bound<'_, PyAny>>, what: &str) -> PyResult<Option<f32>> {
+    let Some(v) = v.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let type_error = || -> PyResult<Option<f32>> {
+        Err(pyo3::exceptions::PyTypeError::new_err(format!(
+            "{what} must be a number of metres, or None where the log has no altitude; got {}",
+            v.get_type().name()?
+        )))
+    };
+    let name = v.get_type().name()?.to_string();
+    if v.downcast::<pyo3::types::PyBool>().is_ok() || name == "bool_" || name == "bool" {
+        return type_error();
+    }
+    match v.extract::<f64>() {
+        Ok(a) => Ok(Some(a as f32)),
+        Err(_) => type_error(),
+    }
 }
 
 /// The corrected photos of `done` into `out`, each at its tag (its position in the list).
@@ -574,6 +635,7 @@ fn correct(
     let Some(cruise) = given.cruise else {
         let report =
             progress::run_cancellable(py, progress, |p| abysslight::correct_mission(opts, p))?;
+        log_summary(py, &report, opts, "")?;
         return to_dict(py, &report);
     };
     let dives = progress::run_cancellable(py, progress, |p| {
@@ -582,14 +644,47 @@ fn correct(
     let (done, failed) = (PyDict::new(py), PyDict::new(py));
     for (dive, result) in dives {
         match result {
-            Ok(report) => done.set_item(&dive.name, to_dict(py, &report)?)?,
-            Err(e) => failed.set_item(&dive.name, e.to_string())?,
+            Ok(report) => {
+                log_summary(
+                    py,
+                    &report,
+                    &dive.options(
+                        opts,
+                        opts.out.as_deref().unwrap_or(std::path::Path::new(".")),
+                    ),
+                    &format!("{}: ", dive.name),
+                )?;
+                done.set_item(&dive.name, to_dict(py, &report)?)?
+            }
+            Err(e) => failed.set_item(&dive.name, options::keyword_names(&e.to_string()))?,
         }
     }
     let d = PyDict::new(py);
     d.set_item("dives", done)?;
     d.set_item("failed", failed)?;
     Ok(d.into_any().unbind())
+}
+
+/// The end of a run to the `abysslight` logger, as the command prints it (`abysslight::run::summary`): at WARNING
+/// when photos were flagged as likely wrong or files failed, else at INFO. `prefix`: a cruise's dive name.
+fn log_summary(
+    py: Python<'_>,
+    report: &abysslight::Report,
+    opts: &abysslight::Options,
+    prefix: &str,
+) -> PyResult<()> {
+    let out = opts
+        .out
+        .as_deref()
+        .filter(|o| *o != std::path::Path::new("-"));
+    let level = match abysslight::summary::flagged(report) > 0 || !report.all_ok() {
+        true => "warning",
+        false => "info",
+    };
+    for line in abysslight::summary::lines(report, opts, out) {
+        progress::log(py, level, &format!("{prefix}{line}"))?;
+    }
+    Ok(())
 }
 
 /// Run the `abysslight` command with `argv` (the first is the program's name); returns its exit status. The one

@@ -136,9 +136,61 @@ fn required(p: &Option<PathBuf>, name: &str) -> PyResult<()> {
     match p {
         Some(_) => Ok(()),
         None => Err(PyValueError::new_err(format!(
-            "--{name} DIR is required (or {name} = \"DIR\" in --config)"
+            "{name} is required: {name}=\"DIR\" (or {name} = \"DIR\" in the config file)"
         ))),
     }
+}
+
+/// A message of the library (written for the command line) as Python speaks: each `--flag-name` as the keyword
+/// `flag_name` (`--window must be odd` → `window must be odd`, `--no-denoise` → `no_denoise`).
+pub fn keyword_names(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(i) = rest.find("--") {
+        let (before, after) = rest.split_at(i);
+        out.push_str(before);
+        let name_len = after[2..]
+            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+            .unwrap_or(after.len() - 2);
+        let name = &after[2..2 + name_len];
+        let starts_word =
+            before.is_empty() || !before.ends_with(|c: char| c.is_ascii_alphanumeric());
+        if starts_word && name.starts_with(|c: char| c.is_ascii_lowercase()) {
+            out.push_str(&name.replace('-', "_"));
+        } else {
+            out.push_str(&after[..2 + name_len]);
+        }
+        rest = &after[2 + name_len..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The accepted name nearest to a misspelt `key` (at most a third of its letters off), for "did you mean".
+fn nearest<'a>(key: &str, accepted: &'a [String]) -> Option<&'a str> {
+    let distance = |a: &str, b: &str| -> usize {
+        let b: Vec<char> = b.chars().collect();
+        let mut row: Vec<usize> = (0..=b.len()).collect();
+        for (i, ca) in a.chars().enumerate() {
+            let mut diag = row[0];
+            row[0] = i + 1;
+            for (j, &cb) in b.iter().enumerate() {
+                let next = (diag + usize::from(ca != cb))
+                    .min(row[j] + 1)
+                    .min(row[j + 1] + 1);
+                diag = row[j + 1];
+                row[j + 1] = next;
+            }
+        }
+        row[b.len()]
+    };
+    let key = key.to_lowercase().replace('-', "_");
+    accepted
+        .iter()
+        .map(|a| (distance(&key, a), a.as_str()))
+        .filter(|&(d, _)| d <= (key.chars().count() / 3).max(1))
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, a)| a)
 }
 
 /// A keyword's value, converted: a path, or the JSON value of a config file's key.
@@ -161,8 +213,11 @@ fn given(
     for (k, v) in d.iter() {
         let key: String = k.extract()?;
         if !accepted.contains(&key) {
+            let hint = nearest(&key, &accepted)
+                .map(|n| format!(" (did you mean `{n}`?)"))
+                .unwrap_or_default();
             return Err(PyTypeError::new_err(format!(
-                "{caller} got an unexpected option {key:?}; accepted: {}",
+                "{caller} got an unexpected option {key:?}{hint}; accepted: {}",
                 accepted.join(", ")
             )));
         }

@@ -31,11 +31,7 @@ struct PyProgress {
 impl PyProgress {
     fn log(&self, level: &str, message: &str) {
         Python::with_gil(|py| {
-            let r = py
-                .import("logging")
-                .and_then(|l| l.call_method1("getLogger", ("abysslight",)))
-                .and_then(|l| l.call_method1(level, (message,)));
-            if let Err(e) = r {
+            if let Err(e) = log(py, level, message) {
                 self.stop(e);
             }
         });
@@ -83,6 +79,16 @@ impl Progress for PyProgress {
     }
 }
 
+/// `message` to the `abysslight` logger at `level` (`"info"`, `"warning"`, ...), the command's `--flags` said
+/// as Python's keyword names.
+pub fn log(py: Python<'_>, level: &str, message: &str) -> PyResult<()> {
+    let message = crate::options::keyword_names(message);
+    py.import("logging")?
+        .call_method1("getLogger", ("abysslight",))?
+        .call_method1(level, (message,))?;
+    Ok(())
+}
+
 /// What the calling thread waits for while a run goes on.
 enum Event<R> {
     /// The run's result (`None`: its thread ended without one).
@@ -102,6 +108,12 @@ pub fn run_cancellable<T: Send>(
     work: impl FnOnce(&dyn Progress) -> abysslight::Result<T> + Send,
 ) -> PyResult<T> {
     let (ask, asked) = crossbeam_channel::unbounded();
+    // Without a callback nothing asks: wait on a channel that never delivers (not on `asked` with its sender
+    // dropped, which is ready at once, forever: the calling thread spun on it for the whole run).
+    let asked = match callback.is_some() {
+        true => asked,
+        false => crossbeam_channel::never(),
+    };
     let progress = PyProgress {
         asks: callback.is_some().then_some(ask),
         callback,

@@ -147,7 +147,7 @@ def test_engine_option_errors():
         abysslight.Engine(windw=9)
     with pytest.raises(TypeError, match="resume"):
         abysslight.Engine(resume=True)
-    with pytest.raises(ValueError, match="--window must be an odd number"):
+    with pytest.raises(ValueError, match="window must be an odd number"):
         abysslight.Engine(window=4)
     with pytest.raises(ValueError, match="invalid method"):
         abysslight.Engine(method="median")
@@ -166,7 +166,7 @@ def test_correct_option_errors(tmp_path):
         abysslight.correct(survey=tmp_path, out=tmp_path / "o", no_such_option=1, progress=False)
     with pytest.raises(TypeError, match="dry_run"):
         abysslight.correct(survey=tmp_path, out=tmp_path / "o", dry_run=True, progress=False)
-    with pytest.raises(ValueError, match="--survey DIR is required"):
+    with pytest.raises(ValueError, match="survey is required"):
         abysslight.correct(out=tmp_path / "o", progress=False)
     with pytest.raises((OSError, ValueError), match="does-not-exist"):
         abysslight.correct(survey=tmp_path / "does-not-exist", out=tmp_path / "o", progress=False)
@@ -387,7 +387,7 @@ def test_simulate_read_and_evaluate(srgb_dive, tmp_path):
     assert dive["transfer"] == "srgb" and len(dive["survey"]) == 4 and len(dive["water_column"]) == 2
     assert dive["survey"][0].dtype == np.uint16 and dive["survey"][0].shape == (30, 40, 3)
     assert dive["albedo"][0].dtype == np.float32
-    with pytest.raises(ValueError, match="--bit-depth must be 8 or 16"):
+    with pytest.raises(ValueError, match="bit_depth must be 8 or 16"):
         abysslight.simulate(bit_depth=12)
     ev = abysslight.evaluate([("raw", root / "survey"), ("abyss", out)], truth=root)
     sets = {s["label"]: s for s in ev["sets"]}

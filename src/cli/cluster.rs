@@ -24,6 +24,9 @@ Examples:
   sbatch --array=1-16 deploy/slurm/correct-array.sbatch --water-column W --survey S --out OUT
   abysslight merge-shards OUT
 
+  Shards that took their --out from a config file:
+    abysslight merge-shards --config dive042.toml
+
   All shards at once on one machine, then the merge:
     parallel abysslight correct --water-column W --survey S --out OUT --shard {}/8 ::: $(seq 8) && abysslight merge-shards OUT
 
@@ -36,8 +39,11 @@ Exit status:
 #[derive(Args, Debug)]
 pub struct MergeShardsArgs {
     /// The --out of the shards (or of a sharded --cruise: every dive in it is merged).
-    #[arg(value_name = "OUT")]
-    out: PathBuf,
+    #[arg(value_name = "OUT", required_unless_present = "config")]
+    out: Option<PathBuf>,
+    /// The shards' --config file, for its `out` (when OUT is not given: the shards took --out from it).
+    #[arg(long, value_name = "FILE", conflicts_with = "out")]
+    config: Option<PathBuf>,
     /// No summary line (errors are still printed).
     #[arg(long, short = 'q')]
     quiet: bool,
@@ -58,8 +64,20 @@ fn summary(m: &Merged) -> String {
 
 /// `abysslight merge-shards OUT`.
 pub fn merge(a: MergeShardsArgs) -> Result<ExitCode, Error> {
-    if a.out.join(abysslight::io::WORK_DIR).is_dir() && recorded_dives(&a.out).is_none() {
-        let m = merge_shards(&a.out)?;
+    let out = match (&a.out, &a.config) {
+        (Some(out), _) => out.clone(),
+        (None, Some(cfg)) => abysslight::Options::from_toml_file(cfg)?
+            .out
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "merge-shards: {} gives no out = \"DIR\": give OUT, the --out of the shards",
+                    cfg.display()
+                ))
+            })?,
+        (None, None) => return Err(Error::Usage("merge-shards: give OUT".into())),
+    };
+    if out.join(abysslight::io::WORK_DIR).is_dir() && recorded_dives(&out).is_none() {
+        let m = merge_shards(&out)?;
         if !a.quiet {
             eprintln!("abysslight: {}", summary(&m));
         }
@@ -70,7 +88,7 @@ pub fn merge(a: MergeShardsArgs) -> Result<ExitCode, Error> {
         }));
     }
     let mut code = EXIT_OK;
-    for (dive, r) in merge_cruise(&a.out)? {
+    for (dive, r) in merge_cruise(&out)? {
         match r {
             Ok(m) => {
                 if !a.quiet {

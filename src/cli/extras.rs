@@ -1,14 +1,10 @@
 //! What the CLI adds around a run for the people at the console: shell completions and the man page (from the
-//! same clap definition as `--help`), the note before a re-run into a used folder, the hint after Ctrl-C, and the
-//! names of the flagged photos at the end.
+//! same clap definition as `--help`), the note before a re-run into a used folder, the hint after Ctrl-C.
 
 use std::path::Path;
 use std::process::ExitCode;
 
-use abysslight::{Error, Report};
-
-/// How many flagged photos the closing summary names.
-const FLAGGED_NAMED: usize = 5;
+use abysslight::Error;
 
 /// Print the completion script for `shell` to stdout.
 pub fn completions(shell: clap_complete::Shell, cmd: &mut clap::Command) {
@@ -74,6 +70,22 @@ fn non_empty_out_note(out: &Path, resume: bool) -> Option<String> {
     })
 }
 
+/// A file-size limit (`ulimit -f`, `prlimit --fsize`, a scheduler passing on the submitting shell's limits) must
+/// cost the one file that outgrows it, not the run: by default the kernel kills the process with SIGXFSZ at the
+/// first write past the limit (exit 153, no report, a temporary file left). With a handler installed, the write
+/// fails with `EFBIG` instead and the run's per-file error handling takes over (the file is named, its temporary
+/// file removed, the run goes on and writes its report). The handler only sets a flag nobody reads
+/// (signal-hook's, async-signal-safe); unlike `SIG_IGN` it is not inherited by programs the command starts.
+/// Python ignores SIGXFSZ itself at start-up, so `correct()` from Python is covered without it.
+pub fn survive_file_size_limit() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        // Failing to install it leaves the kernel's default, as before: not worth refusing to run for.
+        let _ = signal_hook::flag::register(signal_hook::consts::SIGXFSZ, flag);
+    });
+}
+
 /// In a batch run, Ctrl-C (SIGINT) or SIGTERM (a scheduler's time limit) says how to go on before the process
 /// exits with 128 + the signal (130 for Ctrl-C). Outputs are only renamed into place when complete, so what is
 /// in the output folder is whole photos; `--resume` corrects the rest with the same result as one run.
@@ -103,65 +115,6 @@ fn interrupted_hint(sig: i32) -> String {
         "abysslight: {what}: the photos written so far are complete. To finish, run the same command again \
          with --resume: finished photos are skipped and the result equals an uninterrupted run."
     )
-}
-
-/// After the summary line: the first flagged photos by name and reason, and where to look.
-pub fn print_flagged(report: &Report, out: Option<&Path>) {
-    let survey = report.options.survey.as_deref();
-    for line in flagged_lines(report, survey, out) {
-        eprintln!("abysslight: {line}");
-    }
-}
-
-fn flagged_lines(report: &Report, survey: Option<&Path>, out: Option<&Path>) -> Vec<String> {
-    let flagged: Vec<_> = report
-        .frames
-        .iter()
-        .filter(|f| !f.health.flags.is_empty())
-        .collect();
-    if flagged.is_empty() {
-        return Vec::new();
-    }
-    let mut lines = Vec::new();
-    for f in flagged.iter().take(FLAGGED_NAMED) {
-        lines.push(format!(
-            "  flagged #{} {}: {}",
-            f.index + 1,
-            // Relative to the survey folder: the name the user knows (and the output's), without a long prefix.
-            survey
-                .and_then(|s| f.input.strip_prefix(s).ok())
-                .unwrap_or(&f.input)
-                .display(),
-            f.health
-                .flags
-                .iter()
-                .map(|f| f.to_string())
-                .collect::<Vec<_>>()
-                .join("; ")
-        ));
-    }
-    if flagged.len() > FLAGGED_NAMED {
-        lines.push(format!(
-            "  ... and {} more (every one is in the report)",
-            flagged.len() - FLAGGED_NAMED
-        ));
-    }
-    let mut look = Vec::new();
-    if let Some(r) = &report.report_path {
-        look.push(format!("{} (frames[].health.flags)", r.display()));
-    }
-    if let Some(out) = out {
-        for pic in ["overview.png", "flagged.png"] {
-            let p = out.join("_abysslight").join(pic);
-            if p.is_file() {
-                look.push(p.display().to_string());
-            }
-        }
-    }
-    if !look.is_empty() {
-        lines.push(format!("  where to look: {}", look.join(", ")));
-    }
-    lines
 }
 
 #[cfg(test)]

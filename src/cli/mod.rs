@@ -46,12 +46,16 @@ const EXIT_OK: u8 = 0;
 const EXIT_SOME_FAILED: u8 = 1;
 /// Exit status: bad usage or a fatal error; nothing (more) was done.
 const EXIT_USAGE: u8 = 2;
+/// Exit status with `--strict`: the run finished and every file was written, but photos were flagged.
+const EXIT_FLAGGED: u8 = 3;
 
 const EXIT_HELP: &str = "\
 Exit status:
   0    every photo was corrected
   1    the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
   2    bad usage or a fatal error (nothing, or nothing more, was written)
+  3    with --strict: every file was written, but photos were flagged as likely wrong (see the
+       report); without --strict such a run exits 0
   130  interrupted (Ctrl-C): run the same command again with --resume to finish";
 
 /// `correct --help`: examples first, then the exit status.
@@ -61,8 +65,9 @@ Examples:
     abysslight correct --water-column dive042/descent --survey dive042/survey \\
         --out dive042/corrected
 
-  JPEGs from an sRGB camera, pictures to check the estimate (on cluttered ground and nodule fields too: the
-  default window is chosen per stretch from a survey of the photos; --contamination C pins one for the dive):
+  JPEGs from an sRGB camera, with pictures to check the estimate (the default window is chosen
+  per stretch from a survey of the photos, on cluttered ground and nodule fields too;
+  --contamination C pins one for the whole dive):
     abysslight correct --water-column descent --survey survey --out corrected \\
         --transfer srgb --save-factors
 
@@ -87,6 +92,8 @@ Exit status:
   0    every photo was corrected
   1    the run finished, but some files failed (listed on stderr and in _abysslight/report.json)
   2    bad usage or a fatal error (nothing, or nothing more, was written)
+  3    with --strict: every file was written, but photos were flagged as likely wrong (see the
+       report); without --strict such a run exits 0
   130  interrupted (Ctrl-C): run the same command again with --resume to finish";
 
 const SCATTER_EXIT_HELP: &str = "\
@@ -97,7 +104,8 @@ Exit status:
 
 const TOP_HELP: &str = "\
 Start with `abysslight demo` (a simulated dive, corrected and scored in seconds), then
-`abysslight correct --help`. Exit status 0: all went well, 1: some files failed, 2: bad usage or a fatal error.";
+`abysslight correct --help`. Exit status 0: all went well, 1: some files failed, 2: bad usage or a fatal error,
+3: photos flagged (only with --strict).";
 
 const H_IN: &str = "Inputs";
 const H_OUT: &str = "Outputs";
@@ -701,6 +709,13 @@ struct CorrectArgs {
     #[arg(long, help_heading = H_RUN)]
     resume: bool,
 
+    /// Exit with status 3 when any photo is flagged as likely wrong (and no file failed).
+    ///
+    /// For pipelines that must not pass a doubtful run on: the run still corrects every photo and writes its
+    /// report (which names the flags); only the exit status differs. Config key: strict = true.
+    #[arg(long, help_heading = H_RUN)]
+    strict: bool,
+
     /// Print what would be read and written, then stop: nothing is written.
     ///
     /// The photos to correct and those read for the windows only, outputs that exist already, the window n,
@@ -842,6 +857,7 @@ fn set_run_flags(args: &CorrectArgs, o: &mut Options) {
     o.save_scatter |= args.save_scatter;
     o.save_factors |= args.save_factors;
     o.resume |= args.resume;
+    o.strict |= args.strict;
     if let Some(v) = args.poll_interval {
         o.poll_interval = v;
     }
@@ -955,6 +971,12 @@ impl Progress for Console {
     }
     fn start(&self, total: usize) {
         *self.count.lock().unwrap() = (0, total);
+        if self.plain && self.bar.is_none() && total > 1 {
+            // `[68/71] done IMG_0070.png`: photos finish out of order on several threads.
+            eprintln!(
+                "abysslight: [k/{total}] below counts the photos finished so far, not the photo's place in the survey"
+            );
+        }
         if let Some(b) = &self.bar {
             if total == 0 {
                 // A watch or a stream: no total to show a bar against.
@@ -1031,40 +1053,17 @@ fn correct(args: &CorrectArgs) -> Result<ExitCode, Error> {
     let console = Console::new(args.quiet);
     let report = abysslight::correct_mission(&opts, &console)?;
     if !args.quiet {
+        for line in abysslight::run::summary::lines(&report, &opts, batch_out.as_deref()) {
+            eprintln!("abysslight: {line}");
+        }
+    }
+    let flagged = abysslight::run::summary::flagged(&report);
+    if opts.strict && flagged > 0 && report.all_ok() {
         eprintln!(
-            "abysslight: {} of {} photos corrected in {:.1} s ({} failed); report: {}",
-            report.corrected,
-            report.survey_photos,
-            report.elapsed_s,
-            report.failed + report.water_column_failed,
-            report
-                .report_path
-                .as_deref()
-                .unwrap_or(Path::new("-"))
-                .display()
+            "abysslight: --strict: {flagged} of {} photos flagged as likely wrong: exit status {EXIT_FLAGGED}",
+            report.frames.len()
         );
-        if let (Some(n), Some(log)) = (report.window.by_altitude, &opts.navigation) {
-            let photos = report.frames.len();
-            eprintln!(
-                "abysslight: windows by altitude ({}): {n} of {photos} photos took theirs among the photos lit from \
-                 the nearest heights{}",
-                log.display(),
-                match photos - n {
-                    0 => String::new(),
-                    _ => "; the others kept the window over time (the altitude spanned less than 15 % of it, or \
-                          was not in the log)"
-                        .into(),
-                }
-            );
-        }
-        eprintln!("abysslight: {}", report.monitor.line(report.frames.len()));
-        extras::print_flagged(&report, batch_out.as_deref());
-        if report.floored_pixels > 0 {
-            eprintln!(
-                "abysslight: {} pixels had F below --factor-floor {} (dark corners; their gain was capped)",
-                report.floored_pixels, opts.factor_floor
-            );
-        }
+        return Ok(ExitCode::from(EXIT_FLAGGED));
     }
     Ok(ExitCode::from(if report.all_ok() {
         EXIT_OK
@@ -1349,6 +1348,7 @@ pub fn run() -> ExitCode {
 
 /// The `abysslight` command with `args` (the first is the program's name).
 pub fn run_from(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
+    extras::survive_file_size_limit();
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {

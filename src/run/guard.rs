@@ -39,6 +39,7 @@ pub fn fingerprint(opts: &Options) -> serde_json::Value {
         out: None,
         threads: None,
         resume: false,
+        strict: false,
         shard: None,
         watch: false,
         idle_timeout: None,
@@ -57,8 +58,14 @@ pub fn fingerprint(opts: &Options) -> serde_json::Value {
     };
     let mut v = serde_json::to_value(&o).unwrap_or(serde_json::Value::Null);
     if let (serde_json::Value::Object(m), Ok(w)) = (&mut v, opts.window_choice()) {
-        // The window in effect, however it was given.
-        m.insert("window-in-effect".into(), w.n.into());
+        // The window in effect, however it was given; `auto` (chosen per stretch by the survey) is not the fixed
+        // window it starts from, and is said as the user gave it.
+        let auto = opts.params().is_ok_and(|p| p.window_is_auto());
+        let in_effect = match auto {
+            true => serde_json::Value::from("auto"),
+            false => w.n.into(),
+        };
+        m.insert("window-in-effect".into(), in_effect);
     }
     v
 }
@@ -398,12 +405,24 @@ mod tests {
             ..o.clone()
         };
         drop(acquire(&more_threads, &work).unwrap());
-        // The same window given another way is the same run.
-        let same_window = Options {
+        // The fixed window 7 is not `auto`, which chooses each stretch's window from the survey of the photos
+        // (it once read "--window 7 before" for a run that used auto).
+        let seven = Options {
             window: Some(crate::method::params::BASE_WINDOW),
             ..o.clone()
         };
-        drop(acquire(&same_window, &work).unwrap());
+        let e = acquire(&seven, &work).unwrap_err().to_string();
+        assert!(e.contains("--window auto before, 7 now"), "{e}");
+        // The same window given another way is the same run.
+        let paper = |window| Options {
+            method: crate::Method::Paper,
+            window,
+            ..o.clone()
+        };
+        assert_eq!(
+            fingerprint(&paper(None)),
+            fingerprint(&paper(Some(crate::method::params::BASE_WINDOW)))
+        );
         for (other, key) in [
             (
                 Options {
@@ -435,7 +454,7 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("--window 7 before, 9 now"), "{e}");
+        assert!(e.contains("--window auto before, 9 now"), "{e}");
         assert!(!e.contains("window-in-effect"), "{e}");
     }
 

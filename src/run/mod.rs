@@ -18,6 +18,7 @@ pub mod plan;
 pub mod prepare;
 pub mod source;
 pub mod stdin;
+pub mod summary;
 pub mod threads;
 pub mod watch;
 

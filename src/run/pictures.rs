@@ -15,44 +15,89 @@ use crate::run::draw::{self, BLACK, BLUE, GREY, RED, WHITE};
 /// One plotted series.
 struct Series<'a> {
     title: &'a str,
+    /// The value of each photo (NaN: none, e.g. a photo the navigation log does not cover).
     values: Vec<f32>,
-    threshold: f32,
+    /// The flag threshold (none: a series for reading only, the altitude).
+    threshold: Option<f32>,
     /// A second flag threshold above the values (texture kept: structure added).
     upper: Option<f32>,
+    /// A flag condition that moves from photo to photo, which a value must exceed too (change of F: 4 times the
+    /// median change so far); NaN where it does not apply.
+    moving: Option<Vec<f32>>,
+    /// The kinds of flag (`Flag::kind`) this panel's values raise: photos with one are drawn as red points.
+    kinds: &'static [&'static str],
 }
 
-/// The series of the overview, one panel each, with their flag thresholds.
-fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 6] {
-    [
+/// The second condition of the `factor-change` flag for each photo, as the run's monitor applies it
+/// (`Monitor::observe_factor_change`): `ratio` times the median change of the photos before it (the first two
+/// have none: 0, and the first photo no change at all).
+fn factor_change_condition(changes: &[f32], ratio: f32) -> Vec<f32> {
+    let mut seen: Vec<f32> = Vec::with_capacity(changes.len());
+    changes
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            if i == 0 {
+                return f32::NAN;
+            }
+            let typical = if seen.is_empty() {
+                0.0
+            } else {
+                let mut s = seen.clone();
+                let mid = s.len() / 2;
+                *s.select_nth_unstable_by(mid, f32::total_cmp).1
+            };
+            seen.push(c);
+            ratio * typical
+        })
+        .collect()
+}
+
+/// The series of the overview, one panel each, with their flag thresholds; the altitude's when the photos have
+/// altitudes (a navigation log).
+fn overview_series(frames: &[FrameReport], t: &Thresholds) -> Vec<Series<'static>> {
+    let changes: Vec<f32> = frames.iter().map(|f| f.health.factor_change).collect();
+    let mut series = vec![
         Series {
             title: "contamination: share of blocks off the seafloor colour (0 to 1)",
             values: frames.iter().map(|f| f.health.contamination).collect(),
-            threshold: t.contamination,
+            threshold: Some(t.contamination),
             upper: None,
+            moving: None,
+            kinds: &["contamination"],
         },
         Series {
-            title: "change of F from the previous photo (relative: 0.1 = 10 %)",
-            values: frames.iter().map(|f| f.health.factor_change).collect(),
-            threshold: t.factor_change,
+            title: "change of F from the previous photo (0.1 = 10 %): flagged above both red lines, dashed and \
+                    dotted (4 x the median change before)",
+            moving: Some(factor_change_condition(&changes, t.factor_change_ratio)),
+            values: changes,
+            threshold: Some(t.factor_change),
             upper: None,
+            kinds: &["factor-change"],
         },
         Series {
             title: "colour shift of F against what its level predicts (relative)",
             values: frames.iter().map(|f| f.health.colour_shift).collect(),
-            threshold: t.colour_shift,
+            threshold: Some(t.colour_shift),
             upper: None,
+            moving: None,
+            kinds: &["colour-shift"],
         },
         Series {
             title: "roughness of F: high = scene left in F (relative)",
             values: frames.iter().map(|f| f.health.roughness).collect(),
-            threshold: t.roughness,
+            threshold: Some(t.roughness),
             upper: None,
+            moving: None,
+            kinds: &["scene-in-factor"],
         },
         Series {
             title: "texture kept by the correction: low = scene left in F, high = structure added (share, 1 = all)",
             values: frames.iter().map(|f| f.health.texture_kept).collect(),
-            threshold: t.texture_kept,
+            threshold: Some(t.texture_kept),
             upper: Some(t.structure_added),
+            moving: None,
+            kinds: &["scene-in-factor", "structure-added"],
         },
         Series {
             title: "exposure against the window's M: |level - 1| (0.1 = 10 %; flagged only without the per-photo gain)",
@@ -60,11 +105,30 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> [Series<'static>; 
                 .iter()
                 .map(|f| (f.health.level - 1.0).abs())
                 .collect(),
-            threshold: t.exposure_jump,
+            threshold: Some(t.exposure_jump),
             upper: None,
+            moving: None,
+            kinds: &["exposure-jump"],
         },
-    ]
+    ];
+    if frames.iter().any(|f| f.altitude.is_some()) {
+        series.push(Series {
+            title: "altitude above the seafloor from the navigation log (m; gaps: not in the log)",
+            values: frames
+                .iter()
+                .map(|f| f.altitude.unwrap_or(f32::NAN))
+                .collect(),
+            threshold: None,
+            upper: None,
+            moving: None,
+            kinds: &[],
+        });
+    }
+    series
 }
+
+/// The height of the overview's title and key above the first panel, in pixels.
+const HEADER: i64 = 66;
 
 /// Margins and sizes of the overview, in pixels.
 struct Frame {
@@ -128,7 +192,7 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
         photos: frames.len().max(1),
     };
     let width = (f.left + f.plot_w + 20) as u32;
-    let height = (56 + series.len() as i64 * (f.title_h + f.panel_h + f.gap) + 10) as u32;
+    let height = (HEADER + series.len() as i64 * (f.title_h + f.panel_h + f.gap) + 10) as u32;
     let mut img = RgbImage::from_pixel(width, height, WHITE);
     let flagged = frames.iter().filter(|f| !f.health.flags.is_empty()).count();
     let title = format!(
@@ -142,9 +206,13 @@ pub fn overview(frames: &[FrameReport], t: &Thresholds) -> RgbImage {
         1
     };
     draw::text(&mut img, f.left, 10, &title, scale, BLACK);
-    let key = "blue: value of each photo; red bands: flagged; red dashes: flag threshold";
-    draw::text(&mut img, f.left, 34, key, 1, GREY);
-    let mut top = 56i64;
+    let key = "blue: value of each photo; red points: flagged for the panel's reason; red bands: flagged for \
+               any reason; red dashes: flag threshold";
+    let chars = ((width as i64 - f.left - 4) / 8).max(1) as usize;
+    for (k, line) in wrap(key, chars).iter().take(2).enumerate() {
+        draw::text(&mut img, f.left, 34 + 10 * k as i64, line, 1, GREY);
+    }
+    let mut top = HEADER;
     for s in &series {
         panel(&mut img, &f, frames, s, top);
         top += f.title_h + f.panel_h + f.gap;
@@ -159,12 +227,19 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
         draw::text(img, f.left, top + 1 + 10 * k as i64, line, 1, BLACK);
     }
     let (y0, h) = (top + f.title_h, f.panel_h);
-    let vmax = s
+    // The moving condition counts too: a dotted line cut off at the top would say less than it is.
+    let values_max = s
         .values
         .iter()
+        .chain(s.moving.iter().flatten())
         .copied()
         .filter(|v| v.is_finite())
-        .fold(s.threshold.max(s.upper.unwrap_or(0.0)) * 1.5, f32::max);
+        .fold(0.0, f32::max);
+    let vmax = match s.threshold {
+        Some(t) => values_max.max(t.max(s.upper.unwrap_or(0.0)) * 1.5),
+        None => values_max * 1.1,
+    }
+    .max(f32::MIN_POSITIVE);
     let y_of = |v: f32| y0 + h - 1 - ((v / vmax).clamp(0.0, 1.0) * (h - 1) as f32) as i64;
     let band = image::Rgb([255, 200, 200]);
     for (i, fr) in frames.iter().enumerate() {
@@ -175,22 +250,34 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
     let right = f.left + f.plot_w - 1;
     draw::line(img, (f.left, y0), (f.left, y0 + h - 1), BLACK);
     draw::line(img, (f.left, y0 + h - 1), (right, y0 + h - 1), BLACK);
-    let marks = [
-        (0.0, BLACK),
-        (vmax / 2.0, BLACK),
-        (vmax, BLACK),
-        (s.threshold, RED),
-    ];
-    for (v, colour) in marks.into_iter().chain(s.upper.map(|u| (u, RED))) {
+    let marks = [(0.0, BLACK), (vmax / 2.0, BLACK), (vmax, BLACK)];
+    let thresholds = s.threshold.into_iter().chain(s.upper);
+    for (v, colour) in marks
+        .into_iter()
+        .chain(thresholds.clone().map(|u| (u, RED)))
+    {
         let y = y_of(v);
         draw::line(img, (f.left - 4, y), (f.left, y), colour);
         let label = format!("{v:.3}");
         let x = f.left - 6 - draw::text_width(&label, 1) as i64;
         draw::text(img, x, y - 4, &label, 1, colour);
     }
-    for ty in std::iter::once(s.threshold).chain(s.upper).map(y_of) {
+    for ty in thresholds.map(y_of) {
         for x in (f.left..right).step_by(6) {
             draw::line(img, (x, ty), (x + 2, ty), RED);
+        }
+    }
+    // The moving condition: a dotted red step at each photo's own level.
+    if let Some(moving) = &s.moving {
+        for (i, v) in moving.iter().enumerate() {
+            if !v.is_finite() {
+                continue;
+            }
+            let y = y_of(*v);
+            let (x0, x1) = (f.x_of(i.saturating_sub(1)).max(f.left), f.x_of(i));
+            for x in (x0..=x1).step_by(3) {
+                draw::fill_rect(img, x, y, 1, 1, RED);
+            }
         }
     }
     for t in photo_ticks(frames.len()) {
@@ -212,12 +299,23 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
     draw::text(img, right - aw, y0 + h + 17, axis, 1, GREY);
     let mut prev: Option<(i64, i64)> = None;
     for (i, v) in s.values.iter().enumerate() {
+        if !v.is_finite() {
+            prev = None;
+            continue;
+        }
         let p = (f.x_of(i), y_of(*v));
         if let Some(q) = prev {
             draw::line(img, q, p, BLUE);
         }
         draw::fill_rect(img, p.0 - 1, p.1 - 1, 3, 3, BLUE);
         prev = Some(p);
+    }
+    // Photos flagged for this panel's reason: red points over the line.
+    for (i, (v, fr)) in s.values.iter().zip(frames).enumerate() {
+        if v.is_finite() && fr.health.flags.iter().any(|k| s.kinds.contains(&k.kind())) {
+            let p = (f.x_of(i), y_of(*v));
+            draw::fill_rect(img, p.0 - 2, p.1 - 2, 5, 5, RED);
+        }
     }
 }
 
@@ -713,7 +811,7 @@ mod tests {
         };
         assert_eq!(img.width() as i64, 70 + 600 + 20);
         for p in 0..6 {
-            let below = 56 + p * (22 + 130 + 30) + 22 + 130 + 6;
+            let below = HEADER + p * (22 + 130 + 30) + 22 + 130 + 6;
             for t in [19usize, 79, 139] {
                 let x = f.x_of(t);
                 assert!(
@@ -730,6 +828,60 @@ mod tests {
                 "panel {p}"
             );
         }
+    }
+
+    /// The second condition of `factor-change`, by hand: 4 times the median (the upper one of an even count) of
+    /// the changes of the photos before, the first photo's left out (it has no change).
+    #[test]
+    fn the_moving_condition_of_a_change_of_f_is_the_monitors() {
+        let m = factor_change_condition(&[0.0, 0.3, 0.1, 0.2, 0.05], 4.0);
+        assert!(m[0].is_nan());
+        for (got, want) in m[1..].iter().zip([0.0, 1.2, 1.2, 0.8]) {
+            assert!((got - want).abs() < 1e-6, "{m:?}");
+        }
+    }
+
+    /// A photo flagged `factor-change` is a red point in the change-of-F panel, an unflagged one is not; with
+    /// altitudes the overview has a seventh panel, the altitude.
+    #[test]
+    fn flagged_points_are_red_and_altitudes_get_a_panel() {
+        let mut fr = frames(20, Path::new("/nowhere"));
+        fr[10].health.factor_change = 0.5;
+        fr[10].health.flags.push(
+            (&crate::method::monitor::Flag::FactorChange {
+                change: 0.5,
+                altitude: None,
+            })
+                .into(),
+        );
+        fr[14].health.factor_change = 0.5;
+        let t = Thresholds::default();
+        let img = overview(&fr, &t);
+        let f = Frame {
+            left: 70,
+            plot_w: 600,
+            panel_h: 130,
+            title_h: 22,
+            gap: 30,
+            photos: 20,
+        };
+        let red = |x: i64, y: i64| {
+            (y - 1..=y + 1)
+                .flat_map(|y| (x - 1..=x + 1).map(move |x| (x, y)))
+                .filter(|&(x, y)| img.get_pixel(x as u32, y as u32).0 == RED.0)
+                .count()
+        };
+        // Panel 1 (change of F): the largest value, 0.5, is the top of its value axis (above 1.5 x 0.15 and the
+        // moving condition, 0 here: the median change before photo 10 and 14 is 0).
+        let y = HEADER + (22 + 130 + 30) + 22;
+        assert_eq!(red(f.x_of(10), y), 9, "the flagged photo's point");
+        assert_eq!(red(f.x_of(14), y), 0, "an unflagged photo's point");
+        let six = img.height();
+        for (i, f) in fr.iter_mut().enumerate() {
+            f.altitude = (i > 2).then_some(3.0 + i as f32 / 10.0);
+        }
+        assert_eq!(overview_series(&fr, &t).len(), 7);
+        assert_eq!(overview(&fr, &t).height(), six + 22 + 130 + 30);
     }
 
     /// The flagged sheet has a title over each column, above the first photo's name.

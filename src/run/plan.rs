@@ -428,10 +428,14 @@ impl Plan {
             .collect();
         if !self.streaming {
             lines.push(match lines.len() {
-                0 => "checks: photo sizes, water-column size, formats, window, one dive, disk: nothing found"
+                0 => "checks: photo sizes, water-column size, formats, window, one dive, disk: nothing found \
+                      (what only a run can check: the photos' content, the ground, the camera's motion, the \
+                      independent samples in each window and the flags they raise)"
                     .to_string(),
                 k => format!(
-                    "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\")"
+                    "checks: {k} warning(s) above (docs/guide.md, \"Before the first run\"); what only a run \
+                     can check: the photos' content, the ground, the camera's motion, the independent samples in \
+                     each window and the flags they raise"
                 ),
             });
         }

@@ -360,3 +360,55 @@ fn a_cruise_keeps_every_dives_report_and_its_own_water_column() {
         );
     }
 }
+
+/// `merge-shards.sbatch` given the array's arguments where `--out` is only in the `--config` file (before: "give
+/// OUT", exit 2): it merges the shards the config's out holds. Run with bash, as SLURM runs the script on a node.
+#[test]
+fn the_merge_script_takes_out_from_the_config_file() {
+    let d = tempfile::tempdir().unwrap();
+    let root = d.path();
+    let dv = dive(40, 24, 10, 5, 0.2, false, 81);
+    write_all(&dv.photos, &root.join("survey"), "img", "png");
+    write_all(&dv.water, &root.join("water"), "wc", "png");
+    std::fs::write(
+        root.join("dive.toml"),
+        "survey = \"survey\"\nwater-column = \"water\"\nout = \"corrected\"\nwindow = 5\n",
+    )
+    .unwrap();
+    for k in 1..=2 {
+        let shard = format!("{k}/2");
+        let o = abysslight_in(
+            &["correct", "--config", "dive.toml", "--shard", &shard, "-q"],
+            root,
+        );
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/slurm/merge-shards.sbatch");
+    let merge = |args: &[&str]| {
+        std::process::Command::new("bash")
+            .arg(&script)
+            .args(args)
+            .env("ABYSSLIGHT", BIN)
+            .current_dir(root)
+            .output()
+            .unwrap()
+    };
+    // The array's own arguments: --config, and --shard as each task had it (the script ignores it).
+    let o = merge(&["--config", "dive.toml", "--shard", "1/2"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let r = json(&root.join("corrected/_abysslight/report.json"));
+    assert_eq!(r["corrected"], 10, "{r}");
+    // --config=FILE too, and an --out flag over the file's.
+    std::fs::remove_file(root.join("corrected/_abysslight/report.json")).unwrap();
+    let o = merge(&["--config=dive.toml"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(root.join("corrected/_abysslight/report.json").is_file());
+    let o = merge(&["--config", "dive.toml", "--out", "elsewhere"]);
+    assert_eq!(o.status.code(), Some(2), "the flag wins: {}", stderr(&o));
+    assert!(stderr(&o).contains("elsewhere"), "{}", stderr(&o));
+    // A config without out is named.
+    std::fs::write(root.join("no-out.toml"), "survey = \"survey\"\n").unwrap();
+    let o = merge(&["--config", "no-out.toml"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no-out.toml"), "{}", stderr(&o));
+}

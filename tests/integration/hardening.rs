@@ -409,6 +409,90 @@ fn the_mission_size_is_the_majority_of_the_first_headers() {
     assert!(e.contains("8x6") && e.contains("32x24"), "{e}");
 }
 
+/// Issue 57: a file-size limit (`ulimit -f`, `prlimit --fsize`, passed on by SLURM from the submitting shell)
+/// costs the photos whose output outgrows it, each named, and the run goes on to write its report. Before, the
+/// kernel's SIGXFSZ killed the process at the first such write (exit 153, no message, no report, a temp file left).
+/// The limit is set by the shell's `ulimit -f` (512- or 1024-byte blocks by the shell: 20 or 40 KB here, between
+/// the report's few KB and the noisy photos' 90 KB).
+#[test]
+fn a_file_size_limit_costs_the_files_that_outgrow_it_not_the_run() {
+    let d = tempfile::tempdir().unwrap();
+    let (survey, water) = (d.path().join("survey"), d.path().join("water"));
+    for dir in [&survey, &water] {
+        std::fs::create_dir_all(dir).unwrap();
+    }
+    let mut state = 12345u32;
+    let mut noise = |x: u32, y: u32, i: u32| {
+        state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
+        ((state >> 16) % 120) as u8 + ((x + y + i) % 60) as u8 + 40
+    };
+    for i in 0..5u32 {
+        let img = image::RgbImage::from_fn(200, 150, |x, y| {
+            image::Rgb([noise(x, y, i), noise(x, y, i), noise(x, y, i)])
+        });
+        img.save(survey.join(format!("IMG_{i:04}.png"))).unwrap();
+        assert!(
+            std::fs::metadata(survey.join(format!("IMG_{i:04}.png")))
+                .unwrap()
+                .len()
+                > 60_000
+        );
+    }
+    for i in 0..3u8 {
+        image::RgbImage::from_pixel(200, 150, image::Rgb([10 + i, 12, 14]))
+            .save(water.join(format!("wc{i}.png")))
+            .unwrap();
+    }
+    let out = d.path().join("out");
+    let o = untouched(&[&survey, &water], || {
+        Command::new("sh")
+            .args(["-c", "ulimit -f 40 && exec \"$0\" \"$@\""])
+            .args([BIN, "correct", "--water-column"])
+            .args([
+                &water,
+                Path::new("--survey"),
+                &survey,
+                Path::new("--out"),
+                &out,
+            ])
+            .output()
+            .unwrap()
+    });
+    let err = stderr(&o);
+    // An ordinary exit, not a signal's; some photos failed.
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let too_large: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("File too large"))
+        .collect();
+    assert!(
+        !too_large.is_empty(),
+        "no write named as over the limit: {err}"
+    );
+    for line in &too_large {
+        assert!(
+            line.contains(s(&out)),
+            "the error names the output file: {line}"
+        );
+    }
+    // The report is written, with every photo in it as corrected or failed.
+    let r = json(&out.join("_abysslight/report.json"));
+    let failed = r["failed"].as_u64().unwrap() as usize;
+    assert!(failed > 0, "{r}");
+    assert_eq!(failed + r["corrected"].as_u64().unwrap() as usize, 5, "{r}");
+    let errors = r["errors"].as_array().unwrap();
+    assert_eq!(errors.len(), failed, "{r}");
+    // Nothing half-written is left: every file in the output folder decodes, no temporary files.
+    for e in std::fs::read_dir(&out).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(!name.contains("abysslight-tmp"), "temp file left: {name}");
+        if p.is_file() {
+            decode(&p).unwrap_or_else(|e| panic!("{name} is not a whole photo: {e}"));
+        }
+    }
+}
+
 // --- 4. numeric flags ----------------------------------------------------------------------------------------------
 
 #[test]

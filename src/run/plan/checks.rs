@@ -152,12 +152,24 @@ pub(crate) fn mixed_formats(photos: &[Entry]) -> Option<String> {
 pub(crate) fn too_few(total: usize, n: usize, auto: bool) -> Option<String> {
     if auto {
         let longest = crate::method::stretch::longest_window(total);
-        return (longest < n).then(|| {
-            format!(
+        if longest < n {
+            return Some(format!(
                 "the survey has {total} photo(s): every window is at most {longest} photo(s), fewer than the {n} a \
                  stretch of clean seafloor takes; clutter at one place in {} of them stays in F (the run flags \
                  photos whose window holds too few independent samples); give more photos",
                 longest.div_ceil(2)
+            ));
+        }
+        // A short mission (MBARI's 12 frames): the survey that chooses the windows measures each photo against
+        // the photos around it, more than the mission holds.
+        let ahead = crate::method::survey::Survey::LOOK_AHEAD;
+        return (total < ahead).then(|| {
+            format!(
+                "the survey has {total} photo(s), fewer than the {ahead} --window auto looks ahead over to judge \
+                 the ground and the camera's motion: its windows are at most {longest} photo(s), and under a slow \
+                 camera they hold too few independent views of the seafloor for F to leave the scene out (the run \
+                 flags such photos few-samples); only the run can tell, from the photos themselves; give more \
+                 photos of the dive if there are any"
             )
         });
     }
@@ -649,7 +661,14 @@ mod tests {
         assert!(too_few(7, 7, false).is_none());
         assert!(too_few(4, 7, false).unwrap().contains("n = 7"));
         // Under auto: a window as long as the mission allows (the largest odd number of its photos), never "n = 7".
-        assert!(too_few(7, 7, true).is_none());
+        assert!(too_few(25, 7, true).is_none());
+        let short = too_few(12, 7, true).unwrap();
+        assert!(
+            short.contains("12 photo(s)")
+                && short.contains("at most 11")
+                && short.contains("few-samples"),
+            "{short}"
+        );
         let four = too_few(4, 7, true).unwrap();
         assert!(
             four.contains("at most 3 photo(s)") && !four.contains("n = 7"),
