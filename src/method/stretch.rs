@@ -197,12 +197,9 @@ impl Surveyor {
             .pending
             .par_iter()
             .map(|(own, reference)| {
-                // The scene from every lit block (a mask that follows the backscatter's share would move with the
-                // altitude and correlate photos taken at the same height); the dark share where the ground shows.
-                let ratio = lit_ratios(own, reference, None);
-                let shown = lit_ratios(own, reference, s_grey.as_deref());
+                let ratio = lit_ratios(own, reference, s_grey.as_deref());
                 (
-                    dark_share(&shown, size),
+                    dark_share(&ratio, size),
                     scene(&ratio, size),
                     shape(own, size),
                 )
@@ -576,8 +573,8 @@ pub struct Choice {
     /// Which choice won the check against the paper's window ([`do_no_harm`]).
     pub won: Won,
     /// The evidence: the mean change of the lighting's low-frequency shape between the photos of the survey's window
-    /// further apart than [`SHORT_LAGS`], over that between the photos within it (`None` where nothing was checked).
-    pub drift: Option<f32>,
+    /// further apart than [`SHORT_LAGS`], over that between the photos within it (NaN where nothing was checked).
+    pub drift: f32,
 }
 
 impl Choice {
@@ -589,8 +586,7 @@ impl Choice {
                 "{c:.0} % dark, {:.1} photo(s) per independent sample, but the lights' shape changed {:.1}× more \
                  between photos of the longer window than within the window {BASE_WINDOW} (more than its noise): the \
                  window {BASE_WINDOW} and its median",
-                self.photos_per_sample,
-                self.drift.unwrap_or(f32::NAN)
+                self.photos_per_sample, self.drift
             ),
             Rule::Sparse => format!(
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the window {BASE_WINDOW} and its median",
@@ -689,7 +685,7 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         needed: need,
         rule,
         won: Won::Paper,
-        drift: None,
+        drift: f32::NAN,
     };
     do_no_harm(photos, i, choice)
 }
@@ -737,7 +733,7 @@ pub fn do_no_harm(photos: &[PhotoSurvey], i: usize, choice: Choice) -> Choice {
         }
     };
     let (short, long) = (mean(short), mean(long));
-    let drift = Some(long / short.max(1e-6)).filter(|d| d.is_finite());
+    let drift = long / short.max(1e-6);
     let steady = !(long > DRIFT_RATIO * short + SHAPE_NOISE);
     if steady {
         return Choice {
