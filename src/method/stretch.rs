@@ -52,23 +52,6 @@ pub const MAX_LAG: usize = 16;
 /// ([`independent`]).
 pub const PERSISTS: f32 = 0.2;
 
-/// Cells across and down of a photo's low-frequency shape ([`shape`]): the residual pattern's grid.
-pub const SHAPE_CELLS: (usize, usize) = (8, 6);
-/// The quantile of a cell's blocks that stands for its level in [`shape`]: the sediment's, above the dark blocks of a
-/// field covering up to half of the cell (a cell's median jumps between sediment and nodules on a dense field, and
-/// the shape's noise with it).
-pub const SHAPE_QUANTILE: f64 = 0.75;
-/// Lags, in photos, whose shape changes are the noise a longer window's are judged against: those within the
-/// paper's window ([`BASE_WINDOW`]` / 2`).
-pub const SHORT_LAGS: usize = BASE_WINDOW / 2;
-/// How much more the lighting's shape may change over a longer window than within the paper's window before the
-/// survey's choice is given up for the paper's ([`do_no_harm`]): the changes at the longer lags at most this many
-/// times those at the short lags, plus [`SHAPE_NOISE`].
-pub const DRIFT_RATIO: f32 = 1.3;
-/// Change of the low-frequency shape (median absolute difference of log levels over the cells) that is noise at any
-/// lag: a percent of the light.
-pub const SHAPE_NOISE: f32 = 0.01;
-
 /// What the survey measured on one photo.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PhotoSurvey {
@@ -78,9 +61,6 @@ pub struct PhotoSurvey {
     /// Correlation of its scene with the scene of the photo `k` after it at the same blocks, `k = 1..=`
     /// [`MAX_LAG`] (NaN past the mission's end).
     pub same_scene: [f32; MAX_LAG],
-    /// Change of its low-frequency shape ([`shape`]: the lights' shape with the level taken out) to the shape of the
-    /// photo `k` after it, `k = 1..=`[`MAX_LAG`] (NaN past the mission's end or where neither is lit).
-    pub shape_change: [f32; MAX_LAG],
 }
 
 /// The streaming pass over a mission's block images (bounded memory: `2·`[`REFERENCE_HALF`]` + 1` grey block
@@ -95,8 +75,6 @@ pub struct Surveyor {
     pushed: usize,
     /// The scenes of the last photos measured (at most [`MAX_LAG`] + 1).
     scenes: VecDeque<Vec<f32>>,
-    /// Their low-frequency shapes ([`shape`]).
-    shapes: VecDeque<Vec<f32>>,
     /// Photos whose reference is known, waiting to be measured together: their grey levels and reference.
     pending: Vec<(Vec<f32>, Vec<f32>)>,
     done: Vec<PhotoSurvey>,
@@ -131,7 +109,6 @@ impl Surveyor {
             size: (0, 0),
             pushed: 0,
             scenes: VecDeque::new(),
-            shapes: VecDeque::new(),
             pending: Vec::new(),
             done: Vec::new(),
         }
@@ -192,21 +169,16 @@ impl Surveyor {
     /// order its scene's correlation with the scenes of the photos before it.
     fn measure_pending(&mut self) {
         let size = self.size;
-        let s_grey = self.s_low.as_ref().map(|s| grey_of(s));
-        let measured: Vec<(f32, Vec<f32>, Vec<f32>)> = self
+        let measured: Vec<(f32, Vec<f32>)> = self
             .pending
             .par_iter()
             .map(|(own, reference)| {
-                let ratio = lit_ratios(own, reference, s_grey.as_deref());
-                (
-                    dark_share(&ratio, size),
-                    scene(&ratio, size),
-                    shape(own, size),
-                )
+                let ratio = lit_ratios(own, reference);
+                (dark_share(&ratio), scene(&ratio, size))
             })
             .collect();
         self.pending.clear();
-        for (coverage, scene, shape) in measured {
+        for (coverage, scene) in measured {
             let j = self.done.len();
             // This photo's scene against the photos before it: their correlation at lag k.
             let earlier: Vec<&Vec<f32>> = self.scenes.iter().rev().collect();
@@ -214,21 +186,13 @@ impl Surveyor {
             for (k, c) in lags.into_iter().enumerate() {
                 self.done[j - 1 - k].same_scene[k] = c;
             }
-            for (k, e) in self.shapes.iter().rev().enumerate() {
-                self.done[j - 1 - k].shape_change[k] = shape_change(e, &shape);
-            }
             self.scenes.push_back(scene);
             if self.scenes.len() > MAX_LAG {
                 self.scenes.pop_front();
             }
-            self.shapes.push_back(shape);
-            if self.shapes.len() > MAX_LAG {
-                self.shapes.pop_front();
-            }
             self.done.push(PhotoSurvey {
                 coverage,
                 same_scene: [f32::NAN; MAX_LAG],
-                shape_change: [f32::NAN; MAX_LAG],
             });
         }
     }
@@ -273,29 +237,13 @@ pub fn means_stand_for_medians(means: &Raster, medians: &Raster, s: Option<&Rast
     let (w, h) = (medians.width, medians.height);
     let (a, b) = (grey_above(means, s), grey_above(medians, s));
     let reference = box_average_finite(&b, (w, h), (w.max(h) / 8).max(2), f32::NAN);
-    let s = s.map(grey_of);
-    let share = |g: &[f32]| dark_share(&lit_ratios(g, &reference, s.as_deref()), (w, h));
+    let share = |g: &[f32]| dark_share(&lit_ratios(g, &reference));
     (share(&a) - share(&b)).abs() <= MEANS_AGREE
 }
 
-/// The grey level of each block of `s` (mean over channels).
-fn grey_of(s: &Raster) -> Vec<f32> {
-    let c = s.channels.max(1);
-    s.data
-        .chunks_exact(c)
-        .map(|px| px.iter().sum::<f32>() / c as f32)
-        .collect()
-}
-
-/// Share of what the camera saw at a block that must be light from the seafloor, not the backscatter subtracted,
-/// for the block to be judged dark or not: where the water column's backscatter (larger than what reaches the
-/// floor from a low altitude, smaller from a high one) is most of it, the level above it says nothing of the ground.
-pub const SIGNAL_SHARE: f32 = 0.3;
-
 /// `own / reference` per block where the reference is lit (at least 5 % of its 95th percentile: corners the lights
-/// miss are not judged) and the photo's own level above the backscatter `s` (grey, per block) is at least
-/// [`SIGNAL_SHARE`] of its level with it, `NaN` elsewhere and where either is not finite (masked).
-fn lit_ratios(own: &[f32], reference: &[f32], s: Option<&[f32]>) -> Vec<f32> {
+/// miss are not judged), `NaN` elsewhere and where either is not finite (masked).
+fn lit_ratios(own: &[f32], reference: &[f32]) -> Vec<f32> {
     let mut lit: Vec<f32> = reference
         .iter()
         .copied()
@@ -304,11 +252,8 @@ fn lit_ratios(own: &[f32], reference: &[f32], s: Option<&[f32]>) -> Vec<f32> {
     let top = quantile(&mut lit, 0.95);
     own.iter()
         .zip(reference)
-        .enumerate()
-        .map(|(b, (&o, &r))| {
-            let sb = s.and_then(|s| s.get(b).copied()).unwrap_or(0.0).max(0.0);
-            let signal = o > SIGNAL_SHARE * (o + sb) || sb == 0.0;
-            if r.is_finite() && o.is_finite() && r > 0.05 * top && top > 0.0 && signal {
+        .map(|(&o, &r)| {
+            if r.is_finite() && o.is_finite() && r > 0.05 * top && top > 0.0 {
                 o / r
             } else {
                 f32::NAN
@@ -317,14 +262,8 @@ fn lit_ratios(own: &[f32], reference: &[f32], s: Option<&[f32]>) -> Vec<f32> {
         .collect()
 }
 
-/// The dark share of a photo's blocks (`w`×`h`), from their [`lit_ratios`] against the reference (NaN: not
-/// judged): blocks below [`DARK_RATIO`] of the seafloor's level around them. The level is local: the `(1 + c)/2`
-/// quantile of the ratios in each of [`SHAPE_CELLS`] cells (`c`: the share dark against one level for the whole
-/// frame), interpolated between the cells' centres. A photo taken higher or lower than its neighbours differs from
-/// their reference by the lights' smooth shape and by a backscatter the water column's over- or understates, not by
-/// dark ground: measured against one level for the whole frame, that shape's dim side read as dark (a quarter to
-/// a third of bare sediment under a swinging sledge).
-fn dark_share(ratio: &[f32], (w, h): (usize, usize)) -> f32 {
+/// The dark share of a photo's blocks, from their [`lit_ratios`] against the reference (NaN: not judged).
+fn dark_share(ratio: &[f32]) -> f32 {
     let mut judged: Vec<f32> = ratio.iter().copied().filter(|v| v.is_finite()).collect();
     if judged.is_empty() {
         return 0.0;
@@ -332,137 +271,13 @@ fn dark_share(ratio: &[f32], (w, h): (usize, usize)) -> f32 {
     let n = judged.len();
     // The seafloor's level: a first guess at the median, then at the median of the blocks not dark.
     let mut level = quantile(&mut judged, 0.5);
-    let mut q = 0.5;
     for _ in 0..2 {
         let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
         let c = dark_n as f64 / n as f64;
-        q = ((1.0 + c) / 2.0).min(0.95);
-        level = quantile(&mut judged, q);
+        level = quantile(&mut judged, ((1.0 + c) / 2.0).min(0.95));
     }
-    let local = local_level(ratio, (w, h), q, level);
-    // Blocks whose cell has no positive level (the backscatter subtracted as large as the light there) are not judged.
-    let (mut judged_n, mut dark_n) = (0usize, 0usize);
-    for (&r, &l) in ratio.iter().zip(&local) {
-        if r.is_finite() && l.is_finite() {
-            judged_n += 1;
-            dark_n += usize::from(r < DARK_RATIO * l);
-        }
-    }
-    dark_n as f32 / judged_n.max(1) as f32
-}
-
-/// The seafloor's level around each block of `ratio` (`w`×`h`): the `q` quantile of the finite values in each of
-/// [`SHAPE_CELLS`] cells, interpolated in log between the cells' centres (bilinear over the neighbouring cells that
-/// have a positive level, flat beyond the outer centres); NaN in a cell whose level is not positive or that has no
-/// value; `level` everywhere when the size does not match.
-fn local_level(ratio: &[f32], (w, h): (usize, usize), q: f64, level: f32) -> Vec<f32> {
-    if ratio.len() != w * h || w == 0 || h == 0 {
-        return vec![level; ratio.len()];
-    }
-    let (cw, ch) = (SHAPE_CELLS.0.min(w), SHAPE_CELLS.1.min(h));
-    let mut cells: Vec<Vec<f32>> = vec![Vec::new(); cw * ch];
-    for y in 0..h {
-        for x in 0..w {
-            let v = ratio[y * w + x];
-            if v.is_finite() {
-                cells[(y * ch / h) * cw + x * cw / w].push(v);
-            }
-        }
-    }
-    let logs: Vec<f32> = cells
-        .iter_mut()
-        .map(|c| {
-            let l = quantile(c, q);
-            if l > 0.0 {
-                l.ln()
-            } else {
-                f32::NAN
-            }
-        })
-        .collect();
-    // Block centre `p + 0.5` in cell units, less the cell centre's 0.5: between which centres it lies.
-    let at = |p: usize, size: usize, cells: usize| {
-        let u =
-            ((p as f32 + 0.5) * cells as f32 / size as f32 - 0.5).clamp(0.0, (cells - 1) as f32);
-        let i = (u.floor() as usize).min(cells.saturating_sub(2));
-        (i, (u - i as f32).clamp(0.0, 1.0))
-    };
-    let mut out = Vec::with_capacity(w * h);
-    for y in 0..h {
-        let (iy, fy) = at(y, h, ch);
-        for x in 0..w {
-            if !logs[(y * ch / h) * cw + x * cw / w].is_finite() {
-                out.push(f32::NAN);
-                continue;
-            }
-            let (ix, fx) = at(x, w, cw);
-            let (mut sum, mut weight) = (0.0f32, 0.0f32);
-            for (cy, wy) in [(iy, 1.0 - fy), ((iy + 1).min(ch - 1), fy)] {
-                for (cx, wx) in [(ix, 1.0 - fx), ((ix + 1).min(cw - 1), fx)] {
-                    let v = logs[cy * cw + cx];
-                    if v.is_finite() && wy * wx > 0.0 {
-                        sum += wy * wx * v;
-                        weight += wy * wx;
-                    }
-                }
-            }
-            out.push(if weight > 0.0 {
-                (sum / weight).exp()
-            } else {
-                f32::NAN
-            });
-        }
-    }
-    out
-}
-
-/// A photo's low-frequency shape: its grey levels above `S` (`w`×`h` blocks) as the [`SHAPE_QUANTILE`] of each of
-/// [`SHAPE_CELLS`] cells, in log, less their median (the level: an exposure or a gain). Cells the lights barely reach (below 5 % of
-/// the brightest cell) or without a finite block are NaN.
-fn shape(grey: &[f32], (w, h): (usize, usize)) -> Vec<f32> {
-    let (cw, ch) = SHAPE_CELLS;
-    let mut cells: Vec<Vec<f32>> = vec![Vec::new(); cw * ch];
-    if grey.len() == w * h {
-        for y in 0..h {
-            for x in 0..w {
-                let v = grey[y * w + x];
-                if v.is_finite() {
-                    cells[(y * ch / h) * cw + x * cw / w].push(v);
-                }
-            }
-        }
-    }
-    let med: Vec<f32> = cells.iter_mut().map(|c| quantile(c, 0.5)).collect();
-    let top = med
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.0f32, f32::max);
-    let log: Vec<f32> = med
-        .iter()
-        .map(|&m| {
-            if m.is_finite() && top > 0.0 && m > 0.25 * top {
-                m.ln()
-            } else {
-                f32::NAN
-            }
-        })
-        .collect();
-    let mut finite: Vec<f32> = log.iter().copied().filter(|v| v.is_finite()).collect();
-    let level = quantile(&mut finite, 0.5);
-    log.iter().map(|&v| v - level).collect()
-}
-
-/// How much two low-frequency shapes differ: the median absolute difference over the cells finite in both (NaN
-/// where none is; the median: a cell whose level jumps with the ground's content does not count).
-fn shape_change(a: &[f32], b: &[f32]) -> f32 {
-    let mut d: Vec<f32> = a
-        .iter()
-        .zip(b)
-        .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .map(|(x, y)| (x - y).abs())
-        .collect();
-    quantile(&mut d, 0.5)
+    let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
+    dark_n as f32 / n as f32
 }
 
 /// A photo's scene at block resolution, from its [`lit_ratios`] `own / reference`: their log less its box average
@@ -534,21 +349,6 @@ pub enum Rule {
     /// As [`Rule::Quantile`], but the whole mission, shorter than [`MAX_AUTO_WINDOW`], did not hold the samples
     /// asked: the window is as long as the mission allows.
     Short,
-    /// The survey asked for a longer window or another quantile, but the lighting's shape changed along that window
-    /// more than its noise ([`do_no_harm`]): the paper's window 7 and its median.
-    Unsteady,
-}
-
-/// Which choice a photo took when the survey's choice was checked against the paper's ([`do_no_harm`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Won {
-    /// The survey chose the paper's window 7 and its median itself: nothing to check.
-    Paper,
-    /// The survey's longer window or quantile: the lighting's shape was steady along its window.
-    Survey,
-    /// The paper's window 7 and its median: the lighting's shape changed along the survey's window.
-    Short,
 }
 
 /// What `--window auto` chose for one photo.
@@ -570,11 +370,6 @@ pub struct Choice {
     pub needed: usize,
     /// Why.
     pub rule: Rule,
-    /// Which choice won the check against the paper's window ([`do_no_harm`]).
-    pub won: Won,
-    /// The evidence: the mean change of the lighting's low-frequency shape between the photos of the survey's window
-    /// further apart than [`SHORT_LAGS`], over that between the photos within it (NaN where nothing was checked).
-    pub drift: f32,
 }
 
 impl Choice {
@@ -582,12 +377,6 @@ impl Choice {
     pub fn why(&self) -> String {
         let c = 100.0 * self.coverage;
         match self.rule {
-            Rule::Unsteady => format!(
-                "{c:.0} % dark, {:.1} photo(s) per independent sample, but the lights' shape changed {:.1}× more \
-                 between photos of the longer window than within the window {BASE_WINDOW} (more than its noise): the \
-                 window {BASE_WINDOW} and its median",
-                self.photos_per_sample, self.drift
-            ),
             Rule::Sparse => format!(
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the window {BASE_WINDOW} and its median",
                 self.photos_per_sample
@@ -675,7 +464,7 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         (true, false) => Rule::Sparse,
         (true, true) => Rule::Quantile,
     };
-    let choice = Choice {
+    Choice {
         window,
         quantile: q as f32,
         near: (near < window).then_some(near),
@@ -684,77 +473,6 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         samples: found,
         needed: need,
         rule,
-        won: Won::Paper,
-        drift: f32::NAN,
-    };
-    do_no_harm(photos, i, choice)
-}
-
-/// The survey's choice for photo `i` checked against the paper's window [`BASE_WINDOW`] and its median, on what
-/// the photos themselves show: the window's own assumption, that the lighting is the same over its photos. The
-/// lighting's low-frequency shape ([`PhotoSurvey::shape_change`]) may change between photos of the survey's window
-/// further apart than [`SHORT_LAGS`] at most [`DRIFT_RATIO`] times what it changes between photos within the paper's
-/// window, plus [`SHAPE_NOISE`]; where it changes more (an altitude swing moves the light cones, a change of
-/// exposure or of the lights), the longer window mixes lightings and the photo takes the paper's window and median
-/// ([`Rule::Unsteady`]). A choice that is the paper's window already, or not longer than it, is kept.
-pub fn do_no_harm(photos: &[PhotoSurvey], i: usize, choice: Choice) -> Choice {
-    if choice.window <= BASE_WINDOW {
-        return Choice {
-            won: if choice.rule == Rule::Sparse {
-                Won::Paper
-            } else {
-                Won::Survey
-            },
-            ..choice
-        };
-    }
-    let range = window_range(i, choice.window, photos.len());
-    let (mut short, mut long) = ((0.0f64, 0usize), (0.0f64, 0usize));
-    for a in range.clone() {
-        for (k, &d) in photos[a].shape_change.iter().enumerate() {
-            let lag = k + 1;
-            if a + lag >= range.end || !d.is_finite() {
-                continue;
-            }
-            let acc = if lag <= SHORT_LAGS {
-                &mut short
-            } else {
-                &mut long
-            };
-            acc.0 += d as f64;
-            acc.1 += 1;
-        }
-    }
-    let mean = |(s, n): (f64, usize)| {
-        if n > 0 {
-            (s / n as f64) as f32
-        } else {
-            f32::NAN
-        }
-    };
-    let (short, long) = (mean(short), mean(long));
-    let drift = long / short.max(1e-6);
-    let steady = !(long > DRIFT_RATIO * short + SHAPE_NOISE);
-    if steady {
-        return Choice {
-            won: Won::Survey,
-            drift,
-            ..choice
-        };
-    }
-    let short_range = window_range(i, BASE_WINDOW.min(choice.window), photos.len());
-    let samples = independent(photos, short_range.clone());
-    Choice {
-        window: short_range.len(),
-        quantile: 0.5,
-        near: None,
-        photos_per_sample: short_range.len() as f32 / samples.max(1) as f32,
-        samples,
-        needed: samples,
-        rule: Rule::Unsteady,
-        won: Won::Short,
-        drift,
-        ..choice
     }
 }
 
@@ -870,8 +588,8 @@ mod tests {
                             quantile(&mut v, REFERENCE_QUANTILE)
                         })
                         .collect();
-                    let ratio = lit_ratios(&greys[j], &reference, None);
-                    (dark_share(&ratio, size), scene(&ratio, size))
+                    let ratio = lit_ratios(&greys[j], &reference);
+                    (dark_share(&ratio), scene(&ratio, size))
                 })
                 .collect();
             assert_eq!(got.len(), frames);
@@ -998,7 +716,6 @@ mod tests {
                 PhotoSurvey {
                     coverage: 0.01,
                     same_scene,
-                    shape_change: [0.0; MAX_LAG],
                 };
                 60
             ]
@@ -1027,7 +744,6 @@ mod tests {
             PhotoSurvey {
                 coverage: 0.0,
                 same_scene: [0.0; MAX_LAG],
-                shape_change: [0.0; MAX_LAG],
             };
             10
         ];

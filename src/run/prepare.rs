@@ -403,10 +403,7 @@ fn stretches_line(choices: &[Choice]) -> String {
     let (w0, w1) = span(&|c| c.window as f64);
     let (c0, c1) = span(&|c| c.coverage as f64);
     let (p0, p1) = span(&|c| c.photos_per_sample as f64);
-    let acted = choices
-        .iter()
-        .filter(|c| !matches!(c.rule, Rule::Sparse | Rule::Unsteady))
-        .count();
+    let acted = choices.iter().filter(|c| c.rule != Rule::Sparse).count();
     format!(
         "--window auto: {acted} of {} photos on stretches that need more than the window 7 and its median; \
          windows {w0}..{w1} photos, dark share {:.0}..{:.0} %, {p0:.1}..{p1:.1} photo(s) per independent sample",
