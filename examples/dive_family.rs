@@ -379,7 +379,7 @@ fn survey_summary(r: &Report) -> (f64, f64, String) {
     let mut kept = std::collections::BTreeMap::<String, usize>::new();
     for f in &r.frames {
         if let Some(w) = &f.window_auto {
-            let v = serde_json::to_value(&w.choice).unwrap_or_default();
+            let v = serde_json::to_value(w.choice).unwrap_or_default();
             let key = v
                 .get("won")
                 .and_then(|k| k.as_str())
