@@ -25,11 +25,11 @@ use crate::run::merge::{merge_shards, Merged};
 use crate::run::options::{Options, Shard};
 
 /// Folder of a dive's survey photos, below the dive's folder.
-pub const SURVEY: &str = "survey";
+pub(crate) const SURVEY: &str = "survey";
 /// Folder of a dive's water-column frames, below the dive's folder.
-pub const WATER_COLUMN: &str = "water-column";
+pub(crate) const WATER_COLUMN: &str = "water-column";
 /// A dive's navigation log (each photo's altitude), in the dive's folder.
-pub const NAVIGATION: &str = "navigation.csv";
+pub(crate) const NAVIGATION: &str = "navigation.csv";
 
 /// One dive of a cruise.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -65,7 +65,7 @@ pub mod io;
 pub mod kernels;
 pub mod limits;
 pub(crate) mod method;
-pub(crate) mod options;
+pub mod options;
 pub mod report;
 pub(crate) mod run;
 mod simd;
@@ -83,9 +83,12 @@ pub use method::scatter::Scatter;
 pub use method::survey::Survey;
 pub use method::transfer::Transfer;
 pub use method::window::{choose_window, p_half};
+#[doc(no_inline)]
 pub use options::{Options, Shard};
 #[doc(no_inline)]
 pub use report::{Progress, Report, Silent};
 pub use run::correct_mission;
 pub use run::merge::merge_shards;
+/// The end-of-run summary in the command's words, for the Python binding.
+#[doc(hidden)]
 pub use run::summary;

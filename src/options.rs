@@ -7,10 +7,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::limits;
-pub use crate::method::baseline::Method;
-pub use crate::method::params::SeafloorColour;
+pub(crate) use crate::method::baseline::Method;
+pub(crate) use crate::method::params::SeafloorColour;
 use crate::method::params::{InvalidConfig, Params, Steps, Window};
-pub use crate::method::transfer::Transfer;
+pub(crate) use crate::method::transfer::Transfer;
 use crate::method::window::{p_half, WindowChoice};
 
 /// One of `count` contiguous chunks of a survey (`--shard K/N`, `K` from 1 to `N`).
@@ -172,9 +172,9 @@ pub struct Options {
     /// The SHA-256 of the mask file's content, recorded by the run as [`Options::navigation_sha256`] is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mask_sha256: Option<String>,
-    /// How the lighting is estimated: `abyss` (the paper's method with per-photo refinements, see
-    /// `refine`), `paper` (Köser et al. as published), or the baselines `mean` (mission mean image,
-    /// Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
+    /// How the lighting is estimated: `abyss` (the paper's method with the steps of docs/method.md, one file
+    /// each under `method/steps/`), `paper` (Köser et al. as published), or the baselines `mean` (mission mean
+    /// image, Pizarro & Singh) and `polynomial` (per-photo robust polynomial fit, Singh et al. 2007). Default: abyss.
     pub method: Method,
     /// Degree of the 2-D polynomial of `method = polynomial`. Default: 4.
     pub degree: usize,
@@ -342,10 +342,10 @@ impl Default for Options {
 }
 
 /// The breakdown probability `P_half` accepted when `--contamination` chooses the window (the paper's 1 %).
-pub const DEFAULT_RISK: f64 = 0.01;
+pub(crate) const DEFAULT_RISK: f64 = 0.01;
 
 /// The largest config file read (a config file is a page of settings).
-pub const CONFIG_MAX_BYTES: u64 = 1 << 20;
+pub(crate) const CONFIG_MAX_BYTES: u64 = 1 << 20;
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0

@@ -1014,7 +1014,7 @@ fn pose_view<'a>(
 }
 
 /// Largest photo side the simulator makes (pixels).
-pub const MAX_SIDE: usize = 16384;
+pub(crate) const MAX_SIDE: usize = 16384;
 
 /// Most survey photos (and most water-column frames) of a simulated dive.
 pub(crate) const MAX_FRAMES: usize = 1_000_000;

@@ -18,13 +18,13 @@
 //!   `2023-06-03T16:27:01.5Z` (a space for the `T`, an offset such as `+02:00`, or none: UTC). A photo's time is
 //!   its EXIF `DateTimeOriginal` ([`crate::Metadata::time_taken`]); the log's times plus the clock offset
 //!   (`--navigation-clock-offset`, the camera's clock minus the log's) are on the camera's clock. A photo's
-//!   altitude is interpolated between the rows around it, where they lie at most [`MAX_GAP_S`] apart.
+//!   altitude is interpolated between the rows around it, where they lie at most `MAX_GAP_S` apart.
 //!
 //! Rows without a usable altitude (empty, `NaN`, `0`, negative: a DVL without bottom lock) are passed over and
 //! counted ([`Navigation::notes`]); between the rows around them the gap rule decides. A log with too few usable
-//! rows, or an altitude no camera is flown at ([`MAX_ALTITUDE_M`]: a no-data marker or another column), is refused.
+//! rows, or an altitude no camera is flown at (`MAX_ALTITUDE_M`: a no-data marker or another column), is refused.
 //!
-//! The log is joined to the photos once, when they are listed ([`Navigation::join`], in parallel: for a log by
+//! The log is joined to the photos once, when they are listed (`Navigation::join`, in parallel: for a log by
 //! time it reads each photo's EXIF time); the lookups after it ([`Navigation::altitude_by_name`],
 //! [`Navigation::altitude_at`]) read no file.
 
@@ -40,11 +40,11 @@ use crate::error::{Error, Result};
 pub const MAX_BYTES: u64 = 1 << 30;
 
 /// Rows of a log by time further apart than this (seconds) give no altitude between them (a gap in the log).
-pub const MAX_GAP_S: f64 = 10.0;
+pub(crate) const MAX_GAP_S: f64 = 10.0;
 
 /// An altitude above this (metres) is refused: no camera lights the seafloor from there (a no-data marker such
 /// as 9999, a depth column, or millimetres).
-pub const MAX_ALTITUDE_M: f32 = 1000.0;
+pub(crate) const MAX_ALTITUDE_M: f32 = 1000.0;
 
 /// The fewest usable rows of a log by time (two rows bracket a photo).
 pub(crate) const MIN_TIME_ROWS: usize = 2;
@@ -175,9 +175,9 @@ pub struct ReadAs {
     pub clock_offset: f64,
 }
 
-/// A photo joined to the log ([`Navigation::join`]).
+/// A photo joined to the log (`Navigation::join`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Joined {
+pub(crate) struct Joined {
     /// Its altitude, where the log gives one.
     pub altitude: Option<f32>,
     /// A log by time: the photo's EXIF time (seconds since 1970 UTC), where it has one.
@@ -394,7 +394,7 @@ impl Navigation {
     }
 
     /// A log by time: the altitude at `t` (seconds since 1970 UTC on the camera's clock), interpolated between the
-    /// rows around it where they lie at most [`MAX_GAP_S`] apart; `None` outside the log and in its gaps.
+    /// rows around it where they lie at most `MAX_GAP_S` apart; `None` outside the log and in its gaps.
     pub fn altitude_at(&self, t: f64) -> Option<f32> {
         let Rows::ByTime(rows) = &self.rows else {
             return None;
@@ -412,7 +412,7 @@ impl Navigation {
 
     /// The photo at `path` joined to the log: by its file name, or for a log by time at its EXIF time (read from
     /// the file: the one read of this module besides the log's).
-    pub fn photo(&self, path: &Path) -> Joined {
+    pub(crate) fn photo(&self, path: &Path) -> Joined {
         match &self.rows {
             Rows::ByName(names) => Joined {
                 altitude: names.get(&path.file_name().unwrap_or_default().to_string_lossy()),
@@ -431,7 +431,7 @@ impl Navigation {
     }
 
     /// The photos at `paths` joined to the log ([`Navigation::photo`]), in parallel, in their order.
-    pub fn join(&self, paths: &[&Path]) -> Vec<Joined> {
+    pub(crate) fn join(&self, paths: &[&Path]) -> Vec<Joined> {
         paths.par_iter().map(|p| self.photo(p)).collect()
     }
 
@@ -704,7 +704,7 @@ fn csv_error(e: csv::Error) -> String {
 /// A time as seconds since 1970-01-01 00:00 UTC: a number (those seconds), or a date and time, `YYYY-MM-DD` (or
 /// `YYYY:MM:DD`, as EXIF writes it, or with `/`), `T` or a space, `HH:MM:SS` with an optional fraction, and an
 /// optional `Z` or offset (`+02:00`, `-0330`); without one, UTC.
-pub fn parse_time(text: &str) -> Option<f64> {
+pub(crate) fn parse_time(text: &str) -> Option<f64> {
     let text = text.trim();
     if let Ok(v) = text.parse::<f64>() {
         return v.is_finite().then_some(v);
@@ -748,7 +748,7 @@ pub(crate) fn utc_seconds(y: i32, month: u32, day: u32, h: u32, m: u32, s: u32) 
 }
 
 /// A time zone's offset from UTC in seconds: `Z`, or `+HH:MM`, `-HH:MM`, `+HHMM`, `+HH` (EXIF's `OffsetTime`).
-pub fn parse_offset(text: &str) -> Option<f64> {
+pub(crate) fn parse_offset(text: &str) -> Option<f64> {
     let text = text.trim();
     if text.eq_ignore_ascii_case("z") {
         return Some(0.0);

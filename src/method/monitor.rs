@@ -217,25 +217,7 @@ impl std::fmt::Display for Flag {
                 longer,
                 exposure,
                 levelled,
-            } => write!(
-                f,
-                "the correction added structure ({:.0} % of the photo's texture): F holds objects its {window} \
-                 photos saw at the same place ({}){}",
-                100.0 * texture_kept,
-                match exposure {
-                    Some(l) => format!(
-                        "taken in with this photo's exposure jump: {l:.2}× its window's level"
-                    ),
-                    None => "a slow camera".to_string(),
-                },
-                match (exposure, levelled, longer) {
-                    (Some(_), false, _) => {
-                        "; exposure levelling keeps such jumps out of F (drop --no-level-exposures)".into()
-                    }
-                    (_, _, Some(n)) => format!("; try --window {n}"),
-                    _ => String::new(),
-                }
-            ),
+            } => structure_added(f, texture_kept, window, longer, exposure, levelled),
             Flag::ShortMission { photos, window } => write!(
                 f,
                 "only {photos} photos in the mission, fewer than the window n = {window}"
@@ -254,6 +236,34 @@ impl std::fmt::Display for Flag {
             ),
         }
     }
+}
+
+/// The message of [`Flag::StructureAdded`]: what the correction added, where it came from, and what to do.
+fn structure_added(
+    f: &mut std::fmt::Formatter<'_>,
+    texture_kept: f32,
+    window: usize,
+    longer: Option<usize>,
+    exposure: Option<f32>,
+    levelled: bool,
+) -> std::fmt::Result {
+    write!(
+        f,
+        "the correction added structure ({:.0} % of the photo's texture): F holds objects its {window} \
+         photos saw at the same place ({}){}",
+        100.0 * texture_kept,
+        match exposure {
+            Some(l) => format!("taken in with this photo's exposure jump: {l:.2}× its window's level"),
+            None => "a slow camera".to_string(),
+        },
+        match (exposure, levelled, longer) {
+            (Some(_), false, _) => {
+                "; exposure levelling keeps such jumps out of F (drop --no-level-exposures)".into()
+            }
+            (_, _, Some(n)) => format!("; try --window {n}"),
+            _ => String::new(),
+        }
+    )
 }
 
 impl Serialize for Flag {

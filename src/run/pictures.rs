@@ -280,23 +280,7 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
             }
         }
     }
-    for t in photo_ticks(frames.len()) {
-        let x = f.x_of(t);
-        draw::line(img, (x, y0 + h - 1), (x, y0 + h + 3), BLACK);
-        let label = (frames[t].index + 1).to_string();
-        let lw = draw::text_width(&label, 1) as i64;
-        draw::text(
-            img,
-            (x - lw / 2).min(right - lw),
-            y0 + h + 6,
-            &label,
-            1,
-            BLACK,
-        );
-    }
-    let axis = "photo number";
-    let aw = draw::text_width(axis, 1) as i64;
-    draw::text(img, right - aw, y0 + h + 17, axis, 1, GREY);
+    photo_axis(img, f, frames, y0 + h, right);
     let mut prev: Option<(i64, i64)> = None;
     for (i, v) in s.values.iter().enumerate() {
         if !v.is_finite() {
@@ -317,6 +301,27 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
             draw::fill_rect(img, p.0 - 2, p.1 - 2, 5, 5, RED);
         }
     }
+}
+
+/// The photo axis below a panel whose plot ends at `bottom`: ticks labelled with the photos' numbers in the mission.
+fn photo_axis(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], bottom: i64, right: i64) {
+    for t in photo_ticks(frames.len()) {
+        let x = f.x_of(t);
+        draw::line(img, (x, bottom - 1), (x, bottom + 3), BLACK);
+        let label = (frames[t].index + 1).to_string();
+        let lw = draw::text_width(&label, 1) as i64;
+        draw::text(
+            img,
+            (x - lw / 2).min(right - lw),
+            bottom + 6,
+            &label,
+            1,
+            BLACK,
+        );
+    }
+    let axis = "photo number";
+    let aw = draw::text_width(axis, 1) as i64;
+    draw::text(img, right - aw, bottom + 17, axis, 1, GREY);
 }
 
 /// A contact sheet of flagged photos: corrected photo | `F·C`, with the photo's name and first reason.
