@@ -181,7 +181,7 @@ fn try_take(file: &std::fs::File, path: &Path, shared: bool, out: &Path) -> Resu
     match got {
         Ok(()) => Ok(()),
         Err(std::fs::TryLockError::WouldBlock) => {
-            let who = std::fs::read_to_string(path)
+            let who = crate::io::whole::read_text(path, RECORD_MAX_BYTES, "lock")
                 .ok()
                 .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
                 .and_then(|v| v.get("pid").and_then(|p| p.as_u64()))
@@ -243,10 +243,22 @@ pub fn acquire(opts: &Options, work_dir: &Path) -> Result<RunLock> {
     Ok(RunLock { _held: held })
 }
 
+/// The most of a run's own small files (its record of options, its lock) that is read.
+const RECORD_MAX_BYTES: u64 = 1 << 20;
+
 /// Compare the options with those recorded in `work_dir/options.json` (or record them).
 fn check_options(opts: &Options, work_dir: &Path, fp: &serde_json::Value) -> Result<()> {
     let recorded = work_dir.join("options.json");
-    match std::fs::read_to_string(&recorded) {
+    // Read bounded, as every file read whole (io::whole): a record of options is a few KiB.
+    let read = match std::fs::metadata(&recorded) {
+        Ok(_) => Ok(crate::io::whole::read_text(
+            &recorded,
+            RECORD_MAX_BYTES,
+            "record of an earlier run's options",
+        )?),
+        Err(e) => Err(e),
+    };
+    match read {
         Ok(text) => {
             let old: serde_json::Value =
                 serde_json::from_str(&text).map_err(|e| Error::Config {

@@ -25,6 +25,9 @@ use crate::report::{FileError, FrameReport, Report};
 use crate::run::guard::differing_options;
 use crate::run::options::Shard;
 
+/// The most of a shard's report.json that is read (about 4 KiB a photo: a million photos in one shard).
+const REPORT_MAX_BYTES: u64 = 4 << 30;
+
 /// What [`merge_shards`] wrote.
 #[derive(Debug, Clone)]
 pub struct Merged {
@@ -152,7 +155,7 @@ fn read_shards(work: &Path) -> Result<Vec<ShardReport>> {
     reports
         .into_iter()
         .map(|((count, index), path)| {
-            let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+            let text = crate::io::whole::read_text(&path, REPORT_MAX_BYTES, "shard report")?;
             let report: Report = serde_json::from_str(&text).map_err(|e| Error::Config {
                 path: path.clone(),
                 reason: format!("unreadable shard report: {e}"),
@@ -181,7 +184,7 @@ fn shard_problem(
 ) -> Option<String> {
     let rerun = format!("rerun it (abysslight correct <the same arguments> --shard {k}/{n}, or resubmit array task {k})");
     if let Some(lock) = lock.filter(|l| unfinished(l, report)) {
-        let pid = std::fs::read_to_string(lock)
+        let pid = crate::io::whole::read_text(lock, 1 << 20, "lock")
             .ok()
             .and_then(|t| serde_json::from_str::<Holder>(&t).ok())
             .map_or(String::new(), |h| format!(" by pid {}", h.pid));
@@ -476,7 +479,8 @@ pub fn save_flagged(work: &Path, shard: Shard, kept: &[(usize, Raster)]) -> Resu
 
 /// Read one `F·C` image written by [`save_flagged`].
 fn load_flagged(path: &Path) -> Result<Raster> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    // Header, then at most the largest photo's block image as f32 RGB.
+    let bytes = crate::io::whole::read_whole(path, 16 + 12 * crate::io::MAX_PIXELS, "F·C image")?;
     let bad = || Error::Decode {
         path: path.to_owned(),
         reason: "not an F·C image written by abysslight correct --shard".into(),

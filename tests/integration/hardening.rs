@@ -905,3 +905,62 @@ fn shards_that_read_other_logs_or_masks_do_not_mix() {
         stderr(&o)
     );
 }
+
+/// `merge-shards` reads the shards' reports whole: one that is a link to `/dev/zero` or a FIFO is refused by name,
+/// not read until out of memory or waited on.
+#[cfg(unix)]
+#[test]
+fn a_shard_report_that_is_a_device_or_a_fifo_is_refused_by_name() {
+    let d = tempfile::tempdir().unwrap();
+    let (survey, _) = tiny_mission(d.path(), 6);
+    let out = d.path().join("out");
+    for k in ["1/2", "2/2"] {
+        let args = [
+            "--survey",
+            s(&survey),
+            "--out",
+            s(&out),
+            "--window",
+            "3",
+            "--shard",
+            k,
+        ];
+        let o = run_within(&args, d.path(), 300);
+        assert_eq!(code(&o), 0, "{}", stderr(&o));
+    }
+    let shard_report = out.join("_abysslight").join("report-shard-1-of-2.json");
+    assert!(shard_report.is_file(), "the shard left its report");
+    // Without its lock the shard counts as finished, so its report is read.
+    let _ = std::fs::remove_file(out.join("_abysslight").join("lock-shard-1-of-2"));
+    for (kind, make) in [
+        (
+            "a device",
+            &(|p: &Path| std::os::unix::fs::symlink("/dev/zero", p).unwrap()) as &dyn Fn(&Path),
+        ),
+        ("a FIFO", &(|p: &Path| mkfifo(p)) as &dyn Fn(&Path)),
+    ] {
+        std::fs::remove_file(&shard_report).unwrap();
+        make(&shard_report);
+        let mut child = Command::new(BIN)
+            .args(["merge-shards", s(&out)])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let started = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if started.elapsed() > std::time::Duration::from_secs(60) {
+                child.kill().unwrap();
+                panic!("merge-shards still reading {kind} after 60 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let o = child.wait_with_output().unwrap();
+        assert_ne!(code(&o), 0, "{kind}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains("report-shard-1-of-2.json") && stderr(&o).contains(kind),
+            "{kind}: {}",
+            stderr(&o)
+        );
+    }
+}
