@@ -704,10 +704,13 @@ fn library_run_refuses_the_same_paths() {
 /// `abysslight correct -q ARGS` in `cwd`, stopped after `secs`: a run that blocks fails the test instead of
 /// hanging it.
 fn run_within(args: &[&str], cwd: &Path, secs: u64) -> Output {
+    command_within(&[&["correct", "-q"][..], args].concat(), cwd, secs)
+}
+
+/// `abysslight ARGS` run in `cwd`, killed (and the test failed) if it has not finished within `secs` seconds.
+fn command_within(args: &[&str], cwd: &Path, secs: u64) -> Output {
     use std::process::Stdio;
     let mut child = Command::new(BIN)
-        .arg("correct")
-        .arg("-q")
         .args(args)
         .current_dir(cwd)
         .stdout(Stdio::piped())
@@ -941,21 +944,7 @@ fn a_shard_report_that_is_a_device_or_a_fifo_is_refused_by_name() {
     ] {
         std::fs::remove_file(&shard_report).unwrap();
         make(&shard_report);
-        let mut child = Command::new(BIN)
-            .args(["merge-shards", s(&out)])
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let started = std::time::Instant::now();
-        while child.try_wait().unwrap().is_none() {
-            if started.elapsed() > std::time::Duration::from_secs(60) {
-                child.kill().unwrap();
-                panic!("merge-shards still reading {kind} after 60 s");
-            }
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
-        let o = child.wait_with_output().unwrap();
+        let o = command_within(&["merge-shards", s(&out)], d.path(), 60);
         assert_ne!(code(&o), 0, "{kind}: {}", stderr(&o));
         assert!(
             stderr(&o).contains("report-shard-1-of-2.json") && stderr(&o).contains(kind),
