@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use abysslight::eval::evaluate::{albedo_error_where, residual_pattern_where};
+use abysslight::eval::evaluate::{albedo_error, residual_pattern};
 use abysslight::eval::matrix::{self, load_set, signal_mask, DiveSpec};
 use abysslight::eval::simulate::Rig;
 use abysslight::{correct_mission, Silent};
@@ -476,8 +476,8 @@ fn run_one(
             _ => (f64::NAN, f64::NAN),
         };
         scores.push(Score {
-            albedo: albedo_error_where(&photos, &r.albedo, Some(&r.signal)),
-            pattern: residual_pattern_where(&photos, &r.albedo, (8, 6), Some(&r.signal)),
+            albedo: albedo_error(&photos, &r.albedo, Some(&r.signal)),
+            pattern: residual_pattern(&photos, &r.albedo, (8, 6), Some(&r.signal)),
             nmae,
             peer_pattern,
         });

@@ -38,9 +38,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
-use abysslight::eval::evaluate::{
-    albedo_error, albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
-};
+use abysslight::eval::evaluate::{albedo_error, consistency_parts, residual_pattern};
 use abysslight::eval::matrix::{
     self, lit_mask, load_set, only_lit, signal_mask, window_floor, DIVES, HELD_OUT, NODULES,
     NODULES_HELD_OUT,
@@ -84,10 +82,10 @@ fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>], lit: &[Vec<bool>]
     let (consistency_lit, overlap_lit) =
         consistency_parts(&only_lit(photos, lit), &hs, 8.0).unwrap_or((f64::NAN, f64::NAN));
     Score {
-        albedo: albedo_error_where(photos, &dive.albedo, Some(signal)),
-        albedo_all: albedo_error(photos, &dive.albedo),
-        pattern: residual_pattern_where(photos, &dive.albedo, (8, 6), Some(signal)),
-        pattern_all: residual_pattern(photos, &dive.albedo, (8, 6)),
+        albedo: albedo_error(photos, &dive.albedo, Some(signal)),
+        albedo_all: albedo_error(photos, &dive.albedo, None),
+        pattern: residual_pattern(photos, &dive.albedo, (8, 6), Some(signal)),
+        pattern_all: residual_pattern(photos, &dive.albedo, (8, 6), None),
         consistency,
         overlap,
         consistency_lit,
@@ -618,8 +616,8 @@ fn judge(
         let one = std::slice::from_ref(p);
         let albedo = std::slice::from_ref(&dive.albedo[i]);
         let mask = std::slice::from_ref(&signal[i]);
-        let a = albedo_error_where(one, albedo, Some(mask));
-        let r = residual_pattern_where(one, albedo, (8, 6), Some(mask));
+        let a = albedo_error(one, albedo, Some(mask));
+        let r = residual_pattern(one, albedo, (8, 6), Some(mask));
         let wrong = a > 1.5 * bar_albedo || r > 1.5 * bar_pattern;
         m.photos += 1;
         m.wrong += usize::from(wrong);

@@ -49,8 +49,8 @@ fn main() -> Result<(), abysslight::Error> {
         .iter()
         .map(|(_, p)| Raster::from_photo(p))
         .collect();
-    let before = albedo_error(&raw, &dive.albedo);
-    let after = albedo_error(&got, &dive.albedo);
+    let before = albedo_error(&raw, &dive.albedo, None);
+    let after = albedo_error(&got, &dive.albedo, None);
     println!("albedo error: raw photos {before:.3}, corrected {after:.3}");
     if after >= 0.5 * before {
         eprintln!("the correction did not halve the albedo error");

@@ -10,7 +10,7 @@
 //! - the method on photos in memory: a [`Scatter`] (`S` from water-column frames), [`Params`] (the method's
 //!   settings, [`Params::validate`]d; [`Options::params`] maps a run's options onto them, [`Params::resolved`]
 //!   resolves every `auto`), the [`Engine`] that runs the method over a stream of [`Photo`]s with bounded memory:
-//!   its first pass, the [`Survey`], chooses each photo's window as the photos come, as a run over a folder does;
+//!   its first pass, the survey, chooses each photo's window as the photos come, as a run over a folder does;
 //! - the window rule of the paper: [`p_half`] and [`choose_window`];
 //! - [`kernels`]: the method's steps one by one (medians, `F`, the correction), for callers who want one alone;
 //! - [`io`]: finding, decoding and writing photos (atomically, with their metadata);
@@ -80,7 +80,6 @@ pub use method::members::Members;
 pub use method::params::{BlockRule, Facts, InvalidConfig, Params, SeafloorColour, Steps, Window};
 pub use method::raster::{BitDepth, Layout, Photo, Raster, Sample, Samples};
 pub use method::scatter::Scatter;
-pub use method::survey::Survey;
 pub use method::transfer::Transfer;
 pub use method::window::{choose_window, p_half};
 #[doc(no_inline)]

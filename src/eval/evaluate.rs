@@ -129,13 +129,9 @@ fn check_pairs(got: &[Raster], truth: &[Raster]) {
     }
 }
 
-/// Albedo error after the best global per-channel scale: `Σ|g − s_c·t| / Σ s_c·t`.
-pub fn albedo_error(got: &[Raster], truth: &[Raster]) -> f64 {
-    albedo_error_where(got, truth, None)
-}
-
-/// [`albedo_error`] over the samples `signal` flags (see [`residual_pattern_where`]).
-pub fn albedo_error_where(got: &[Raster], truth: &[Raster], signal: Option<&[Vec<bool>]>) -> f64 {
+/// Albedo error after the best global per-channel scale: `Σ|g − s_c·t| / Σ s_c·t`, over every sample (`signal:
+/// None`) or over the samples `signal` flags (see [`residual_pattern`]).
+pub fn albedo_error(got: &[Raster], truth: &[Raster], signal: Option<&[Vec<bool>]>) -> f64 {
     check_pairs(got, truth);
     check_signal(truth, signal);
     let s = channel_scales(got, truth, signal);
@@ -176,16 +172,12 @@ fn median(v: &mut [f64]) -> f64 {
 /// of the image frame (pooled over photos), averaged over channels. Samples with `t` below 0.02 are skipped.
 /// A channel left black (its scale `s_c` or the median of its cell medians 0) scores 1, the whole signal lost.
 /// (It used to score 0, a perfect flatness, which rewarded a correction that blacks out a starved channel.)
-pub fn residual_pattern(got: &[Raster], truth: &[Raster], grid: (usize, usize)) -> f64 {
-    residual_pattern_where(got, truth, grid, None)
-}
-
-/// [`residual_pattern`] scored only on the samples where `signal` (one flag per sample of each photo, in the
-/// rasters' order) is set: e.g. where the photo carries the albedo at all, its true lit signal `F·A` at least one
-/// code step of the camera's encoding. The flags come from the data, not from a method's output, so every method
-/// is scored on the same samples. A channel with no scored sample is left out of the average (NaN when none is
-/// left).
-pub fn residual_pattern_where(
+///
+/// With `signal: None` every sample is scored; with flags (one per sample of each photo, in the rasters' order) only
+/// those set: e.g. where the photo carries the albedo at all, its true lit signal `F·A` at least one code step of the
+/// camera's encoding. The flags come from the data, not from a method's output, so every method is scored on the
+/// same samples. A channel with no scored sample is left out of the average (NaN when none is left).
+pub fn residual_pattern(
     got: &[Raster],
     truth: &[Raster],
     grid: (usize, usize),
@@ -760,8 +752,8 @@ impl ScoreSet<'_> {
             label: label.to_string(),
             folder: folder.to_owned(),
             photos: photos.len(),
-            albedo_error: albedo.map(|a| albedo_error(&photos, a)),
-            residual_pattern: albedo.map(|a| residual_pattern(&photos, a, settings.grid)),
+            albedo_error: albedo.map(|a| albedo_error(&photos, a, None)),
+            residual_pattern: albedo.map(|a| residual_pattern(&photos, a, settings.grid, None)),
             consistency: parts.map(|p| p.0),
             overlap_difference: parts.map(|p| p.1),
             clipped: at_limit as f64 / samples.max(1) as f64,

@@ -520,7 +520,7 @@ mod tests {
                 }
             }
         }
-        let pattern = crate::eval::evaluate::residual_pattern(&out, &a, (8, 2));
+        let pattern = crate::eval::evaluate::residual_pattern(&out, &a, (8, 2), None);
         assert!(pattern > 0.1, "the strip is left as pattern: {pattern}");
     }
 

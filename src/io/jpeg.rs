@@ -7,26 +7,7 @@
 use std::io::Read;
 use std::path::Path;
 
-/// Chroma subsampling of a colour JPEG: how many luma samples share one chroma sample, across and down.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-pub enum Subsampling {
-    /// No subsampling.
-    #[default]
-    #[serde(rename = "444")]
-    S444,
-    /// Half the chroma columns (most video, many cameras).
-    #[serde(rename = "422")]
-    S422,
-    /// Half the chroma columns and rows (most cameras).
-    #[serde(rename = "420")]
-    S420,
-    /// Half the chroma rows (read from inputs only).
-    #[serde(rename = "440")]
-    S440,
-    /// A quarter of the chroma columns (read from inputs only).
-    #[serde(rename = "411")]
-    S411,
-}
+use crate::io::Subsampling;
 
 impl Subsampling {
     /// Luma samples per chroma sample, across and down.

@@ -23,7 +23,6 @@ use std::path::{Path, PathBuf};
 use image::{DynamicImage, ImageFormat};
 
 use crate::error::{Error, Result};
-pub use crate::io::jpeg::Subsampling;
 // The readers' parts that the command, the Python binding and the project's tests reach: public for them, not part
 // of the documented interface (which is `decode`, `find_photos`, `encode_to` and `write_atomic`).
 #[doc(hidden)]
@@ -35,6 +34,27 @@ pub use crate::io::paths::check_outputs;
 #[doc(hidden)]
 pub use crate::io::pnm::{decode_frame, FrameSplitter};
 use crate::method::raster::{Layout, Photo, Raster, Samples};
+
+/// Chroma subsampling of a colour JPEG: how many luma samples share one chroma sample, across and down.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum Subsampling {
+    /// No subsampling.
+    #[default]
+    #[serde(rename = "444")]
+    S444,
+    /// Half the chroma columns (most video, many cameras).
+    #[serde(rename = "422")]
+    S422,
+    /// Half the chroma columns and rows (most cameras).
+    #[serde(rename = "420")]
+    S420,
+    /// Half the chroma rows (read from inputs only).
+    #[serde(rename = "440")]
+    S440,
+    /// A quarter of the chroma columns (read from inputs only).
+    #[serde(rename = "411")]
+    S411,
+}
 
 /// File name extensions taken as photos (case-insensitive).
 pub(crate) const PHOTO_EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "tif", "tiff"];

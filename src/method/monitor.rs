@@ -109,7 +109,7 @@ pub enum Flag {
         /// hold).
         longer: Option<usize>,
         /// The photo's level against its window's where it jumped by more than
-        /// [`Thresholds::exposure_jump`]: the structure came in with the jump, not with a slow camera.
+        /// `Thresholds::exposure_jump`: the structure came in with the jump, not with a slow camera.
         exposure: Option<f32>,
         /// Whether exposure levelling ran (`false`: turned off, and turning it on is the advice for a jump).
         levelled: bool,

@@ -114,7 +114,7 @@ impl fmt::Display for SeafloorColour {
 #[serde(rename_all = "kebab-case")]
 pub enum Window {
     /// With [`Method::Abyss`], per stretch of the mission by the method's first pass, the survey
-    /// ([`Survey`](crate::Survey)): each photo's window, the quantile its `M` takes and its near window, from how
+    /// (the survey, see [`Engine::LOOK_AHEAD`](crate::Engine::LOOK_AHEAD)): each photo's window, the quantile its `M` takes and its near window, from how
     /// much of the ground is dark and how far the camera moves. The other methods take the paper's
     /// paper's 7 photos and the median.
     #[default]

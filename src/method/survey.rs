@@ -15,28 +15,20 @@ use crate::method::stretch::{
     choose, choose_one, photos_read, Choice, PhotoSurvey, Surveyor, REFERENCE_HALF,
 };
 
-/// Photos a stream waits for after a photo before the survey decides it ([`Survey::LOOK_AHEAD`]).
+/// Photos a stream waits for after a photo before the survey decides it ([`Engine::LOOK_AHEAD`](crate::Engine::LOOK_AHEAD)).
 pub(crate) const LOOK_AHEAD: usize = crate::method::stretch::MAX_AUTO_WINDOW / 2 + REFERENCE_HALF;
-/// The photo whose push decides the mission's first photos ([`Survey::FIRST_DECIDED`]).
+/// The photo whose push decides the mission's first photos
+/// ([`Engine::FIRST_DECIDED`](crate::Engine::FIRST_DECIDED)).
 pub(crate) const FIRST_DECIDED: usize =
     crate::method::stretch::MAX_AUTO_WINDOW - 1 + REFERENCE_HALF;
 
 /// Each photo's window from a survey of the mission's block images (see the module documentation).
-pub struct Survey {
+pub(crate) struct Survey {
     surveyor: Option<Surveyor>,
     choices: Vec<Choice>,
 }
 
 impl Survey {
-    /// Photos a stream waits for after a photo before the survey decides it: the photos after it that its longest
-    /// window holds, and the 10 photos after those that their measures need (25). The first photos wait
-    /// longer, for the longest window from the mission's start: they are decided once photo
-    /// [`Survey::FIRST_DECIDED`] is pushed.
-    pub const LOOK_AHEAD: usize = LOOK_AHEAD;
-    /// The photo whose push decides the mission's first photos, those whose longest window starts at the first
-    /// photo (40: the 41st photo).
-    pub const FIRST_DECIDED: usize = FIRST_DECIDED;
-
     /// A survey against the backscatter `s_low` (block resolution, linear light; `None`: no `S`).
     pub fn new(s_low: Option<&Raster>) -> Self {
         Survey {

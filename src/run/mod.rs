@@ -176,7 +176,7 @@ fn say_what_runs(plan: &Plan, params: &crate::method::params::Params, progress: 
             format!(
                 "correcting survey photos as they come (windows chosen per stretch by the survey as the photos \
                  come: each photo once the {} after it are in; blocks {blocks})",
-                crate::method::survey::Survey::LOOK_AHEAD
+                crate::method::survey::LOOK_AHEAD
             )
         } else {
             format!(

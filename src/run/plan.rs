@@ -395,7 +395,7 @@ impl Plan {
                 match self.streaming {
                     true => format!(
                         "as they come, each photo once the {} after it are in",
-                        crate::method::survey::Survey::LOOK_AHEAD
+                        crate::method::survey::LOOK_AHEAD
                     ),
                     false => "before the correction".into(),
                 },

@@ -2,9 +2,7 @@
 //! the default method (`abyss`) against the paper as published on small dives of the dive matrix
 //! (examples/dive_matrix.rs, docs/evaluation.md).
 
-use abysslight::eval::evaluate::{
-    albedo_error_where, evaluate, residual_pattern_where, EvalSettings,
-};
+use abysslight::eval::evaluate::{albedo_error, evaluate, residual_pattern, EvalSettings};
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::{Exposure, Rig, Simulation, Water};
 use abysslight::Method;
@@ -173,7 +171,7 @@ impl MatrixDive {
                             .collect()
                     })
                     .collect();
-                albedo_error_where(&photos, &self.dive.albedo, Some(&only))
+                albedo_error(&photos, &self.dive.albedo, Some(&only))
             })
             .collect()
     }
@@ -184,8 +182,8 @@ impl MatrixDive {
         correct_dive(&self.sim, &self.dir.path().join("dive"), &out, opts);
         let photos = matrix::load_set(&out, &self.names, self.sim.encode);
         (
-            albedo_error_where(&photos, &self.dive.albedo, Some(&self.signal)),
-            residual_pattern_where(&photos, &self.dive.albedo, (8, 6), Some(&self.signal)),
+            albedo_error(&photos, &self.dive.albedo, Some(&self.signal)),
+            residual_pattern(&photos, &self.dive.albedo, (8, 6), Some(&self.signal)),
         )
     }
 }

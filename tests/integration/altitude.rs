@@ -6,7 +6,7 @@ use crate::common::*;
 
 use std::path::Path;
 
-use abysslight::eval::evaluate::{albedo_error_where, residual_pattern_where};
+use abysslight::eval::evaluate::{albedo_error, residual_pattern};
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::{Dive, Simulation};
 use abysslight::io::{decode, find_photos};
@@ -47,8 +47,8 @@ fn windows_chosen_by_altitude_correct_a_swinging_sledge_better() {
         assert_eq!(report.corrected, sim.frames);
         let photos = matrix::load_set(&out, &names, sim.encode);
         (
-            albedo_error_where(&photos, &dive.albedo, Some(&signal)),
-            residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(&signal)),
+            albedo_error(&photos, &dive.albedo, Some(&signal)),
+            residual_pattern(&photos, &dive.albedo, (8, 6), Some(&signal)),
         )
     };
     let (time, by_altitude) = (score(false, "time"), score(true, "altitude"));

@@ -67,8 +67,8 @@ fn engine_corrects_a_dive_in_memory_in_order_with_bounded_memory() {
         .collect();
     let raw: Vec<Raster> = dive.survey.iter().map(Raster::from_photo).collect();
     let (before, after) = (
-        albedo_error(&raw, &dive.albedo),
-        albedo_error(&got, &dive.albedo),
+        albedo_error(&raw, &dive.albedo, None),
+        albedo_error(&got, &dive.albedo, None),
     );
     assert!(after < 0.4 * before, "albedo error {before} -> {after}");
 }

@@ -190,7 +190,7 @@ fn at_default_options_laser_dots_stay_red_leave_no_stain_and_are_reported() {
     let mut out = Vec::new();
     for e in find_photos(&survey).unwrap().photos {
         out.extend(engine.push((decode(&e.path).unwrap(), e.relative)).unwrap());
-        if engine.accepted() <= abysslight::Survey::FIRST_DECIDED {
+        if engine.accepted() <= abysslight::Engine::<u8>::FIRST_DECIDED {
             assert!(
                 !engine.laser_paths_decided(),
                 "decided from the first photos only"

@@ -1,9 +1,7 @@
 //! Nodule fields (docs/nodules.md): a dive of `matrix::NODULES` whose coverage changes along the track, corrected
 //! at default options (no coverage given) and as the paper was published, scored against the simulator's truth.
 
-use abysslight::eval::evaluate::{
-    albedo_error_where, consistency_parts, residual_pattern, residual_pattern_where,
-};
+use abysslight::eval::evaluate::{albedo_error, consistency_parts, residual_pattern};
 use abysslight::eval::matrix;
 use abysslight::Method;
 use abysslight::{correct_mission, Options, Silent};
@@ -43,8 +41,8 @@ fn scores(
     let names: Vec<String> = dive.truth.poses.iter().map(|p| p.file.clone()).collect();
     let photos = corrected(root, out, &names, sim.encode, opts);
     (
-        albedo_error_where(&photos, &dive.albedo, Some(signal)),
-        residual_pattern_where(&photos, &dive.albedo, (8, 6), Some(signal)),
+        albedo_error(&photos, &dive.albedo, Some(signal)),
+        residual_pattern(&photos, &dive.albedo, (8, 6), Some(signal)),
     )
 }
 
@@ -173,7 +171,7 @@ impl Rendered {
         let (root, out) = (self.dir.path().join("dive"), self.dir.path().join(out));
         let photos = corrected(&root, &out, &self.names, self.sim.encode, opts);
         let (consistency, overlap) = consistency_parts(&photos, &self.hs, 8.0).unwrap();
-        let pattern = residual_pattern(&photos, &self.dive.albedo, (8, 6));
+        let pattern = residual_pattern(&photos, &self.dive.albedo, (8, 6), None);
         (consistency, overlap, pattern)
     }
 }

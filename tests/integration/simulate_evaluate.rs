@@ -2,7 +2,7 @@
 //! correction methods on small simulated dives.
 
 use abysslight::eval::evaluate::{
-    albedo_error, consistency, evaluate, residual_pattern, residual_pattern_where, EvalSettings,
+    albedo_error, consistency, evaluate, residual_pattern, EvalSettings,
 };
 use abysslight::eval::simulate::Simulation;
 use abysslight::Method;
@@ -26,7 +26,7 @@ fn albedo_error_is_zero_for_a_per_channel_scale_and_hand_computed_otherwise() {
     for (i, v) in g.data.iter_mut().enumerate() {
         *v *= [2.0, 0.5, 1.3][i % 3];
     }
-    assert!(albedo_error(&[g], std::slice::from_ref(&t)) < 1e-6);
+    assert!(albedo_error(&[g], std::slice::from_ref(&t), None) < 1e-6);
 
     // One grey channel: truth [1, 1], got [1, 3]: s = (1 + 3) / 2 = 2, error = (|1−2| + |3−2|) / (2 + 2) = 0.5.
     let truth = Raster {
@@ -39,7 +39,7 @@ fn albedo_error_is_zero_for_a_per_channel_scale_and_hand_computed_otherwise() {
         data: vec![1.0, 3.0],
         ..truth.clone()
     };
-    assert!((albedo_error(&[got], &[truth]) - 0.5).abs() < 1e-9);
+    assert!((albedo_error(&[got], &[truth], None) - 0.5).abs() < 1e-9);
 }
 
 #[test]
@@ -50,7 +50,7 @@ fn residual_pattern_by_hand() {
         data: t.data.iter().map(|v| 0.7 * v).collect(),
         ..t.clone()
     };
-    assert!(residual_pattern(&[scaled], std::slice::from_ref(&t), (4, 2)) < 1e-6);
+    assert!(residual_pattern(&[scaled], std::slice::from_ref(&t), (4, 2), None) < 1e-6);
 
     // Grey 4×1 photo, truth 1 everywhere, got [1, 1, 1, 2] on a 4×1 grid: s = 7/4, cell ratios
     // [4/7, 4/7, 4/7, 8/7]; median 4/7, absolute deviations [0, 0, 0, 4/7], MAD 0: no robust spread
@@ -66,12 +66,12 @@ fn residual_pattern_by_hand() {
         data: vec![1.0, 1.0, 1.0, 2.0],
         ..truth.clone()
     };
-    assert!(residual_pattern(&[one], std::slice::from_ref(&truth), (4, 1)) < 1e-9);
+    assert!(residual_pattern(&[one], std::slice::from_ref(&truth), (4, 1), None) < 1e-9);
     let two = Raster {
         data: vec![1.0, 1.0, 2.0, 2.0],
         ..truth.clone()
     };
-    let r = residual_pattern(&[two], &[truth], (4, 1));
+    let r = residual_pattern(&[two], &[truth], (4, 1), None);
     assert!((r - 1.4826 / 3.0).abs() < 1e-6, "{r}");
 }
 
@@ -308,8 +308,8 @@ fn pattern_of(
 ) -> f64 {
     let (got, truth) = (std::slice::from_ref(got), std::slice::from_ref(truth));
     match signal {
-        Some(m) => residual_pattern_where(got, truth, grid, Some(&[m])),
-        None => residual_pattern(got, truth, grid),
+        Some(m) => residual_pattern(got, truth, grid, Some(&[m])),
+        None => residual_pattern(got, truth, grid, None),
     }
 }
 
@@ -351,7 +351,7 @@ fn residual_pattern_of_a_black_channel_is_one_not_zero() {
 }
 
 #[test]
-fn residual_pattern_where_scores_only_the_flagged_samples() {
+fn residual_pattern_scores_only_the_flagged_samples() {
     // Grey 4×1, truth 1; got [1, 1, 2, 2] has a pattern (see residual_pattern_by_hand), but scored only where
     // the photo carries signal (the first two samples) it has none. With no sample flagged the score is NaN.
     let truth = Raster {

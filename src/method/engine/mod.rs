@@ -22,7 +22,7 @@
 //! chosen by altitude (photos pushed with an altitude, [`PhotoIn::altitude`]) the ring holds the `2n + 1` photos
 //! each window is chosen among, and up to `n + 1` photos wait (`2n + 1` at the start). With the window chosen per
 //! stretch ([`Window::Auto`](crate::Window::Auto)) as photos come, a photo also waits for the survey's decision:
-//! up to 41 photos at the start of a mission (until [`crate::Survey::FIRST_DECIDED`] is pushed) and 26 after, or
+//! up to 41 photos at the start of a mission (until [`Engine::FIRST_DECIDED`] is pushed) and 26 after, or
 //! with altitudes up to 63 at the start and 32 after (the longest window, 31, chosen by altitude).
 
 use std::time::Instant;
@@ -64,7 +64,7 @@ pub struct Corrected<T> {
     /// Position among the photos the engine accepted (0-based).
     pub index: usize,
     /// The photos (by `index`) whose median gave this photo's `F`, and whether altitude chose them
-    /// ([`crate::method::altitude`]).
+    /// (docs/method.md, "Windows by altitude").
     pub window: crate::method::members::Members,
     /// The altitude the photo was pushed with ([`PhotoIn::altitude`]).
     pub altitude: Option<f32>,
@@ -146,6 +146,15 @@ pub struct Engine<T> {
 }
 
 impl<T> Engine<T> {
+    /// Photos a stream waits for after a photo before the survey decides its window: the photos after it that its
+    /// longest window holds, and the 10 photos after those that their measures need (25). The first photos wait
+    /// longer, for the longest window from the mission's start: they are decided once photo
+    /// [`Engine::FIRST_DECIDED`] is pushed.
+    pub const LOOK_AHEAD: usize = crate::method::survey::LOOK_AHEAD;
+    /// The photo whose push decides the mission's first photos, those whose longest window starts at the first
+    /// photo (40: the 41st photo).
+    pub const FIRST_DECIDED: usize = crate::method::survey::FIRST_DECIDED;
+
     /// An engine for one mission. `scatter` is `S` (`None`: no backscatter removal); `mask` marks static pixels
     /// (overlays, vehicle parts), left out of every median, with `F` and `S` filled in smoothly beneath them.
     pub fn new(params: Params, scatter: Option<&Scatter>, mask: Option<Mask>) -> Result<Engine<T>> {

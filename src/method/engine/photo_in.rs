@@ -24,13 +24,13 @@ pub enum Use {
 pub struct PhotoIn<T> {
     /// The photo, of the mission's layout (the first photo sets it).
     pub photo: Photo,
-    /// What the caller gets back with it ([`Corrected::tag`]).
+    /// What the caller gets back with it ([`Corrected::tag`](crate::Corrected::tag)).
     pub tag: T,
     /// What the engine does with it.
     pub use_: Use,
     /// Its altitude above the seafloor in metres, where known (a navigation log). With [`Method::Abyss`](crate::Method::Abyss), where the
     /// altitude swings along the track, a photo's window is then chosen among the photos around it lit from the
-    /// nearest heights ([`crate::method::altitude`]); a photo then waits for its window's length of photos after
+    /// nearest heights (docs/method.md, "Windows by altitude"); a photo then waits for its window's length of photos after
     /// it, not half. Windows are chosen by altitude when the mission's first photo comes with an altitude, or after
     /// [`Engine::expect_altitudes`]; photos without one keep the window over time and are not chosen into others'.
     /// An altitude that is not a positive number is refused with [`Error::Usage`].

@@ -16,7 +16,7 @@ use crate::method::survey::FIRST_DECIDED;
 use crate::method::transfer::Transfer;
 
 /// The photos whose laser spots decide the paths of laser dots: those the engine's own survey holds when it makes
-/// its first decision ([`crate::Survey::FIRST_DECIDED`]), so that no photo waits longer for them (41).
+/// its first decision ([`Engine::FIRST_DECIDED`](crate::Engine::FIRST_DECIDED)), so that no photo waits longer for them (41).
 pub const LASER_PHOTOS: usize = FIRST_DECIDED + 1;
 
 /// The look for the paths of laser dots in a mission's first [`LASER_PHOTOS`] photos.

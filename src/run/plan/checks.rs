@@ -162,7 +162,7 @@ pub(crate) fn too_few(total: usize, n: usize, auto: bool) -> Option<String> {
         }
         // A short mission (MBARI's 12 frames): the survey that chooses the windows measures each photo against
         // the photos around it, more than the mission holds.
-        let ahead = crate::method::survey::Survey::LOOK_AHEAD;
+        let ahead = crate::method::survey::LOOK_AHEAD;
         return (total < ahead).then(|| {
             format!(
                 "the survey has {total} photo(s), fewer than the {ahead} --window auto looks ahead over to judge \
