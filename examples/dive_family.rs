@@ -12,9 +12,12 @@
 //! ```
 //! `--count N` dives of each simulator (default 60), `--from K` starts at dive `K` (runs in parts). Each dive's
 //! scores are appended to `DIR/family.tsv` (default `target/dive-family/`) as it finishes; dives already there are
-//! not run again. `--summary` only prints the distribution (median, 90th percentile, worst) of default ÷ peer and
-//! default ÷ `--window 7` per score, per simulator and half, from that file. Needs `/work/peer-venv` (numpy,
-//! OpenCV, SciPy) and `../shared/peers/{simdive,paper_numpy,evaluate_dive}.py`; without them only the crate's
+//! not run again; each photo of the default's output is appended to `DIR/photos.tsv` with its albedo error and
+//! residual pattern beside the true lighting's on the same photo and the flags the run raised on it. `--summary`
+//! only prints, from those files, the distribution (median, 90th percentile, worst) of default ÷ peer and default ÷
+//! `--window 7` per score, per simulator and half, and the monitor as a classifier (precision, recall, good photos
+//! flagged, per flag) by the definition of docs/results.md. Needs the peers' Python (`../peer-venv`, or
+//! `PEER_PYTHON`; numpy, OpenCV, SciPy) and `../shared/peers/{simdive,paper_numpy,evaluate_dive}.py`; without them only the crate's
 //! dives and columns are run.
 
 use std::fmt::Write as _;
@@ -139,8 +142,10 @@ struct Peers {
 }
 
 fn peers() -> Option<Peers> {
-    let python = PathBuf::from("/work/peer-venv/bin/python");
-    let dir = ["../shared/peers", "/work/shared/peers"]
+    let python = std::env::var_os("PEER_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("../peer-venv/bin/python"));
+    let dir = ["../shared/peers"]
         .iter()
         .map(PathBuf::from)
         .find(|p| p.join("simdive.py").exists())?;
@@ -155,6 +160,12 @@ struct Rendered {
     transfer: Transfer,
     albedo: Vec<Raster>,
     signal: Vec<Vec<bool>>,
+    /// Each photo corrected with the true lighting (`F` and `S`), scored as the methods are.
+    oracle: Vec<Raster>,
+    /// The samples each photo is scored on alone (for the monitor): `signal`, and on `simdive.py`'s dives only where
+    /// the raw sample is at least 2 % of the sensor's range (its true lighting is not given; in the corners the
+    /// lights miss the oracle divides noise by almost nothing).
+    lit: Vec<Vec<bool>>,
 }
 
 fn render_ours(d: &Drawn, dir: &Path, size: (usize, usize), frames: usize) -> Rendered {
@@ -196,7 +207,7 @@ fn render_ours(d: &Drawn, dir: &Path, size: (usize, usize), frames: usize) -> Re
     } else {
         (root.join("survey"), root.join("water"))
     };
-    let names = dive
+    let names: Vec<String> = dive
         .truth
         .poses
         .iter()
@@ -207,13 +218,26 @@ fn render_ours(d: &Drawn, dir: &Path, size: (usize, usize), frames: usize) -> Re
                 .into_owned()
         })
         .collect();
+    // The oracle: `(I − S)/F` with the true lighting, of the photos every method was given.
+    let oracle = load_set(&survey, &names, sim.encode)
+        .into_iter()
+        .zip(dive.factor.iter().zip(&dive.backscatter))
+        .map(|(mut p, (f, s))| {
+            for ((v, &f), &s) in p.data.iter_mut().zip(&f.data).zip(&s.data) {
+                *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
+            }
+            p
+        })
+        .collect();
     Rendered {
         survey,
         water,
         names,
         transfer: sim.encode,
+        lit: signal_mask(&dive, sim.encode, d.bits),
         signal: signal_mask(&dive, sim.encode, d.bits),
         albedo: dive.albedo,
+        oracle,
     }
 }
 
@@ -333,6 +357,22 @@ fn render_simdive(
                 .collect()
         })
         .collect();
+    let pngs: Vec<String> = (0..frames).map(|i| format!("s{i:04}.png")).collect();
+    let lit = raw
+        .iter()
+        .zip(&signal)
+        .map(|(r, s): (&Raster, &Vec<bool>)| {
+            let c = r.channels;
+            r.data
+                .chunks_exact(c)
+                .zip(s.chunks_exact(c))
+                .flat_map(|(px, s)| {
+                    let ok = s[0] && px.iter().all(|&v| v >= 0.02);
+                    std::iter::repeat_n(ok, c)
+                })
+                .collect()
+        })
+        .collect();
     Rendered {
         survey,
         water: root.join("water"),
@@ -340,6 +380,8 @@ fn render_simdive(
         transfer,
         albedo,
         signal,
+        lit,
+        oracle: load_set(&root.join("oracle"), &pngs, transfer),
     }
 }
 
@@ -362,8 +404,8 @@ fn evaluate_dive(p: &Peers, dive: &Path, corrected: &Path) -> (f64, f64) {
     }
 }
 
-/// What the default's survey chose: the median of its photos' stretch coverage and the share of photos whose window
-/// is longer than 7.
+/// What the default's survey chose: the median of its photos' stretch coverage, the share of photos whose window
+/// is longer than 7, and how many photos each rule chose (`unsteady`: the survey asked for more, the window 7 won).
 fn survey_summary(r: &Report) -> (f64, f64, String) {
     let mut c: Vec<f64> = r
         .frames
@@ -381,7 +423,7 @@ fn survey_summary(r: &Report) -> (f64, f64, String) {
         if let Some(w) = &f.window_auto {
             let v = serde_json::to_value(w.choice).unwrap_or_default();
             let key = v
-                .get("won")
+                .get("rule")
                 .and_then(|k| k.as_str())
                 .unwrap_or("-")
                 .to_string();
@@ -406,7 +448,7 @@ fn run_one(
     out: &Path,
     size: (usize, usize),
     frames: usize,
-) -> String {
+) -> (String, Vec<String>) {
     let dir = out.join(d.name());
     for col in COLUMNS {
         let _ = std::fs::remove_dir_all(dir.join(col));
@@ -431,6 +473,7 @@ fn run_one(
     let mut scores: Vec<Score> = Vec::new();
     let mut survey = (f64::NAN, f64::NAN, String::new());
     let mut times = Vec::new();
+    let mut photo_lines = Vec::new();
     for col in COLUMNS {
         let t = Instant::now();
         let o = dir.join(col);
@@ -468,6 +511,8 @@ fn run_one(
                 .unwrap_or_else(|e| panic!("{} {col}: {e}", d.name()));
             if col == "default" {
                 survey = survey_summary(&report);
+                let photos = load_set(&o, &r.names, r.transfer);
+                photo_lines = per_photo(d, &r, &photos, &report);
             }
         }
         let photos = load_set(&o, &r.names, r.transfer);
@@ -521,12 +566,51 @@ fn run_one(
             .collect::<Vec<_>>()
             .join(",")
     );
-    line
+    (line, photo_lines)
 }
+
+/// The default's photos one by one, for the monitor as a classifier: each photo's albedo error and residual pattern
+/// beside the true lighting's on the same photo, and the flags the run raised on it.
+fn per_photo(d: &Drawn, r: &Rendered, photos: &[Raster], report: &Report) -> Vec<String> {
+    (0..photos.len())
+        .map(|i| {
+            let one = |p: &Raster| {
+                let (p, a) = (std::slice::from_ref(p), std::slice::from_ref(&r.albedo[i]));
+                let m = Some(std::slice::from_ref(&r.lit[i]));
+                (albedo_error(p, a, m), residual_pattern(p, a, (8, 6), m))
+            };
+            let (da, dp) = one(&photos[i]);
+            let (oa, op) = one(&r.oracle[i]);
+            let flags = report
+                .frames
+                .iter()
+                .find(|f| f.index == i)
+                .map(|f| {
+                    f.health
+                        .flags
+                        .iter()
+                        .map(|n| n.kind.clone())
+                        .collect::<Vec<_>>()
+                        .join(",")
+                })
+                .unwrap_or_default();
+            format!(
+                "{}\t{}\t{}\t{i}\t{da:.4}\t{dp:.4}\t{oa:.4}\t{op:.4}\t{}",
+                d.name(),
+                d.sim,
+                d.half(),
+                if flags.is_empty() { "-" } else { &flags }
+            )
+        })
+        .collect()
+}
+
+const PHOTO_HEADER: &str =
+    "dive\tsim\thalf\tphoto\tdefault_albedo\tdefault_pattern\toracle_albedo\toracle_pattern\tflags";
 
 const HEADER: &str =
     "dive\tsim\thalf\tseed\trig\tcover\tpatchy\taltitude\tswing\toverlap\tcurve\tbits\tformat\
-\tsurvey_cover\tlong_windows\twon\
+\tsurvey_cover\tlong_windows\trules\
 \tdefault_albedo\tdefault_pattern\tdefault_nmae\tdefault_peer_pattern\
 \twindow7_albedo\twindow7_pattern\twindow7_nmae\twindow7_peer_pattern\
 \tnumpy_albedo\tnumpy_pattern\tnumpy_nmae\tnumpy_peer_pattern\trender_s\tcolumn_s";
@@ -615,6 +699,72 @@ fn summary(tsv: &Path) -> String {
     md
 }
 
+/// The monitor as a classifier on the held-out half (and the tuning half), by the definition a user signs: a photo
+/// is wrong where its albedo error is above max(1.5 × the true lighting's on that photo, the true lighting's + 0.03),
+/// or its residual pattern above max(2 × the true lighting's, 0.05); flagged where the run raised any flag on it.
+/// Precision, recall and the share of good photos flagged, overall and per flag, per simulator.
+fn monitor_summary(tsv: &Path) -> String {
+    let text = std::fs::read_to_string(tsv).unwrap_or_default();
+    let rows: Vec<Vec<&str>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split('\t').collect())
+        .collect();
+    let mut md = String::from(
+        "| simulator | half | photos | wrong | flagged | precision | recall | good photos flagged | per flag: flagged (of them wrong) |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for sim in ["ours", "simdive"] {
+        for half in ["tuning", "held-out"] {
+            let here: Vec<&Vec<&str>> = rows
+                .iter()
+                .filter(|r| r.len() >= 9 && r[1] == sim && r[2] == half)
+                .collect();
+            if here.is_empty() {
+                continue;
+            }
+            let num = |r: &Vec<&str>, i: usize| r[i].parse::<f64>().unwrap_or(f64::NAN);
+            let wrong = |r: &Vec<&str>| {
+                let (da, dp, oa, op) = (num(r, 4), num(r, 5), num(r, 6), num(r, 7));
+                da > (1.5 * oa).max(oa + 0.03) || dp > (2.0 * op).max(0.05)
+            };
+            let flagged = |r: &Vec<&str>| r[8] != "-";
+            let n = here.len();
+            let w = here.iter().filter(|r| wrong(r)).count();
+            let f = here.iter().filter(|r| flagged(r)).count();
+            let tp = here.iter().filter(|r| wrong(r) && flagged(r)).count();
+            let good_flagged = here.iter().filter(|r| !wrong(r) && flagged(r)).count();
+            let mut per = std::collections::BTreeMap::<&str, (usize, usize)>::new();
+            for r in &here {
+                for k in r[8].split(',').filter(|k| *k != "-") {
+                    let e = per.entry(k).or_default();
+                    e.0 += 1;
+                    e.1 += usize::from(wrong(r));
+                }
+            }
+            let per = per
+                .iter()
+                .map(|(k, (a, b))| format!("{k} {a} ({b})"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let ratio = |a: usize, b: usize| {
+                if b == 0 {
+                    "-".to_string()
+                } else {
+                    format!("{:.2}", a as f64 / b as f64)
+                }
+            };
+            let _ = writeln!(
+                md,
+                "| {sim} | {half} | {n} | {w} | {f} | {} | {} | {} | {per} |",
+                ratio(tp, f),
+                ratio(tp, w),
+                ratio(good_flagged, n - w)
+            );
+        }
+    }
+    md
+}
+
 fn main() {
     let mut out =
         PathBuf::from(std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| "target".into()))
@@ -655,7 +805,7 @@ fn main() {
     if !only_summary {
         let peers = peers();
         if peers.is_none() {
-            eprintln!("dive_family: peers not found (/work/peer-venv, ../shared/peers): the crate's dives only");
+            eprintln!("dive_family: peers not found (../peer-venv or PEER_PYTHON, ../shared/peers): the crate's dives only");
             sims.retain(|s| *s == "ours");
         }
         let done = std::fs::read_to_string(&tsv).unwrap_or_default();
@@ -673,7 +823,19 @@ fn main() {
                     continue;
                 }
                 let t = Instant::now();
-                let line = run_one(&d, peers.as_ref(), &out, size, frames);
+                let (line, photo_lines) = run_one(&d, peers.as_ref(), &out, size, frames);
+                let photos_tsv = out.join("photos.tsv");
+                let mut p = std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&photos_tsv)
+                    .expect("open photos.tsv");
+                if p.metadata().is_ok_and(|m| m.len() == 0) {
+                    writeln!(p, "{PHOTO_HEADER}").expect("append to photos.tsv");
+                }
+                for l in photo_lines {
+                    writeln!(p, "{l}").expect("append to photos.tsv");
+                }
                 eprintln!(
                     "dive_family: {} {:.0} s: {line}",
                     d.name(),
@@ -687,7 +849,9 @@ fn main() {
             }
         }
     }
-    let md = summary(&tsv);
+    let mut md = summary(&tsv);
+    md.push('\n');
+    md.push_str(&monitor_summary(&out.join("photos.tsv")));
     println!("{md}");
     let _ = std::fs::write(out.join("family.md"), md);
 }

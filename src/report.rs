@@ -515,6 +515,7 @@ mod typed_report_tests {
             samples: 4,
             needed: 3,
             rule: Rule::Sparse,
+            misfit: Some([0.125, 0.0625]),
         }));
         r.window.count(&r.frames, true);
         r.monitor = Summary::of(r.frames.iter().map(|f| &f.health));

@@ -52,6 +52,24 @@ pub const MAX_LAG: usize = 16;
 /// ([`independent`]).
 pub const PERSISTS: f32 = 0.2;
 
+/// The parts of the frame (columns, rows) over which the lights' low-frequency shape is read ([`PhotoSurvey::shape`]).
+pub const SHAPE_GRID: (usize, usize) = (8, 6);
+/// Parts of [`SHAPE_GRID`].
+pub const SHAPE_PARTS: usize = SHAPE_GRID.0 * SHAPE_GRID.1;
+/// The quantile of a part's blocks that stands for its lit seafloor (above what nodules covering up to half of the
+/// part pull down).
+pub const SHAPE_QUANTILE: f64 = 0.9;
+/// Photos on each side of a photo whose shapes are compared with a window's ([`shape_misfit`]).
+pub const STEADY_HALF: usize = 1;
+/// Where the survey asked for more than the window 7 and its median on sparse ground (a slow camera): the longer
+/// window is kept where its [`shape_misfit`] is at most `.0` times the short window's plus `.1` (log units: 1 % of
+/// the light).
+pub const STEADY_SPARSE: (f32, f32) = (1.5, 0.01);
+/// The same on a dense stretch, where both windows are compared without the photos they are fitted to: a short
+/// window's `M` holds their nodules, which the parts' upper quantile does not wholly leave out, and fits them by
+/// holding them, so more is asked before the short window wins.
+pub const STEADY_DENSE: (f32, f32) = (2.0, 0.02);
+
 /// What the survey measured on one photo.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PhotoSurvey {
@@ -61,12 +79,19 @@ pub struct PhotoSurvey {
     /// Correlation of its scene with the scene of the photo `k` after it at the same blocks, `k = 1..=`
     /// [`MAX_LAG`] (NaN past the mission's end).
     pub same_scene: [f32; MAX_LAG],
+    /// The lights' low-frequency shape and level in the photo: per part of [`SHAPE_GRID`] (row by row), the log of
+    /// the [`SHAPE_QUANTILE`] of its blocks' grey level above `S`; NaN where the part is masked or unlit (below 5 %
+    /// of the photo's brightest parts).
+    #[serde(skip)]
+    pub shape: [f32; SHAPE_PARTS],
 }
 
 /// The streaming pass over a mission's block images (bounded memory: `2·`[`REFERENCE_HALF`]` + 1` grey block
 /// images). Push each photo's block medians (linear light) in mission order, then [`Surveyor::finish`].
 pub struct Surveyor {
     s_low: Option<Raster>,
+    /// The grey level of `S` per block (mean over channels), for the blocks the dark share judges.
+    s_grey: Option<Vec<f32>>,
     /// Grey `M − S`-like levels of the last photos, with their first photo's number.
     greys: VecDeque<Vec<f32>>,
     /// The levels of `greys`, per block, for their reference ([`REFERENCE_QUANTILE`]).
@@ -104,6 +129,7 @@ impl Surveyor {
     pub fn new(s_low: Option<&Raster>) -> Self {
         Surveyor {
             s_low: s_low.cloned(),
+            s_grey: s_low.map(|s| grey_above(s, None)),
             greys: VecDeque::new(),
             held: None,
             size: (0, 0),
@@ -168,17 +194,21 @@ impl Surveyor {
     /// The photos waiting: each one's dark share and scene against its reference (on all workers), then in mission
     /// order its scene's correlation with the scenes of the photos before it.
     fn measure_pending(&mut self) {
-        let size = self.size;
-        let measured: Vec<(f32, Vec<f32>)> = self
+        let (size, s_grey) = (self.size, self.s_grey.as_deref());
+        let measured: Vec<(f32, Vec<f32>, [f32; SHAPE_PARTS])> = self
             .pending
             .par_iter()
             .map(|(own, reference)| {
                 let ratio = lit_ratios(own, reference);
-                (dark_share(&ratio), scene(&ratio, size))
+                (
+                    dark_share(&judged_ratios(&ratio, own, reference, s_grey, size), size),
+                    scene(&ratio, size),
+                    shape(own, size),
+                )
             })
             .collect();
         self.pending.clear();
-        for (coverage, scene) in measured {
+        for (coverage, scene, shape) in measured {
             let j = self.done.len();
             // This photo's scene against the photos before it: their correlation at lag k.
             let earlier: Vec<&Vec<f32>> = self.scenes.iter().rev().collect();
@@ -193,6 +223,7 @@ impl Surveyor {
             self.done.push(PhotoSurvey {
                 coverage,
                 same_scene: [f32::NAN; MAX_LAG],
+                shape,
             });
         }
     }
@@ -237,7 +268,14 @@ pub fn means_stand_for_medians(means: &Raster, medians: &Raster, s: Option<&Rast
     let (w, h) = (medians.width, medians.height);
     let (a, b) = (grey_above(means, s), grey_above(medians, s));
     let reference = box_average_finite(&b, (w, h), (w.max(h) / 8).max(2), f32::NAN);
-    let share = |g: &[f32]| dark_share(&lit_ratios(g, &reference));
+    // One level for the frame: both are measured against the same smooth reference.
+    let share = |g: &[f32]| {
+        let mut judged: Vec<f32> = lit_ratios(g, &reference)
+            .into_iter()
+            .filter(|v| v.is_finite())
+            .collect();
+        dark_count(&mut judged) as f32 / judged.len().max(1) as f32
+    };
     (share(&a) - share(&b)).abs() <= MEANS_AGREE
 }
 
@@ -262,22 +300,164 @@ fn lit_ratios(own: &[f32], reference: &[f32]) -> Vec<f32> {
         .collect()
 }
 
-/// The dark share of a photo's blocks, from their [`lit_ratios`] against the reference (NaN: not judged).
-fn dark_share(ratio: &[f32]) -> f32 {
-    let mut judged: Vec<f32> = ratio.iter().copied().filter(|v| v.is_finite()).collect();
-    if judged.is_empty() {
+/// Share of the photo's own light, smoothed over an eighth of the frame, below which its blocks are not judged dark
+/// or not: where the vehicle comes low the cones narrow, and blocks its neighbours lit fall dark in the photo itself.
+pub const OWN_LIT: f32 = 0.25;
+
+/// The [`lit_ratios`] `ratio` of the blocks the dark share judges (NaN elsewhere): the photo's own grey levels `own`
+/// (`w`×`h`), smoothed over an eighth of the frame, at least [`OWN_LIT`] of their 95th percentile; and the reference
+/// at least the backscatter `s` subtracted there — where `S` is most of the light, the water column's `S` (taken
+/// over the whole descent) can exceed what reaches the floor from low down, and the seafloor left above it reads
+/// dark where it is not.
+fn judged_ratios(
+    ratio: &[f32],
+    own: &[f32],
+    reference: &[f32],
+    s: Option<&[f32]>,
+    (w, h): (usize, usize),
+) -> Vec<f32> {
+    if ratio.len() != w * h || own.len() != w * h {
+        return ratio.to_vec();
+    }
+    let smooth = box_average_finite(own, (w, h), (w.max(h) / 8).max(2), f32::NAN);
+    let mut finite: Vec<f32> = smooth.iter().copied().filter(|v| v.is_finite()).collect();
+    let top = quantile(&mut finite, 0.95);
+    let s = s.filter(|s| s.len() == ratio.len());
+    (0..ratio.len())
+        .map(|b| {
+            let lit = smooth[b] >= OWN_LIT * top && s.is_none_or(|s| reference[b] >= s[b]);
+            if lit {
+                ratio[b]
+            } else {
+                f32::NAN
+            }
+        })
+        .collect()
+}
+
+/// The dark share of a photo's blocks (`w`×`h`), from their [`lit_ratios`] against the reference (NaN: not judged),
+/// each block against the seafloor's level around it: the ratios' box average over an eighth of the frame, then the
+/// box average of the blocks that first guess did not find dark. The neighbours' reference is taken at other
+/// altitudes where the vehicle swings, and the lights' cones move and widen with the altitude: against one level for
+/// the whole frame, the cones' edges read as dark.
+fn dark_share(ratio: &[f32], (w, h): (usize, usize)) -> f32 {
+    if ratio.len() != w * h || ratio.is_empty() {
         return 0.0;
     }
+    let r = (w.max(h) / 8).max(2);
+    let first = box_average_finite(ratio, (w, h), r, f32::NAN);
+    let bright: Vec<f32> = ratio
+        .iter()
+        .zip(&first)
+        .map(|(&q, &l)| if q >= DARK_RATIO * l { q } else { f32::NAN })
+        .collect();
+    let level = box_average_finite(&bright, (w, h), r, f32::NAN);
+    let (mut dark, mut judged) = (0usize, 0usize);
+    for ((&q, &l), &l0) in ratio.iter().zip(&level).zip(&first) {
+        if q.is_finite() {
+            judged += 1;
+            let l = if l.is_finite() { l } else { l0 };
+            dark += usize::from(q < DARK_RATIO * l);
+        }
+    }
+    if judged == 0 {
+        0.0
+    } else {
+        dark as f32 / judged as f32
+    }
+}
+
+/// The blocks of `judged` (their ratios) darker than [`DARK_RATIO`] of their seafloor level: a first guess at the
+/// median, then twice the `(1 + c)/2` quantile of the share `c` found dark.
+fn dark_count(judged: &mut [f32]) -> usize {
     let n = judged.len();
-    // The seafloor's level: a first guess at the median, then at the median of the blocks not dark.
-    let mut level = quantile(&mut judged, 0.5);
+    if n == 0 {
+        return 0;
+    }
+    let mut level = quantile(judged, 0.5);
     for _ in 0..2 {
         let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
         let c = dark_n as f64 / n as f64;
-        level = quantile(&mut judged, ((1.0 + c) / 2.0).min(0.95));
+        level = quantile(judged, ((1.0 + c) / 2.0).min(0.95));
     }
-    let dark_n = judged.iter().filter(|&&r| r < DARK_RATIO * level).count();
-    dark_n as f32 / n as f32
+    judged.iter().filter(|&&r| r < DARK_RATIO * level).count()
+}
+
+/// The lights' shape in a photo from its blocks' grey levels above `S` (`w`×`h`): [`PhotoSurvey::shape`].
+fn shape(grey: &[f32], (w, h): (usize, usize)) -> [f32; SHAPE_PARTS] {
+    let (gx, gy) = SHAPE_GRID;
+    let mut parts: Vec<Vec<f32>> = vec![Vec::new(); SHAPE_PARTS];
+    let mut blocks = [0usize; SHAPE_PARTS];
+    for (b, &v) in grey.iter().enumerate().take(w * h) {
+        let k = ((b / w) * gy / h) * gx + (b % w) * gx / w;
+        blocks[k] += 1;
+        if v.is_finite() {
+            parts[k].push(v);
+        }
+    }
+    let mut level = [f32::NAN; SHAPE_PARTS];
+    for (k, part) in parts.iter_mut().enumerate() {
+        if !part.is_empty() && 2 * part.len() >= blocks[k] {
+            level[k] = quantile(part, SHAPE_QUANTILE);
+        }
+    }
+    let mut lit: Vec<f32> = level.iter().copied().filter(|v| v.is_finite()).collect();
+    let top = quantile(&mut lit, 0.95);
+    level.map(|l| {
+        if l.is_finite() && top > 0.0 && l > 0.05 * top {
+            l.ln()
+        } else {
+            f32::NAN
+        }
+    })
+}
+
+/// How far the lights' shape in the photos around `i` (`i − `[`STEADY_HALF`]` ..= i + `[`STEADY_HALF`]) is from the
+/// shape the rest of the window `range` gives them at its quantile `q`: per part of [`SHAPE_GRID`], the `q` quantile
+/// of the shapes of the window's other photos (the window's `M`, at this scale, without the photos it is compared
+/// with: a short window would otherwise fit them by holding them) against the median of the photos' own, less the
+/// median over the parts (the level: the per-photo gain takes it), as the mean absolute difference (log units). NaN
+/// where fewer than 2 other photos or 4 lit parts are left.
+pub fn shape_misfit(
+    photos: &[PhotoSurvey],
+    i: usize,
+    range: std::ops::Range<usize>,
+    q: f64,
+    leave_out: bool,
+) -> f32 {
+    let near = i.saturating_sub(STEADY_HALF)..(i + STEADY_HALF + 1).min(photos.len());
+    let others: Vec<&PhotoSurvey> = range
+        .filter(|j| !leave_out || !near.contains(j))
+        .map(|j| &photos[j])
+        .collect();
+    if others.len() < 2 {
+        return f32::NAN;
+    }
+    let mut r: Vec<f32> = (0..SHAPE_PARTS)
+        .filter_map(|k| {
+            let mut m: Vec<f32> = others
+                .iter()
+                .map(|p| p.shape[k])
+                .filter(|v| v.is_finite())
+                .collect();
+            if 2 * m.len() < others.len() {
+                return None;
+            }
+            let m = quantile(&mut m, q);
+            let mut d: Vec<f32> = photos[near.clone()]
+                .iter()
+                .map(|p| p.shape[k] - m)
+                .filter(|v| v.is_finite())
+                .collect();
+            let d = quantile(&mut d, 0.5);
+            d.is_finite().then_some(d)
+        })
+        .collect();
+    if r.len() < 4 {
+        return f32::NAN;
+    }
+    let level = quantile(&mut r.clone(), 0.5);
+    r.iter_mut().map(|v| (*v - level).abs()).sum::<f32>() / r.len() as f32
 }
 
 /// A photo's scene at block resolution, from its [`lit_ratios`] `own / reference`: their log less its box average
@@ -349,6 +529,10 @@ pub enum Rule {
     /// As [`Rule::Quantile`], but the whole mission, shorter than [`MAX_AUTO_WINDOW`], did not hold the samples
     /// asked: the window is as long as the mission allows.
     Short,
+    /// The survey asked for a longer window or a higher quantile, but the lights' shape changed along it (a swing
+    /// of the altitude, a turn): the window [`BASE_WINDOW`] fitted the photos' own shape better
+    /// ([`shape_misfit`]), and it is taken with its median, as [`Rule::Sparse`].
+    Unsteady,
 }
 
 /// What `--window auto` chose for one photo.
@@ -373,6 +557,10 @@ pub struct Choice {
     pub needed: usize,
     /// Why.
     pub rule: Rule,
+    /// Where the survey asked for more than the window [`BASE_WINDOW`] and its median: the [`shape_misfit`] of what
+    /// it asked and of the short window, which decided between them (`None`: not checked).
+    #[serde(default)]
+    pub misfit: Option<[f32; 2]>,
 }
 
 impl Choice {
@@ -384,6 +572,14 @@ impl Choice {
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the window {BASE_WINDOW} and its median",
                 self.photos_per_sample
             ),
+            Rule::Unsteady => {
+                let [long, short] = self.misfit.unwrap_or([f32::NAN; 2]);
+                format!(
+                    "{c:.0} % dark, {:.1} photo(s) per independent sample, but the lights' shape changed along the \
+                     longer window (misfit {long:.3} against {short:.3}): the window {BASE_WINDOW} and its median",
+                    self.photos_per_sample
+                )
+            }
             Rule::Quantile | Rule::Capped | Rule::Short => format!(
                 "{c:.0} % dark, {:.1} photo(s) per independent sample: the {:.2} quantile of {} photos{}",
                 self.photos_per_sample,
@@ -434,6 +630,51 @@ pub fn photos_read(i: usize) -> usize {
 /// asks of the `(1 + c)/2` quantile, and grows from [`BASE_WINDOW`] photos until it holds them ([`independent`]),
 /// never past [`longest_window`] of the mission.
 pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
+    let asked = survey_choice(photos, i);
+    if asked.rule == Rule::Sparse {
+        return asked;
+    }
+    // Do no harm: what the survey asked against the window 7 and its median, on how well each fits the lights'
+    // shape in the photos around this one.
+    let total = photos.len();
+    let short = BASE_WINDOW.min(longest_window(total));
+    let dense = asked.coverage >= ACT_COVERAGE;
+    let long = shape_misfit(
+        photos,
+        i,
+        window_range(i, asked.window, total),
+        asked.quantile as f64,
+        dense,
+    );
+    let plain = shape_misfit(photos, i, window_range(i, short, total), 0.5, dense);
+    if !(long.is_finite() && plain.is_finite()) {
+        return asked;
+    }
+    let misfit = Some([long, plain]);
+    let (ratio, slack) = if dense { STEADY_DENSE } else { STEADY_SPARSE };
+    if long <= ratio * plain + slack {
+        return Choice { misfit, ..asked };
+    }
+    let range = window_range(i, short, total);
+    let (near, _) = grow(photos, NEAR_MIN.min(short), short, NEAR_MIN, |k| {
+        near_range(i, k, &range)
+    });
+    let found = independent(photos, range.clone());
+    Choice {
+        window: short,
+        quantile: 0.5,
+        near: (near < short).then_some(near),
+        coverage: asked.coverage,
+        photos_per_sample: range.len() as f32 / found.max(1) as f32,
+        samples: found,
+        needed: found,
+        rule: Rule::Unsteady,
+        misfit,
+    }
+}
+
+/// What the survey asks for photo `i` before [`choose_one`] checks it against the short window.
+fn survey_choice(photos: &[PhotoSurvey], i: usize) -> Choice {
     let total = photos.len();
     let stretch = &photos[i.saturating_sub(STRETCH_HALF)..(i + STRETCH_HALF + 1).min(total)];
     let mut c: Vec<f32> = stretch.iter().map(|p| p.coverage).collect();
@@ -476,6 +717,7 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         samples: found,
         needed: need,
         rule,
+        misfit: None,
     }
 }
 
@@ -558,6 +800,199 @@ mod tests {
         s.finish()
     }
 
+    /// Altitude of photo `t` of `n`: 4 m, swinging by `swing` metres 1.3 cycles over the mission.
+    fn swing_altitude(t: usize, n: usize, swing: f32) -> f32 {
+        4.0 + swing * (std::f32::consts::TAU * 1.3 * t as f32 / n as f32).sin()
+    }
+
+    /// The block images (grey, linear, 40×30) of a mission of `n` photos under a side light that moves and widens
+    /// with the altitude and dims with its square, the camera moving `step` blocks a photo over sediment of level 1
+    /// with a little texture and dark nodules (0.15) covering a share `cover` in patches of 2×2 blocks; and the
+    /// water column's backscatter (more than reaches the floor from low down).
+    fn swinging(n: usize, swing: f32, step: usize, cover: f64) -> (Vec<Raster>, Raster) {
+        let (w, h) = (40usize, 30usize);
+        let hash = |a: u64, b: u64, k: u64| {
+            let v =
+                (a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F) ^ k)
+                    .wrapping_mul(0x1656_67B1_9E37_79F9);
+            (v >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let albedo = |x: usize, y: usize, t: usize| {
+            let gx = x + t * step;
+            let texture = 1.0 + 0.1 * (hash(gx as u64, y as u64, 1) as f32 - 0.5);
+            let dark = hash((gx / 2) as u64, (y / 2) as u64, 2) < cover;
+            texture * if dark { 0.15 } else { 1.0 }
+        };
+        let s_water = |x: usize| 0.15 * (1.0 - x as f32 / w as f32);
+        let lows = (0..n)
+            .map(|t| {
+                let a = swing_altitude(t, n, swing);
+                let (cx, sigma) = (0.65 * w as f32 + 3.0 * (a - 4.0), 0.3 * w as f32 * a / 4.0);
+                Raster::from_fn(w, h, 1, |x, y, _| {
+                    let d = ((x as f32 - cx) / sigma).powi(2)
+                        + ((y as f32 - 0.5 * h as f32) / (1.2 * sigma)).powi(2);
+                    let light = (4.0 / a).powi(2) * 0.8 * (-d).exp();
+                    light * albedo(x, y, t) + s_water(x) * (a / 6.0).min(1.0)
+                })
+            })
+            .collect();
+        (lows, Raster::from_fn(w, h, 1, |x, _, _| s_water(x)))
+    }
+
+    fn survey_against(lows: &[Raster], s: &Raster) -> Vec<PhotoSurvey> {
+        let mut surveyor = Surveyor::new(Some(s));
+        lows.iter().for_each(|l| surveyor.push(l));
+        surveyor.finish()
+    }
+
+    /// Bare sediment under a swinging sledge (4 ± 0.8 and ± 1.6 m): the survey reads at most 10 % dark on every
+    /// photo. Against one level for the whole frame, the lights' shape at the top of a swing, other than the
+    /// neighbours' reference, read as dark: more than a tenth of the photo at 1.6 m.
+    #[test]
+    fn bare_sediment_with_swings_reads_no_cover() {
+        for swing in [0.0, 0.8, 1.6] {
+            let (lows, s) = swinging(60, swing, 5, 0.0);
+            let most = survey_against(&lows, &s)
+                .iter()
+                .map(|p| p.coverage)
+                .fold(0.0f32, f32::max);
+            assert!(most <= 0.10, "swing {swing} m: the survey read {most} dark");
+        }
+        // The same photos judged with one level for the frame (the rule before).
+        let (lows, s) = swinging(60, 1.6, 5, 0.0);
+        let greys: Vec<Vec<f32>> = lows.iter().map(|l| grey_above(l, Some(&s))).collect();
+        let whole = (0..60usize)
+            .map(|j| {
+                let around =
+                    &greys[j.saturating_sub(10).min(39)..(j.saturating_sub(10).min(39) + 21)];
+                let reference: Vec<f32> = (0..greys[j].len())
+                    .map(|b| {
+                        let mut v: Vec<f32> = around.iter().map(|g| g[b]).collect();
+                        quantile(&mut v, REFERENCE_QUANTILE)
+                    })
+                    .collect();
+                let mut judged: Vec<f32> = lit_ratios(&greys[j], &reference)
+                    .into_iter()
+                    .filter(|v| v.is_finite())
+                    .collect();
+                dark_count(&mut judged) as f32 / judged.len() as f32
+            })
+            .fold(0.0f32, f32::max);
+        assert!(whole > 0.10, "one level for the frame read {whole}");
+        // Nodules are still read: a 40 % field, level or swinging.
+        for swing in [0.0, 1.6] {
+            let (lows, s) = swinging(60, swing, 3, 0.4);
+            let mut c: Vec<f32> = survey_against(&lows, &s)
+                .iter()
+                .map(|p| p.coverage)
+                .collect();
+            let median = quantile(&mut c, 0.5);
+            assert!(median > 0.25 && median < 0.55, "swing {swing}: {median}");
+        }
+    }
+
+    /// A dense nodule field (40 %) flown level: the survey's longer window and quantile are kept, with the misfits
+    /// that decided it. Flown with a swing of 1.6 m, the lights' shape changes along that window: photos where the
+    /// window 7 fits their shape better take it and its median (rule `unsteady`), and say so.
+    #[test]
+    fn the_survey_s_window_falls_back_to_the_short_one_where_the_lighting_changes_along_it() {
+        let (lows, s) = swinging(60, 0.0, 3, 0.4);
+        let level = choose(&survey_against(&lows, &s));
+        let longer = level.iter().filter(|c| c.window > BASE_WINDOW).count();
+        assert!(
+            longer >= 40,
+            "a dense field asks for longer windows: {longer}"
+        );
+        assert!(
+            level.iter().all(|c| c.rule != Rule::Unsteady),
+            "level: {:?}",
+            level.iter().find(|c| c.rule == Rule::Unsteady)
+        );
+        assert!(level
+            .iter()
+            .filter(|c| c.rule != Rule::Sparse)
+            .all(|c| c.misfit.is_some()));
+        let (lows, s) = swinging(60, 1.6, 3, 0.4);
+        let swung = choose(&survey_against(&lows, &s));
+        let mut short = 0;
+        for c in &swung {
+            if c.rule == Rule::Unsteady {
+                short += 1;
+                assert_eq!((c.window, c.quantile), (BASE_WINDOW, 0.5), "{c:?}");
+                let [long, plain] = c.misfit.expect("the misfits that decided");
+                assert!(long > STEADY_DENSE.0 * plain + STEADY_DENSE.1, "{c:?}");
+                assert!(c.why().contains("changed"), "{}", c.why());
+            }
+        }
+        assert!(
+            short >= 10,
+            "swinging: {short} of 60 photos took the short window"
+        );
+    }
+
+    /// [`shape_misfit`] against a brute-force reading of its definition, with and without the photos it is compared
+    /// with left out of the window, on shapes with unlit (NaN) parts.
+    #[test]
+    fn the_shape_misfit_is_its_definition() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let photos: Vec<PhotoSurvey> = (0..20)
+            .map(|_| {
+                let mut shape = [0.0; SHAPE_PARTS];
+                for v in shape.iter_mut() {
+                    *v = if next() < 0.1 { f32::NAN } else { next() - 0.5 };
+                }
+                PhotoSurvey {
+                    coverage: 0.0,
+                    same_scene: [0.0; MAX_LAG],
+                    shape,
+                }
+            })
+            .collect();
+        let sorted_at = |mut v: Vec<f32>, q: f64| {
+            v.sort_by(f32::total_cmp);
+            v[((v.len() - 1) as f64 * q).round() as usize]
+        };
+        for (i, range, q, leave_out) in [
+            (9, 3..16, 0.7, true),
+            (9, 6..13, 0.5, false),
+            (0, 0..7, 0.5, true),
+        ] {
+            let near: Vec<usize> = (i.max(STEADY_HALF) - STEADY_HALF..=i + STEADY_HALF).collect();
+            let others: Vec<usize> = range
+                .clone()
+                .filter(|j| !leave_out || !near.contains(j))
+                .collect();
+            let mut r = Vec::new();
+            for k in 0..SHAPE_PARTS {
+                let m: Vec<f32> = others
+                    .iter()
+                    .map(|&j| photos[j].shape[k])
+                    .filter(|v| v.is_finite())
+                    .collect();
+                if 2 * m.len() < others.len() {
+                    continue;
+                }
+                let m = sorted_at(m, q);
+                let d: Vec<f32> = near
+                    .iter()
+                    .map(|&j| photos[j].shape[k] - m)
+                    .filter(|v| v.is_finite())
+                    .collect();
+                if !d.is_empty() {
+                    r.push(sorted_at(d, 0.5));
+                }
+            }
+            let level = sorted_at(r.clone(), 0.5);
+            let want = r.iter().map(|v| (v - level).abs()).sum::<f32>() / r.len() as f32;
+            let got = shape_misfit(&photos, i, range.clone(), q, leave_out);
+            assert!((got - want).abs() < 1e-6, "{i} {range:?}: {got} vs {want}");
+        }
+    }
+
     /// The streaming survey (a running reference, photos measured in batches on all workers) gives bit for bit what
     /// each photo gives measured on its own: its reference the 0.8 quantile of the finite levels of the 21 photos
     /// around it (the mission's first or last 21 at its ends; all of a shorter mission) selected afresh, its scene correlated with
@@ -592,7 +1027,13 @@ mod tests {
                         })
                         .collect();
                     let ratio = lit_ratios(&greys[j], &reference);
-                    (dark_share(&ratio), scene(&ratio, size))
+                    (
+                        dark_share(
+                            &judged_ratios(&ratio, &greys[j], &reference, None, size),
+                            size,
+                        ),
+                        scene(&ratio, size),
+                    )
                 })
                 .collect();
             assert_eq!(got.len(), frames);
@@ -601,6 +1042,15 @@ mod tests {
                     got[j].coverage.to_bits(),
                     scenes[j].0.to_bits(),
                     "{frames} photos: photo {j}"
+                );
+                let want = shape(&greys[j], size);
+                assert!(
+                    got[j]
+                        .shape
+                        .iter()
+                        .zip(&want)
+                        .all(|(g, w)| g.to_bits() == w.to_bits()),
+                    "{frames} photos: photo {j}'s shape"
                 );
                 for k in 0..MAX_LAG {
                     let want = scenes
@@ -719,6 +1169,7 @@ mod tests {
                 PhotoSurvey {
                     coverage: 0.01,
                     same_scene,
+                    shape: [0.0; SHAPE_PARTS],
                 };
                 60
             ]
@@ -747,6 +1198,7 @@ mod tests {
             PhotoSurvey {
                 coverage: 0.0,
                 same_scene: [0.0; MAX_LAG],
+                shape: [0.0; SHAPE_PARTS],
             };
             10
         ];

@@ -378,9 +378,19 @@ fn stretches_line(choices: &[Choice]) -> String {
     let (w0, w1) = span(&|c| c.window as f64);
     let (c0, c1) = span(&|c| c.coverage as f64);
     let (p0, p1) = span(&|c| c.photos_per_sample as f64);
-    let acted = choices.iter().filter(|c| c.rule != Rule::Sparse).count();
+    let acted = choices
+        .iter()
+        .filter(|c| !matches!(c.rule, Rule::Sparse | Rule::Unsteady))
+        .count();
+    let unsteady = choices.iter().filter(|c| c.rule == Rule::Unsteady).count();
+    let kept = match unsteady {
+        0 => String::new(),
+        n => format!(
+            "; {n} photo(s) keep the window 7 and its median, as the lights' shape changed along the longer window"
+        ),
+    };
     format!(
-        "--window auto: {acted} of {} photos on stretches that need more than the window 7 and its median; \
+        "--window auto: {acted} of {} photos on stretches that need more than the window 7 and its median{kept}; \
          windows {w0}..{w1} photos, dark share {:.0}..{:.0} %, {p0:.1}..{p1:.1} photo(s) per independent sample",
         choices.len(),
         100.0 * c0,

@@ -12,6 +12,7 @@ mod cli;
 mod cluster_runs;
 mod correct_e2e;
 mod defaults;
+mod do_no_harm;
 mod engine;
 mod exposure;
 mod faults;
