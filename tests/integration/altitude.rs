@@ -10,7 +10,7 @@ use abysslight::eval::evaluate::{albedo_error, residual_pattern};
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::{Dive, Simulation};
 use abysslight::io::{decode, find_photos};
-use abysslight::{correct_mission, Engine, Options, Photo, Scatter, Shard, Silent, Use};
+use abysslight::{correct_mission, Engine, Options, Photo, Shard, Silent, Use};
 
 /// Dive `name` of the matrix at `size`, written under `root` (`water/`, `survey/`, `navigation.csv`).
 fn dive(name: &str, size: (usize, usize), root: &Path) -> (Simulation, Dive) {
@@ -151,12 +151,7 @@ fn the_engine_and_shards_take_the_commands_windows_by_altitude() {
     );
 
     // The engine, each photo pushed with its altitude.
-    let water: Vec<Photo> = decoded_photos(&root.join("water"))
-        .into_iter()
-        .map(|(_, p)| p)
-        .collect();
-    let scatter = Scatter::from_frames(&water).unwrap();
-    let mut engine = Engine::new(opts.params().unwrap(), scatter.as_ref(), None).unwrap();
+    let mut engine = engine_over(&root.join("water"), opts.params().unwrap());
     let mut out = Vec::new();
     for ((name, photo), pose) in decoded_photos(&root.join("survey"))
         .into_iter()

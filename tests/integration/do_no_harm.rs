@@ -7,7 +7,7 @@ use std::path::Path;
 
 use crate::common::*;
 
-use abysslight::{correct_mission, Engine, Options, Photo, Scatter, Silent, Transfer};
+use abysslight::{correct_mission, Options, Silent, Transfer};
 
 /// 40 photos of 160×120 (16-bit linear RGB) and 6 water-column frames: sediment of level 1 with a little texture and
 /// dark nodules (0.15) covering 40 % in patches of 8×8 pixels, the camera moving 12 pixels a photo, under a side
@@ -108,12 +108,7 @@ fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_s
     );
 
     // The in-memory engine (what Python and --watch run) makes the same choices and writes the same pixels.
-    let water: Vec<Photo> = decoded_photos(&root.join("water"))
-        .into_iter()
-        .map(|(_, p)| p)
-        .collect();
-    let scatter = Scatter::from_frames(&water).unwrap();
-    let mut engine = Engine::new(opts.params().unwrap(), scatter.as_ref(), None).unwrap();
+    let mut engine = engine_over(&root.join("water"), opts.params().unwrap());
     let mut got = Vec::new();
     for (name, photo) in decoded_photos(&root.join("survey")) {
         got.extend(engine.push((photo, name)).unwrap());

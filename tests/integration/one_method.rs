@@ -10,7 +10,7 @@ use std::process::{Command, Stdio};
 use abysslight::eval::matrix;
 use abysslight::eval::simulate::Simulation;
 use abysslight::io::{decode, find_photos};
-use abysslight::{correct_mission, Engine, Options, Params, Photo, Scatter, Silent};
+use abysslight::{correct_mission, Options, Params, Silent};
 
 /// A nodule field of the matrix at 160×120 (40 photos), written under `root` (`water/`, `survey/`).
 fn field(name: &str, root: &Path) -> Simulation {
@@ -56,12 +56,7 @@ fn the_engine_writes_the_batch_commands_pixels_on_nodule_fields() {
             Params::default(),
             "the command's defaults are the engine's"
         );
-        let water: Vec<Photo> = decoded_photos(&root.join("water"))
-            .into_iter()
-            .map(|(_, p)| p)
-            .collect();
-        let scatter = Scatter::from_frames(&water).unwrap();
-        let mut engine = Engine::new(params, scatter.as_ref(), None).unwrap();
+        let mut engine = engine_over(&root.join("water"), params);
         let mut out = Vec::new();
         for (name, photo) in decoded_photos(&root.join("survey")) {
             out.extend(engine.push((photo, name)).unwrap());

@@ -330,3 +330,10 @@ pub fn decoded_photos(dir: &Path) -> Vec<(PathBuf, Photo)> {
         .map(|e| (e.relative.clone(), abysslight::io::decode(&e.path).unwrap()))
         .collect()
 }
+
+/// The in-memory engine at `params`, its `S` from the water-column photos in `water` (as the command makes it).
+pub fn engine_over(water: &Path, params: abysslight::Params) -> abysslight::Engine<PathBuf> {
+    let frames: Vec<Photo> = decoded_photos(water).into_iter().map(|(_, p)| p).collect();
+    let scatter = abysslight::Scatter::from_frames(&frames).unwrap();
+    abysslight::Engine::new(params, scatter.as_ref(), None).unwrap()
+}
