@@ -67,6 +67,112 @@ pub(crate) fn fields(
         .then_some(b)
 }
 
+/// Where the lights fade out, the blend's fields faded to the fill. A block whose own median is at or below `S` in
+/// every channel (`own`, `s`: the photo's block medians and the `S` in effect) shows none of the seafloor: its level
+/// and weight are the blend's fill (the level the channels share, held to the prior). Its neighbour one code above
+/// black shows the seafloor's full level, and the bilinear ramp between their centres is a step in the output: the
+/// border of an unlit corner a staircase of blocks, where the input fades smoothly (and a sample one code above
+/// black, divided by a tiny `F`, a speck). Every block within [`FADE_REACH`] blocks of an unlit one has its level
+/// moved towards the fill of the unlit blocks around it (`(1 − w)·A_low`, their Gaussian-weighted mean over
+/// [`FADE_SIGMA`] blocks) and its weight towards 0, by `1 −` [`fade_weight`] of its share of lit blocks there. Blocks
+/// farther from every unlit block keep their fields (photos without unlit blocks are unchanged bit for bit).
+pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raster>) {
+    let Some(b) = b else { return };
+    let (bw, bh, c) = (b.level.width, b.level.height, b.level.channels);
+    if own.layout() != b.level.layout() {
+        return;
+    }
+    let unlit: Vec<f32> = (0..bw * bh)
+        .map(|i| {
+            let dark = (i * c..(i + 1) * c).all(|j| {
+                let v = own.data[j] - s.map_or(0.0, |s| s.data[j]);
+                v.is_finite() && v <= 0.0
+            });
+            f32::from(u8::from(dark))
+        })
+        .collect();
+    if !unlit.iter().any(|&u| u > 0.0) {
+        return;
+    }
+    // The fill an unlit block shows at a black sample, `(1 − w)·A_low`, as a level of weight 0: the same output
+    // at black, and no sample a code above black amplified by `1/F` into a speck.
+    let fill: Vec<f32> = (0..bw * bh * c)
+        .map(|j| {
+            if unlit[j / c] > 0.0 {
+                (1.0 - b.weight.data[j]) * b.level.data[j]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let near = gaussian_sum(&unlit, bw, bh, 1);
+    let fill = gaussian_sum(&fill, bw, bh, c);
+    for (i, &n) in near.iter().enumerate() {
+        if n <= 0.0 {
+            continue;
+        }
+        let g = fade_weight(1.0 - n);
+        for j in i * c..(i + 1) * c {
+            let l = fill[j] / n;
+            b.level.data[j] = l + (b.level.data[j] - l) * g;
+            b.weight.data[j] *= g;
+        }
+    }
+}
+
+/// Standard deviation, in blocks, of the Gaussian over which [`fade_unlit`] measures a block's share of unlit blocks.
+pub const FADE_SIGMA: f32 = 2.0;
+
+/// Reach, in blocks, of the Gaussian of [`fade_unlit`] (3 [`FADE_SIGMA`]): blocks farther from every unlit block keep
+/// their fields.
+pub const FADE_REACH: usize = 6;
+
+/// The fade of a block whose share of lit blocks around it is `lit`: 0 up to half lit (the unlit side of a straight
+/// border), rising smoothly (a smoothstep, squared so the output's codes rise about evenly on an sRGB curve) to 1
+/// where all are lit.
+pub fn fade_weight(lit: f32) -> f32 {
+    let x = ((lit - 0.5) / 0.5).clamp(0.0, 1.0);
+    let s = x * x * (3.0 - 2.0 * x);
+    s * s
+}
+
+/// Each block's Gaussian-weighted mean of `u` (`c` values a block, `bw`×`bh` blocks) over the blocks within
+/// [`FADE_REACH`] inside the frame (the weights renormalised at the frame's edges); exactly 0 where no `u` within
+/// reach is nonzero.
+fn gaussian_sum(u: &[f32], bw: usize, bh: usize, c: usize) -> Vec<f32> {
+    let r = FADE_REACH as isize;
+    let taps: Vec<f32> = (-r..=r)
+        .map(|d| (-0.5 * (d as f32 / FADE_SIGMA).powi(2)).exp())
+        .collect();
+    // One pass along rows (`horizontal`) or columns.
+    let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+        let mut out = vec![0.0f32; src.len()];
+        for y in 0..bh {
+            for x in 0..bw {
+                let (p, len) = if horizontal { (x, bw) } else { (y, bh) };
+                for ch in 0..c {
+                    let (mut num, mut den) = (0.0f32, 0.0f32);
+                    for (t, &g) in taps.iter().enumerate() {
+                        let q = p as isize + t as isize - r;
+                        if q >= 0 && (q as usize) < len {
+                            let (qx, qy) = if horizontal {
+                                (q as usize, y)
+                            } else {
+                                (x, q as usize)
+                            };
+                            num += g * src[(qy * bw + qx) * c + ch];
+                            den += g;
+                        }
+                    }
+                    out[(y * bw + x) * c + ch] = num / den;
+                }
+            }
+        }
+        out
+    };
+    pass(&pass(u, true), false)
+}
+
 /// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
 /// most 0.1 % of a pixel's detail).
 pub const NEGLIGIBLE_BLEND: f32 = 1e-3;
