@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use crate::method::median::quantile;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::seen::Window;
+use crate::method::steps::lit_level::lit_level;
 use crate::method::transfer::Curve;
 
 /// The noise and texture measured on the photo (with `denoise`), against its `F`.
@@ -68,7 +69,9 @@ pub(crate) fn fields(
 }
 
 /// Where the lights fade out, the blend's fields faded to the fill. A block whose own median is at or below `S` in
-/// every channel (`own`, `s`: the photo's block medians and the `S` in effect) shows none of the seafloor: its level
+/// every channel (`own`, `s`: the photo's block medians and the `S` in effect) where the window's light `f` is
+/// below [`UNLIT_F`] of the photo's lit level (a dark object in the light is not a corner the lights do not
+/// reach) shows none of the seafloor: its level
 /// and weight are the blend's fill (the level the channels share, held to the prior). Its neighbour one code above
 /// black shows the seafloor's full level, and the bilinear ramp between their centres is a step in the output: the
 /// border of an unlit corner a staircase of blocks, where the input fades smoothly (and a sample one code above
@@ -76,17 +79,21 @@ pub(crate) fn fields(
 /// moved towards the fill of the unlit blocks around it (`(1 − w)·A_low`, their Gaussian-weighted mean over
 /// [`FADE_SIGMA`] blocks) and its weight towards 0, by `1 −` [`fade_weight`] of its share of lit blocks there. Blocks
 /// farther from every unlit block keep their fields (photos without unlit blocks are unchanged bit for bit).
-pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raster>) {
+pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raster>, f: &Raster) {
     let Some(b) = b else { return };
     let (bw, bh, c) = (b.level.width, b.level.height, b.level.channels);
     if own.layout() != b.level.layout() {
         return;
     }
+    if own.layout() != f.layout() {
+        return;
+    }
+    let lit = lit_level(f);
     let unlit: Vec<f32> = (0..bw * bh)
         .map(|i| {
             let dark = (i * c..(i + 1) * c).all(|j| {
                 let v = own.data[j] - s.map_or(0.0, |s| s.data[j]);
-                v.is_finite() && v <= 0.0
+                v.is_finite() && v <= 0.0 && f.data[j] < UNLIT_F * lit[j % c]
             });
             f32::from(u8::from(dark))
         })
@@ -119,6 +126,12 @@ pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raste
         }
     }
 }
+
+/// The share of the photo's lit level of `F` (its 95th percentile) below which a block whose own median is black
+/// is unlit ([`fade_unlit`]): ten times the default relative floor. AQUALOC's unlit corners sit at the floor; on the
+/// dive matrix, blocks whose median is at or below `S` in full light (dark ground under an over-estimated `S`) are
+/// left alone.
+pub const UNLIT_F: f32 = 0.01;
 
 /// Standard deviation, in blocks, of the Gaussian over which [`fade_unlit`] measures a block's share of unlit blocks.
 pub const FADE_SIGMA: f32 = 2.0;
