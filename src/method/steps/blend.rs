@@ -119,10 +119,15 @@ pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raste
             continue;
         }
         let g = fade_weight(1.0 - n);
-        for j in i * c..(i + 1) * c {
-            let l = fill[j] / n;
-            b.level.data[j] = l + (b.level.data[j] - l) * g;
-            b.weight.data[j] *= g;
+        let px = i * c..(i + 1) * c;
+        for ((l, w), &fl) in b.level.data[px.clone()]
+            .iter_mut()
+            .zip(&mut b.weight.data[px.clone()])
+            .zip(&fill[px])
+        {
+            let to = fl / n;
+            *l = to + (*l - to) * g;
+            *w *= g;
         }
     }
 }
@@ -1039,6 +1044,77 @@ mod tests {
         }
         // The noisy channel's level moved towards the shared level more on the dense field.
         assert!(moved[1] > 1.5 * moved[0] && moved[0] > 0.01, "{moved:?}");
+    }
+
+    #[test]
+    fn an_unlit_corner_fades_to_its_fill_and_far_blocks_keep_their_fields() {
+        // 30×20 blocks, one channel: the left 8 columns unlit (own median 0 = S, F at the floor), the rest lit.
+        let (bw, bh) = (30, 20);
+        let own = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.0 } else { 0.3 });
+        let f = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.001 } else { 0.8 });
+        let level = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.02 } else { 0.4 });
+        let weight = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.5 } else { 0.9 });
+        let mut b = Blended {
+            level: level.clone(),
+            weight: weight.clone(),
+            noise_var: vec![1e-6],
+            prior_precision: 10.0,
+        };
+        fade_unlit(Some(&mut b), &own, None, &f);
+        let fill = 0.5 * 0.02;
+        for y in 0..bh {
+            // The unlit blocks: the fill (1 − w)·A_low with weight 0.
+            for x in 0..8 {
+                assert!((b.level.get(x, y, 0) - fill).abs() < 1e-6);
+                assert_eq!(b.weight.get(x, y, 0), 0.0);
+            }
+            // The lit ones: monotone from the fill towards their own fields, within reach; unchanged bit for bit
+            // beyond it.
+            let mut last = fill;
+            for x in 8..bw {
+                let (l, w) = (b.level.get(x, y, 0), b.weight.get(x, y, 0));
+                if x > 7 + FADE_REACH {
+                    assert_eq!((l, w), (0.4, 0.9));
+                    continue;
+                }
+                // Independently: the share of lit blocks along the row (a Gaussian renormalised at the edge; every
+                // row alike), and the smoothstep squared.
+                let r = FADE_REACH as i64;
+                let (mut num, mut den) = (0.0f64, 0.0f64);
+                for q in (x as i64 - r).max(0)..=(x as i64 + r).min(bw as i64 - 1) {
+                    let g = (-0.5 * ((q - x as i64) as f64 / FADE_SIGMA as f64).powi(2)).exp();
+                    den += g;
+                    num += if q >= 8 { g } else { 0.0 };
+                }
+                let t = ((num / den - 0.5) / 0.5).clamp(0.0, 1.0);
+                let g = (t * t * (3.0 - 2.0 * t)).powi(2);
+                assert!(
+                    (l as f64 - (fill as f64 + (0.4 - fill as f64) * g)).abs() < 1e-5,
+                    "{x}: {l}"
+                );
+                assert!((w as f64 - 0.9 * g).abs() < 1e-5, "{x}: {w}");
+                assert!(l >= last - 1e-7, "{x}: {l} < {last}");
+                last = l;
+            }
+        }
+        // The block next to the border is nearly the fill: no step.
+        assert!(b.level.get(8, 0, 0) < fill + 0.05 * (0.4 - fill));
+        // A dark block in full light (own median 0, F high) is no unlit corner: nothing changes.
+        let own = Raster::from_fn(
+            bw,
+            bh,
+            1,
+            |x, y, _| if (x, y) == (15, 10) { 0.0 } else { 0.3 },
+        );
+        let f = Raster::filled(bw, bh, 1, 0.8);
+        let mut b = Blended {
+            level: level.clone(),
+            weight: weight.clone(),
+            noise_var: vec![1e-6],
+            prior_precision: 10.0,
+        };
+        fade_unlit(Some(&mut b), &own, None, &f);
+        assert_eq!((b.level, b.weight), (level, weight));
     }
 
     #[test]
