@@ -57,6 +57,7 @@ pub(crate) fn abyss(w: &Window, photo: Option<&Photo>) -> Estimate {
     let noise = blend::noise(w, photo, &f);
     let mut blended = blend::fields(w, noise.as_ref(), &f, s_k.as_ref());
     levels_by_light::even(w, blended.as_mut(), &f);
+    blend::fade_unlit(blended.as_mut(), &w.own.low, s_k.as_ref(), &f);
     Estimate {
         window_m,
         use_blend: blended.is_some() || rescaled,

@@ -35,5 +35,6 @@ mod real_photos;
 mod run_locks;
 mod simulate_evaluate;
 mod threads_identical;
+mod unlit_border;
 mod vehicle_logs;
 mod write_gate;

@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use crate::method::median::quantile;
 use crate::method::raster::{Layout, Photo, Raster, Sample, Samples};
 use crate::method::seen::Window;
+use crate::method::steps::lit_level::lit_level;
 use crate::method::transfer::Curve;
 
 /// The noise and texture measured on the photo (with `denoise`), against its `F`.
@@ -65,6 +66,129 @@ pub(crate) fn fields(
         .iter()
         .any(|&v| v < 1.0 - NEGLIGIBLE_BLEND)
         .then_some(b)
+}
+
+/// Where the lights fade out, the blend's fields faded to the fill. A block whose own median is at or below `S` in
+/// every channel (`own`, `s`: the photo's block medians and the `S` in effect) where the window's light `f` is
+/// below [`UNLIT_F`] of the photo's lit level (a dark object in the light is not a corner the lights do not
+/// reach) shows none of the seafloor: its level
+/// and weight are the blend's fill (the level the channels share, held to the prior). Its neighbour one code above
+/// black shows the seafloor's full level, and the bilinear ramp between their centres is a step in the output: the
+/// border of an unlit corner a staircase of blocks, where the input fades smoothly (and a sample one code above
+/// black, divided by a tiny `F`, a speck). Every block within [`FADE_REACH`] blocks of an unlit one has its level
+/// moved towards the fill of the unlit blocks around it (`(1 − w)·A_low`, their Gaussian-weighted mean over
+/// [`FADE_SIGMA`] blocks) and its weight towards 0, by `1 −` [`fade_weight`] of its share of lit blocks there. Blocks
+/// farther from every unlit block keep their fields (photos without unlit blocks are unchanged bit for bit).
+pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raster>, f: &Raster) {
+    let Some(b) = b else { return };
+    let (bw, bh, c) = (b.level.width, b.level.height, b.level.channels);
+    if own.layout() != b.level.layout() {
+        return;
+    }
+    if own.layout() != f.layout() {
+        return;
+    }
+    let lit = lit_level(f);
+    let unlit: Vec<f32> = (0..bw * bh)
+        .map(|i| {
+            let dark = (i * c..(i + 1) * c).all(|j| {
+                let v = own.data[j] - s.map_or(0.0, |s| s.data[j]);
+                v.is_finite() && v <= 0.0 && f.data[j] < UNLIT_F * lit[j % c]
+            });
+            f32::from(u8::from(dark))
+        })
+        .collect();
+    if !unlit.iter().any(|&u| u > 0.0) {
+        return;
+    }
+    // The fill an unlit block shows at a black sample, `(1 − w)·A_low`, as a level of weight 0: the same output
+    // at black, and no sample a code above black amplified by `1/F` into a speck.
+    let fill: Vec<f32> = (0..bw * bh * c)
+        .map(|j| {
+            if unlit[j / c] > 0.0 {
+                (1.0 - b.weight.data[j]) * b.level.data[j]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let near = gaussian_sum(&unlit, bw, bh, 1);
+    let fill = gaussian_sum(&fill, bw, bh, c);
+    for (i, &n) in near.iter().enumerate() {
+        if n <= 0.0 {
+            continue;
+        }
+        let g = fade_weight(1.0 - n);
+        let px = i * c..(i + 1) * c;
+        for ((l, w), &fl) in b.level.data[px.clone()]
+            .iter_mut()
+            .zip(&mut b.weight.data[px.clone()])
+            .zip(&fill[px])
+        {
+            let to = fl / n;
+            *l = to + (*l - to) * g;
+            *w *= g;
+        }
+    }
+}
+
+/// The share of the photo's lit level of `F` (its 95th percentile) below which a block whose own median is black
+/// is unlit ([`fade_unlit`]): ten times the default relative floor. AQUALOC's unlit corners sit at the floor; on the
+/// dive matrix, blocks whose median is at or below `S` in full light (dark ground under an over-estimated `S`) are
+/// left alone.
+pub const UNLIT_F: f32 = 0.01;
+
+/// Standard deviation, in blocks, of the Gaussian over which [`fade_unlit`] measures a block's share of unlit blocks.
+pub const FADE_SIGMA: f32 = 2.0;
+
+/// Reach, in blocks, of the Gaussian of [`fade_unlit`] (3 [`FADE_SIGMA`]): blocks farther from every unlit block keep
+/// their fields.
+pub const FADE_REACH: usize = 6;
+
+/// The fade of a block whose share of lit blocks around it is `lit`: 0 up to half lit (the unlit side of a straight
+/// border), rising smoothly (a smoothstep, squared so the output's codes rise about evenly on an sRGB curve) to 1
+/// where all are lit.
+pub fn fade_weight(lit: f32) -> f32 {
+    let x = ((lit - 0.5) / 0.5).clamp(0.0, 1.0);
+    let s = x * x * (3.0 - 2.0 * x);
+    s * s
+}
+
+/// Each block's Gaussian-weighted mean of `u` (`c` values a block, `bw`×`bh` blocks) over the blocks within
+/// [`FADE_REACH`] inside the frame (the weights renormalised at the frame's edges); exactly 0 where no `u` within
+/// reach is nonzero.
+fn gaussian_sum(u: &[f32], bw: usize, bh: usize, c: usize) -> Vec<f32> {
+    let r = FADE_REACH as isize;
+    let taps: Vec<f32> = (-r..=r)
+        .map(|d| (-0.5 * (d as f32 / FADE_SIGMA).powi(2)).exp())
+        .collect();
+    // One pass along rows (`horizontal`) or columns.
+    let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+        let mut out = vec![0.0f32; src.len()];
+        for y in 0..bh {
+            for x in 0..bw {
+                let (p, len) = if horizontal { (x, bw) } else { (y, bh) };
+                for ch in 0..c {
+                    let (mut num, mut den) = (0.0f32, 0.0f32);
+                    for (t, &g) in taps.iter().enumerate() {
+                        let q = p as isize + t as isize - r;
+                        if q >= 0 && (q as usize) < len {
+                            let (qx, qy) = if horizontal {
+                                (q as usize, y)
+                            } else {
+                                (x, q as usize)
+                            };
+                            num += g * src[(qy * bw + qx) * c + ch];
+                            den += g;
+                        }
+                    }
+                    out[(y * bw + x) * c + ch] = num / den;
+                }
+            }
+        }
+        out
+    };
+    pass(&pass(u, true), false)
 }
 
 /// Blend weights `w` at or above `1 − NEGLIGIBLE_BLEND` count as no blend (the correction of such a row changes by at
@@ -920,6 +1044,77 @@ mod tests {
         }
         // The noisy channel's level moved towards the shared level more on the dense field.
         assert!(moved[1] > 1.5 * moved[0] && moved[0] > 0.01, "{moved:?}");
+    }
+
+    #[test]
+    fn an_unlit_corner_fades_to_its_fill_and_far_blocks_keep_their_fields() {
+        // 30×20 blocks, one channel: the left 8 columns unlit (own median 0 = S, F at the floor), the rest lit.
+        let (bw, bh) = (30, 20);
+        let own = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.0 } else { 0.3 });
+        let f = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.001 } else { 0.8 });
+        let level = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.02 } else { 0.4 });
+        let weight = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.5 } else { 0.9 });
+        let mut b = Blended {
+            level: level.clone(),
+            weight: weight.clone(),
+            noise_var: vec![1e-6],
+            prior_precision: 10.0,
+        };
+        fade_unlit(Some(&mut b), &own, None, &f);
+        let fill = 0.5 * 0.02;
+        for y in 0..bh {
+            // The unlit blocks: the fill (1 − w)·A_low with weight 0.
+            for x in 0..8 {
+                assert!((b.level.get(x, y, 0) - fill).abs() < 1e-6);
+                assert_eq!(b.weight.get(x, y, 0), 0.0);
+            }
+            // The lit ones: monotone from the fill towards their own fields, within reach; unchanged bit for bit
+            // beyond it.
+            let mut last = fill;
+            for x in 8..bw {
+                let (l, w) = (b.level.get(x, y, 0), b.weight.get(x, y, 0));
+                if x > 7 + FADE_REACH {
+                    assert_eq!((l, w), (0.4, 0.9));
+                    continue;
+                }
+                // Independently: the share of lit blocks along the row (a Gaussian renormalised at the edge; every
+                // row alike), and the smoothstep squared.
+                let r = FADE_REACH as i64;
+                let (mut num, mut den) = (0.0f64, 0.0f64);
+                for q in (x as i64 - r).max(0)..=(x as i64 + r).min(bw as i64 - 1) {
+                    let g = (-0.5 * ((q - x as i64) as f64 / FADE_SIGMA as f64).powi(2)).exp();
+                    den += g;
+                    num += if q >= 8 { g } else { 0.0 };
+                }
+                let t = ((num / den - 0.5) / 0.5).clamp(0.0, 1.0);
+                let g = (t * t * (3.0 - 2.0 * t)).powi(2);
+                assert!(
+                    (l as f64 - (fill as f64 + (0.4 - fill as f64) * g)).abs() < 1e-5,
+                    "{x}: {l}"
+                );
+                assert!((w as f64 - 0.9 * g).abs() < 1e-5, "{x}: {w}");
+                assert!(l >= last - 1e-7, "{x}: {l} < {last}");
+                last = l;
+            }
+        }
+        // The block next to the border is nearly the fill: no step.
+        assert!(b.level.get(8, 0, 0) < fill + 0.05 * (0.4 - fill));
+        // A dark block in full light (own median 0, F high) is no unlit corner: nothing changes.
+        let own = Raster::from_fn(
+            bw,
+            bh,
+            1,
+            |x, y, _| if (x, y) == (15, 10) { 0.0 } else { 0.3 },
+        );
+        let f = Raster::filled(bw, bh, 1, 0.8);
+        let mut b = Blended {
+            level: level.clone(),
+            weight: weight.clone(),
+            noise_var: vec![1e-6],
+            prior_precision: 10.0,
+        };
+        fade_unlit(Some(&mut b), &own, None, &f);
+        assert_eq!((b.level, b.weight), (level, weight));
     }
 
     #[test]
