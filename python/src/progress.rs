@@ -144,7 +144,12 @@ pub fn run_cancellable<T: Send>(
                 }
             });
             match event {
-                Event::Ended(Some(r)) => break r,
+                // A Ctrl-C whose handler had not run when the calling thread last looked (the signal reaches
+                // another thread first) is not lost with the run's end: raised as during the run.
+                Event::Ended(Some(r)) => {
+                    look(py);
+                    break r;
+                }
                 Event::Ended(None) => {
                     break Ok(Err(Error::Usage("the run ended without a result".into())))
                 }
