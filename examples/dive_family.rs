@@ -218,17 +218,7 @@ fn render_ours(d: &Drawn, dir: &Path, size: (usize, usize), frames: usize) -> Re
                 .into_owned()
         })
         .collect();
-    // The oracle: `(I − S)/F` with the true lighting, of the photos every method was given.
-    let oracle = load_set(&survey, &names, sim.encode)
-        .into_iter()
-        .zip(dive.factor.iter().zip(&dive.backscatter))
-        .map(|(mut p, (f, s))| {
-            for ((v, &f), &s) in p.data.iter_mut().zip(&f.data).zip(&s.data) {
-                *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
-            }
-            p
-        })
-        .collect();
+    let oracle = matrix::oracle(&load_set(&survey, &names, sim.encode), &dive);
     Rendered {
         survey,
         water,

@@ -40,8 +40,8 @@ use std::time::Instant;
 
 use abysslight::eval::evaluate::{albedo_error, consistency_parts, residual_pattern};
 use abysslight::eval::matrix::{
-    self, lit_mask, load_set, only_lit, signal_mask, window_floor, DIVES, HELD_OUT, NODULES,
-    NODULES_HELD_OUT,
+    self, lit_mask, load_set, only_lit, oracle, signal_mask, window_floor, DIVES, HELD_OUT,
+    NODULES, NODULES_HELD_OUT,
 };
 use abysslight::eval::simulate::Dive;
 use abysslight::kernels::auto_block;
@@ -91,21 +91,6 @@ fn score(photos: &[Raster], dive: &Dive, signal: &[Vec<bool>], lit: &[Vec<bool>]
         consistency_lit,
         overlap_lit,
     }
-}
-
-/// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`), of the
-/// photos every method was given (`raw`: on a JPEG dive the camera's JPEGs, not the rendering before it).
-fn oracle(raw: &[Raster], dive: &Dive) -> Vec<Raster> {
-    raw.iter()
-        .zip(dive.factor.iter().zip(&dive.backscatter))
-        .map(|(p, (f, s))| {
-            let mut r = p.clone();
-            for ((v, &f), &s) in r.data.iter_mut().zip(&f.data).zip(&s.data) {
-                *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
-            }
-            r
-        })
-        .collect()
 }
 
 /// The survey's true backscatter over the water-column median, per channel (ratio of the means over all pixels).

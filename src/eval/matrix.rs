@@ -321,6 +321,22 @@ pub fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
         .collect()
 }
 
+/// The oracle: `(I − S)/F` with the true lighting, in linear light (albedo units, clipped to `[0, 2.5]`), of the
+/// photos every method was given (`raw`: on a JPEG dive the camera's JPEGs, not the rendering before it), of a dive rendered with
+/// [`Simulation::render_with_lighting`] (its true `F` and `S`).
+pub fn oracle(raw: &[Raster], dive: &Dive) -> Vec<Raster> {
+    raw.iter()
+        .zip(dive.factor.iter().zip(&dive.backscatter))
+        .map(|(p, (f, s))| {
+            let mut r = p.clone();
+            for ((v, &f), &s) in r.data.iter_mut().zip(&f.data).zip(&s.data) {
+                *v = ((*v - s) / f.max(1e-4)).clamp(0.0, 2.5);
+            }
+            r
+        })
+        .collect()
+}
+
 /// Where each survey photo carries the albedo at all: the true lit signal `F·A` is at least one code step of the
 /// camera's encoding (`bits`, curve `t`) at the sample's level `F·A + S`, and that level is below clipping. The
 /// residual pattern is scored on these samples only, for every method alike: where a starved channel (red over
