@@ -667,7 +667,9 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         coverage: asked.coverage,
         photos_per_sample: range.len() as f32 / found.max(1) as f32,
         samples: found,
-        needed: found,
+        // What the window 7 and its median need, as for [`Rule::Sparse`]: a slow camera's photos stay few samples
+        // (the monitor says so), whichever window fits the lights better.
+        needed: BASE_WINDOW,
         rule: Rule::Unsteady,
         misfit,
     }
@@ -919,6 +921,8 @@ mod tests {
             if c.rule == Rule::Unsteady {
                 short += 1;
                 assert_eq!((c.window, c.quantile), (BASE_WINDOW, 0.5), "{c:?}");
+                assert_eq!(c.needed, BASE_WINDOW, "{c:?}");
+                assert!(c.samples <= BASE_WINDOW, "{c:?}");
                 let [long, plain] = c.misfit.expect("the misfits that decided");
                 assert!(long > STEADY_DENSE.0 * plain + STEADY_DENSE.1, "{c:?}");
                 assert!(c.why().contains("changed"), "{}", c.why());
