@@ -52,6 +52,16 @@ pub const MAX_LAG: usize = 16;
 /// ([`independent`]).
 pub const PERSISTS: f32 = 0.2;
 
+/// The correlation at which a scene that was gone is found again: the lights' pattern, not the ground
+/// ([`lit_again`]).
+pub const LIT_AGAIN: f32 = 0.3;
+
+/// Independent views a window 7 taken by the do-no-harm check ([`Rule::Unsteady`]) must hold not to be flagged
+/// `few-samples`: the fewest among which no view has to fill more than half of it (with 2, one view is in at least
+/// 4 of its 7 photos, and the median takes it). It asks fewer than the survey's 7, which the independence test,
+/// under a swing, cannot always tell from the lights.
+pub const UNSTEADY_VIEWS: usize = BASE_WINDOW.div_ceil(BASE_WINDOW / 2);
+
 /// The parts of the frame (columns, rows) over which the lights' low-frequency shape is read ([`PhotoSurvey::shape`]).
 pub const SHAPE_GRID: (usize, usize) = (8, 6);
 /// Parts of [`SHAPE_GRID`].
@@ -656,10 +666,11 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         return Choice { misfit, ..asked };
     }
     let range = window_range(i, short, total);
-    let (near, _) = grow(photos, NEAR_MIN.min(short), short, NEAR_MIN, |k| {
+    let read = &photos[..photos_read(i).min(total)];
+    let (near, _) = grow(read, NEAR_MIN.min(short), short, NEAR_MIN, |k| {
         near_range(i, k, &range)
     });
-    let found = independent(photos, range.clone());
+    let found = independent(read, range.clone());
     Choice {
         window: short,
         quantile: 0.5,
@@ -667,9 +678,8 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         coverage: asked.coverage,
         photos_per_sample: range.len() as f32 / found.max(1) as f32,
         samples: found,
-        // What the window 7 and its median need, as for [`Rule::Sparse`]: a slow camera's photos stay few samples
-        // (the monitor says so), whichever window fits the lights better.
-        needed: BASE_WINDOW,
+        // A slow camera's photos stay few samples (the monitor says so), whichever window fits the lights better.
+        needed: UNSTEADY_VIEWS,
         rule: Rule::Unsteady,
         misfit,
     }
@@ -696,12 +706,14 @@ fn survey_choice(photos: &[PhotoSurvey], i: usize) -> Choice {
     };
     let longest = longest_window(total);
     let need = samples(RISK, BASE_WINDOW);
-    let (window, found) = grow(photos, BASE_WINDOW.min(longest), longest, need, |n| {
+    // The photos this choice reads (its lit-again test reads no further, as a streamed survey decides).
+    let read = &photos[..photos_read(i).min(total)];
+    let (window, found) = grow(read, BASE_WINDOW.min(longest), longest, need, |n| {
         window_range(i, n, total)
     });
     let range = window_range(i, window, total);
     let need_near = samples(NEAR_RISK, NEAR_MIN);
-    let (near, _) = grow(photos, NEAR_MIN.min(window), window, need_near, |k| {
+    let (near, _) = grow(read, NEAR_MIN.min(window), window, need_near, |k| {
         near_range(i, k, &range)
     });
     let rule = match (found >= need, dense || window > BASE_WINDOW) {
@@ -743,12 +755,15 @@ fn grow(
 }
 
 /// Independent samples among `photos[range]`: the photos whose scene is not the scene of an earlier photo of the
-/// range ([`seen_again`], within [`MAX_LAG`] photos).
+/// range ([`seen_again`], within [`MAX_LAG`] photos), unless that photo is lit again ([`lit_again`], over the
+/// photos up to the end of `photos`: a choice passes the photos it reads).
 pub fn independent(photos: &[PhotoSurvey], range: std::ops::Range<usize>) -> usize {
+    let lit = |e: usize| lit_again(&photos[e], photos.len() - e - 1);
     range
         .clone()
         .filter(|&j| {
-            !(range.start.max(j.saturating_sub(MAX_LAG))..j).any(|e| seen_again(&photos[e], j - e))
+            !(range.start.max(j.saturating_sub(MAX_LAG))..j)
+                .any(|e| seen_again(&photos[e], j - e) && !lit(e))
         })
         .count()
 }
@@ -759,6 +774,19 @@ pub fn independent(photos: &[PhotoSurvey], range: std::ops::Range<usize>) -> usi
 /// was a swing ago) is not, and the photos between, lit from another height, correlate little or negatively.
 fn seen_again(p: &PhotoSurvey, lag: usize) -> bool {
     p.same_scene[lag - 1] >= SAME_SCENE && p.same_scene[..lag - 1].iter().all(|&c| c >= PERSISTS)
+}
+
+/// Whether a photo's scene, once gone (its correlation with a later photo below 0), comes back to [`LIT_AGAIN`]
+/// within the `horizon` photos after it: then what it shares with the photos around is the lights', at every lag.
+/// A view of the ground fades as a slow camera moves on and does not return; a pattern fixed in the frame (the
+/// cones' edges, the backscatter the water column's `S` leaves) follows the altitude and changes sign with it, so
+/// under a swing the photos lit alike correlate as one scene. Only the photos [`photos_read`] by the choice are
+/// read, which a survey streamed with the photos has measured when it decides.
+fn lit_again(p: &PhotoSurvey, horizon: usize) -> bool {
+    let lags = &p.same_scene[..horizon.min(MAX_LAG)];
+    lags.iter()
+        .position(|&c| c < 0.0)
+        .is_some_and(|gone| lags[gone..].iter().any(|&c| c >= LIT_AGAIN))
 }
 
 #[cfg(test)]
@@ -921,7 +949,7 @@ mod tests {
             if c.rule == Rule::Unsteady {
                 short += 1;
                 assert_eq!((c.window, c.quantile), (BASE_WINDOW, 0.5), "{c:?}");
-                assert_eq!(c.needed, BASE_WINDOW, "{c:?}");
+                assert_eq!(c.needed, 3, "{c:?}");
                 assert!(c.samples <= BASE_WINDOW, "{c:?}");
                 let [long, plain] = c.misfit.expect("the misfits that decided");
                 assert!(long > STEADY_DENSE.0 * plain + STEADY_DENSE.1, "{c:?}");
@@ -1224,6 +1252,44 @@ mod tests {
         // The longer window that holds 7 samples around photo 4.
         let (n, found) = grow(&photos, 7, 31, 7, |n| window_range(4, n, 10));
         assert_eq!((n, found), (9, 7));
+    }
+
+    #[test]
+    fn a_scene_that_comes_back_after_it_was_gone_is_the_lights() {
+        let photo = |lags: &[f32]| {
+            let mut p = PhotoSurvey {
+                coverage: 0.0,
+                same_scene: [0.0; MAX_LAG],
+                shape: [0.0; SHAPE_PARTS],
+            };
+            p.same_scene[..lags.len()].copy_from_slice(lags);
+            p
+        };
+        // A slow camera's view fades and goes below 0 (the band's ring), and does not return.
+        let fades = photo(&[0.9, 0.75, 0.55, 0.35, 0.15, -0.1, -0.3, -0.2, -0.05, 0.1]);
+        assert!(!lit_again(&fades, MAX_LAG));
+        // Photos a swing apart: seen as one scene at lags 1–3, gone at 4, back at 7.
+        let swing = photo(&[0.75, 0.7, 0.85, -0.2, -0.3, -0.2, 0.85, 0.6]);
+        assert!(lit_again(&swing, MAX_LAG));
+        assert!(
+            !lit_again(&swing, 6),
+            "the return lies beyond the photos read"
+        );
+        assert!(lit_again(&swing, 7));
+        // Back only to below LIT_AGAIN: a view, not the lights.
+        let faint = photo(&[0.8, 0.6, -0.1, 0.29]);
+        assert!(!lit_again(&faint, MAX_LAG));
+        // By brute force over a mission of 9: photo 0 is lit again, so photos 1–3 are samples of their own; with
+        // photo 0 a fading view, only photo 0 and photos 4–8 are.
+        let mut photos = vec![photo(&[]); 9];
+        photos[0] = swing;
+        assert_eq!(independent(&photos, 0..9), 9);
+        photos[0] = fades;
+        assert!(seen_again(&photos[0], 3) && !seen_again(&photos[0], 4));
+        assert_eq!(independent(&photos, 0..9), 6);
+        // Read only up to photo 6: the return at lag 7 is not seen, photo 0 is a view again.
+        photos[0] = swing;
+        assert_eq!(independent(&photos[..7], 0..7), 4);
     }
 
     #[test]

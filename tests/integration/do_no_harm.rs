@@ -88,16 +88,16 @@ fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_s
                 let used = f["window"].as_array().unwrap();
                 let span = used[1].as_u64().unwrap() - used[0].as_u64().unwrap() + 1;
                 assert_eq!(span, 7, "{f}");
-                // Its count of views is the window 7's against the 7 its median needs, and the monitor flags
-                // `few-samples` exactly where it holds fewer.
+                // Its count of views is the window 7's against the 3 among which no view must fill more than
+                // half of it, and the monitor flags `few-samples` exactly where it holds fewer.
                 let (samples, needed) = (w["samples"].as_u64().unwrap(), w["needed"].as_u64());
-                assert_eq!(needed, Some(7), "{w}");
+                assert_eq!(needed, Some(3), "{w}");
                 let few = f["health"]["flags"]
                     .as_array()
                     .unwrap()
                     .iter()
                     .any(|g| g["kind"] == "few-samples");
-                assert_eq!(few, samples < 7, "{f}");
+                assert_eq!(few, samples < 3, "{f}");
             }
             "quantile" | "capped" | "short" => {
                 kept += 1;
