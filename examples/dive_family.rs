@@ -142,14 +142,8 @@ struct Peers {
 }
 
 fn peers() -> Option<Peers> {
-    let python = std::env::var_os("PEER_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("../peer-venv/bin/python"));
-    let dir = ["../shared/peers"]
-        .iter()
-        .map(PathBuf::from)
-        .find(|p| p.join("simdive.py").exists())?;
-    python.exists().then_some(Peers { python, dir })
+    let (python, dir) = matrix::peers().filter(|(_, d)| d.join("simdive.py").exists())?;
+    Some(Peers { python, dir })
 }
 
 /// A dive ready to correct: its photos, the names to score, the truth and the samples to score.

@@ -10,7 +10,7 @@
 //! given the simulator's `navigation.csv`, `--navigation`: windows chosen by altitude), `oracle` (`(I − S)/F` with
 //! the simulator's true `F` and `S`), `window-floor` (the window's `M` made from the true albedo alone:
 //! what a window over a straight track takes into `F` from the seafloor itself, whatever the lights do —
-//! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `/work/peer-venv` and
+//! `matrix::window_floor`), and `numpy` (the numpy peer of the paper, `PEER_PYTHON` or `../peer-venv` and
 //! `../shared/peers/paper_numpy.py`, when present). `--ablation` adds the abyss method with each lever off.
 //! `--columns NAME[,NAME]` keeps only those of the columns above (the oracle and the window's floor are always
 //! scored; `numpy` runs only when listed). `--nodules` scores the nodule fields (`matrix::NODULES`, with
@@ -209,20 +209,14 @@ fn main() {
             }
         }
     }
-    let peer_python = PathBuf::from("/work/peer-venv/bin/python");
-    let peer_script = [
-        "../shared/peers/paper_numpy.py",
-        "/work/shared/peers/paper_numpy.py",
-    ]
-    .iter()
-    .map(PathBuf::from)
-    .find(|p| p.exists());
-    let peer = peer_script.filter(|_| peer_python.exists());
-    if peer.is_none() {
+    let peers = abysslight::eval::matrix::peers();
+    if peers.is_none() {
         eprintln!(
-            "dive_matrix: numpy peer not found (/work/peer-venv, paper_numpy.py): no numpy column"
+            "dive_matrix: numpy peer not found (PEER_PYTHON or ../peer-venv, ../shared/peers/paper_numpy.py): no numpy column"
         );
     }
+    let peer_python = peers.as_ref().map(|(p, _)| p.clone()).unwrap_or_default();
+    let peer = peers.map(|(_, d)| d.join("paper_numpy.py"));
     // (label, options relative to the paper-as-published baseline)
     let mut methods: Vec<(String, MakeOptions)> = vec![
         (

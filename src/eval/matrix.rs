@@ -310,6 +310,17 @@ pub fn held_out_seed(index: usize, offset: u64) -> u64 {
     5000 + offset * 100 + index as u64
 }
 
+/// The peers beside the project, as `../shared/peers/README.md` sets them up: the Python with numpy and OpenCV
+/// (`PEER_PYTHON`, else `../peer-venv/bin/python`) and the folder of `paper_numpy.py`, `simdive.py` and
+/// `evaluate_dive.py` (`../shared/peers`); `None` where either is missing.
+pub fn peers() -> Option<(std::path::PathBuf, std::path::PathBuf)> {
+    let python = std::env::var_os("PEER_PYTHON")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| "../peer-venv/bin/python".into());
+    let dir = std::path::PathBuf::from("../shared/peers");
+    (python.exists() && dir.join("paper_numpy.py").exists()).then_some((python, dir))
+}
+
 /// The photos `names` of `dir`, each in linear light; panics on a file that does not decode (the matrix wrote it).
 pub fn load_set(dir: &Path, names: &[String], t: Transfer) -> Vec<Raster> {
     names
