@@ -350,15 +350,13 @@ impl Engine {
         if state.finished {
             return Err(finished("push"));
         }
-        if altitude.is_some() && !state.by_altitude {
-            if state.shape.is_some() {
-                return Err(PyValueError::new_err(
-                    "an altitude after a first photo pushed without one: this engine chooses its windows over \
-                     time, and would ignore it. Windows by altitude are chosen from the mission's first photo on: \
-                     give the first photo's altitude, or make the engine with Engine(by_altitude=True) when the \
-                     log starts later (photos without an altitude then keep the window over time)",
-                ));
-            }
+        if altitude.is_some() && !state.by_altitude && state.shape.is_some() {
+            return Err(PyValueError::new_err(
+                "an altitude after a first photo pushed without one: this engine chooses its windows over \
+                 time, and would ignore it. Windows by altitude are chosen from the mission's first photo on: \
+                 give the first photo's altitude, or make the engine with Engine(by_altitude=True) when the \
+                 log starts later (photos without an altitude then keep the window over time)",
+            ));
         }
         let (photo, shape) = photo_from_array(photo, "photo")?;
         if let Some(first) = state.shape {
