@@ -607,6 +607,27 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
+/// The rows of each simulator and half that has any (`sim` in column 1, `half` in column 2; rows of at least
+/// `columns` fields), in the order the tables print them.
+fn groups<'r, 'a>(
+    rows: &'r [Vec<&'a str>],
+    columns: usize,
+) -> Vec<(&'static str, &'static str, Vec<&'r Vec<&'a str>>)> {
+    let mut out = Vec::new();
+    for sim in ["ours", "simdive"] {
+        for half in ["tuning", "held-out"] {
+            let here: Vec<&Vec<&str>> = rows
+                .iter()
+                .filter(|r| r.len() >= columns && r[1] == sim && r[2] == half)
+                .collect();
+            if !here.is_empty() {
+                out.push((sim, half, here));
+            }
+        }
+    }
+    out
+}
+
 /// The distribution of default ÷ peer and default ÷ `--window 7` per score, per simulator and half, in Markdown.
 fn summary(tsv: &Path) -> String {
     let text = std::fs::read_to_string(tsv).unwrap_or_default();
@@ -617,67 +638,58 @@ fn summary(tsv: &Path) -> String {
     let mut md = String::from(
         "| simulator | half | dives | score | default ÷ numpy: median / p90 / worst (dive) | default ÷ `--window 7`: median / p90 / worst (dive) | bare sediment: survey cover max |\n|---|---|---|---|---|---|---|\n",
     );
-    for sim in ["ours", "simdive"] {
-        for half in ["tuning", "held-out"] {
-            let here: Vec<&Vec<&str>> = rows
-                .iter()
-                .filter(|r| r.get(1) == Some(&sim) && r.get(2) == Some(&half))
-                .collect();
-            if here.is_empty() {
-                continue;
-            }
-            let bare = here
-                .iter()
-                .filter(|r| r[5].parse::<f64>().is_ok_and(|c| c == 0.0))
-                .filter_map(|r| col("survey_cover").and_then(|i| r[i].parse::<f64>().ok()))
-                .fold(f64::NAN, f64::max);
-            let mut scores = vec![("albedo", "albedo error"), ("pattern", "residual pattern")];
-            if sim == "simdive" {
-                scores.push(("nmae", "evaluate_dive nmae"));
-                scores.push(("peer_pattern", "evaluate_dive pattern"));
-            }
-            for (key, label) in scores {
-                let ratio = |other: &str| {
-                    let (Some(a), Some(b)) = (
-                        col(&format!("default_{key}")),
-                        col(&format!("{other}_{key}")),
-                    ) else {
-                        return "-".to_string();
-                    };
-                    let mut v: Vec<(f64, &str)> = here
-                        .iter()
-                        .filter_map(|r| {
-                            let (x, y) = (r[a].parse::<f64>().ok()?, r[b].parse::<f64>().ok()?);
-                            (x.is_finite() && y.is_finite() && y > 0.0).then_some((x / y, r[0]))
-                        })
-                        .collect();
-                    if v.is_empty() {
-                        return "-".to_string();
-                    }
-                    v.sort_by(|p, q| p.0.total_cmp(&q.0));
-                    let mut r: Vec<f64> = v.iter().map(|p| p.0).collect();
-                    let worst = v.last().expect("not empty");
-                    format!(
-                        "{:.2} / {:.2} / **{:.2}** ({})",
-                        quantile(&mut r, 0.5),
-                        quantile(&mut r, 0.9),
-                        worst.0,
-                        worst.1
-                    )
+    for (sim, half, here) in groups(&rows, 3) {
+        let bare = here
+            .iter()
+            .filter(|r| r[5].parse::<f64>().is_ok_and(|c| c == 0.0))
+            .filter_map(|r| col("survey_cover").and_then(|i| r[i].parse::<f64>().ok()))
+            .fold(f64::NAN, f64::max);
+        let mut scores = vec![("albedo", "albedo error"), ("pattern", "residual pattern")];
+        if sim == "simdive" {
+            scores.push(("nmae", "evaluate_dive nmae"));
+            scores.push(("peer_pattern", "evaluate_dive pattern"));
+        }
+        for (key, label) in scores {
+            let ratio = |other: &str| {
+                let (Some(a), Some(b)) = (
+                    col(&format!("default_{key}")),
+                    col(&format!("{other}_{key}")),
+                ) else {
+                    return "-".to_string();
                 };
-                let _ = writeln!(
-                    md,
-                    "| {sim} | {half} | {} | {label} | {} | {} | {} |",
-                    here.len(),
-                    ratio("numpy"),
-                    ratio("window7"),
-                    if bare.is_finite() {
-                        format!("{bare:.2}")
-                    } else {
-                        "-".into()
-                    }
-                );
-            }
+                let mut v: Vec<(f64, &str)> = here
+                    .iter()
+                    .filter_map(|r| {
+                        let (x, y) = (r[a].parse::<f64>().ok()?, r[b].parse::<f64>().ok()?);
+                        (x.is_finite() && y.is_finite() && y > 0.0).then_some((x / y, r[0]))
+                    })
+                    .collect();
+                if v.is_empty() {
+                    return "-".to_string();
+                }
+                v.sort_by(|p, q| p.0.total_cmp(&q.0));
+                let mut r: Vec<f64> = v.iter().map(|p| p.0).collect();
+                let worst = v.last().expect("not empty");
+                format!(
+                    "{:.2} / {:.2} / **{:.2}** ({})",
+                    quantile(&mut r, 0.5),
+                    quantile(&mut r, 0.9),
+                    worst.0,
+                    worst.1
+                )
+            };
+            let _ = writeln!(
+                md,
+                "| {sim} | {half} | {} | {label} | {} | {} | {} |",
+                here.len(),
+                ratio("numpy"),
+                ratio("window7"),
+                if bare.is_finite() {
+                    format!("{bare:.2}")
+                } else {
+                    "-".into()
+                }
+            );
         }
     }
     md
@@ -697,54 +709,45 @@ fn monitor_summary(tsv: &Path) -> String {
     let mut md = String::from(
         "| simulator | half | photos | wrong | flagged | precision | recall | good photos flagged | per flag: flagged (of them wrong) |\n|---|---|---|---|---|---|---|---|---|\n",
     );
-    for sim in ["ours", "simdive"] {
-        for half in ["tuning", "held-out"] {
-            let here: Vec<&Vec<&str>> = rows
-                .iter()
-                .filter(|r| r.len() >= 9 && r[1] == sim && r[2] == half)
-                .collect();
-            if here.is_empty() {
-                continue;
+    for (sim, half, here) in groups(&rows, 9) {
+        let num = |r: &Vec<&str>, i: usize| r[i].parse::<f64>().unwrap_or(f64::NAN);
+        let wrong = |r: &Vec<&str>| {
+            let (da, dp, oa, op) = (num(r, 4), num(r, 5), num(r, 6), num(r, 7));
+            da > (1.5 * oa).max(oa + 0.03) || dp > (2.0 * op).max(0.05)
+        };
+        let flagged = |r: &Vec<&str>| r[8] != "-";
+        let n = here.len();
+        let w = here.iter().filter(|r| wrong(r)).count();
+        let f = here.iter().filter(|r| flagged(r)).count();
+        let tp = here.iter().filter(|r| wrong(r) && flagged(r)).count();
+        let good_flagged = here.iter().filter(|r| !wrong(r) && flagged(r)).count();
+        let mut per = std::collections::BTreeMap::<&str, (usize, usize)>::new();
+        for r in &here {
+            for k in r[8].split(',').filter(|k| *k != "-") {
+                let e = per.entry(k).or_default();
+                e.0 += 1;
+                e.1 += usize::from(wrong(r));
             }
-            let num = |r: &Vec<&str>, i: usize| r[i].parse::<f64>().unwrap_or(f64::NAN);
-            let wrong = |r: &Vec<&str>| {
-                let (da, dp, oa, op) = (num(r, 4), num(r, 5), num(r, 6), num(r, 7));
-                da > (1.5 * oa).max(oa + 0.03) || dp > (2.0 * op).max(0.05)
-            };
-            let flagged = |r: &Vec<&str>| r[8] != "-";
-            let n = here.len();
-            let w = here.iter().filter(|r| wrong(r)).count();
-            let f = here.iter().filter(|r| flagged(r)).count();
-            let tp = here.iter().filter(|r| wrong(r) && flagged(r)).count();
-            let good_flagged = here.iter().filter(|r| !wrong(r) && flagged(r)).count();
-            let mut per = std::collections::BTreeMap::<&str, (usize, usize)>::new();
-            for r in &here {
-                for k in r[8].split(',').filter(|k| *k != "-") {
-                    let e = per.entry(k).or_default();
-                    e.0 += 1;
-                    e.1 += usize::from(wrong(r));
-                }
-            }
-            let per = per
-                .iter()
-                .map(|(k, (a, b))| format!("{k} {a} ({b})"))
-                .collect::<Vec<_>>()
-                .join(", ");
-            let ratio = |a: usize, b: usize| {
-                if b == 0 {
-                    "-".to_string()
-                } else {
-                    format!("{:.2}", a as f64 / b as f64)
-                }
-            };
-            let _ = writeln!(
-                md,
-                "| {sim} | {half} | {n} | {w} | {f} | {} | {} | {} | {per} |",
-                ratio(tp, f),
-                ratio(tp, w),
-                ratio(good_flagged, n - w)
-            );
         }
+        let per = per
+            .iter()
+            .map(|(k, (a, b))| format!("{k} {a} ({b})"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let ratio = |a: usize, b: usize| {
+            if b == 0 {
+                "-".to_string()
+            } else {
+                format!("{:.2}", a as f64 / b as f64)
+            }
+        };
+        let _ = writeln!(
+            md,
+            "| {sim} | {half} | {n} | {w} | {f} | {} | {} | {} | {per} |",
+            ratio(tp, f),
+            ratio(tp, w),
+            ratio(good_flagged, n - w)
+        );
     }
     md
 }
