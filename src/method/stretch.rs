@@ -666,7 +666,7 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         return Choice { misfit, ..asked };
     }
     let range = window_range(i, short, total);
-    let read = &photos[..photos_read(i).min(total)];
+    let read = read_by(photos, i);
     let (near, _) = grow(read, NEAR_MIN.min(short), short, NEAR_MIN, |k| {
         near_range(i, k, &range)
     });
@@ -683,6 +683,12 @@ pub fn choose_one(photos: &[PhotoSurvey], i: usize) -> Choice {
         rule: Rule::Unsteady,
         misfit,
     }
+}
+
+/// The photos photo `i`'s choice reads ([`photos_read`]) of those surveyed: its lit-again test reads no further, so
+/// a survey streamed with the photos decides as one over the whole mission.
+fn read_by(photos: &[PhotoSurvey], i: usize) -> &[PhotoSurvey] {
+    &photos[..photos_read(i).min(photos.len())]
 }
 
 /// What the survey asks for photo `i` before [`choose_one`] checks it against the short window.
@@ -706,8 +712,7 @@ fn survey_choice(photos: &[PhotoSurvey], i: usize) -> Choice {
     };
     let longest = longest_window(total);
     let need = samples(RISK, BASE_WINDOW);
-    // The photos this choice reads (its lit-again test reads no further, as a streamed survey decides).
-    let read = &photos[..photos_read(i).min(total)];
+    let read = read_by(photos, i);
     let (window, found) = grow(read, BASE_WINDOW.min(longest), longest, need, |n| {
         window_range(i, n, total)
     });

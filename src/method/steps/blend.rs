@@ -82,10 +82,7 @@ pub(crate) fn fields(
 pub(crate) fn fade_unlit(b: Option<&mut Blended>, own: &Raster, s: Option<&Raster>, f: &Raster) {
     let Some(b) = b else { return };
     let (bw, bh, c) = (b.level.width, b.level.height, b.level.channels);
-    if own.layout() != b.level.layout() {
-        return;
-    }
-    if own.layout() != f.layout() {
+    if own.layout() != b.level.layout() || own.layout() != f.layout() {
         return;
     }
     let lit = lit_level(f);
@@ -1054,12 +1051,13 @@ mod tests {
         let f = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.001 } else { 0.8 });
         let level = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.02 } else { 0.4 });
         let weight = Raster::from_fn(bw, bh, 1, |x, _, _| if x < 8 { 0.5 } else { 0.9 });
-        let mut b = Blended {
+        let blended = || Blended {
             level: level.clone(),
             weight: weight.clone(),
             noise_var: vec![1e-6],
             prior_precision: 10.0,
         };
+        let mut b = blended();
         fade_unlit(Some(&mut b), &own, None, &f);
         let fill = 0.5 * 0.02;
         for y in 0..bh {
@@ -1107,12 +1105,7 @@ mod tests {
             |x, y, _| if (x, y) == (15, 10) { 0.0 } else { 0.3 },
         );
         let f = Raster::filled(bw, bh, 1, 0.8);
-        let mut b = Blended {
-            level: level.clone(),
-            weight: weight.clone(),
-            noise_var: vec![1e-6],
-            prior_precision: 10.0,
-        };
+        let mut b = blended();
         fade_unlit(Some(&mut b), &own, None, &f);
         assert_eq!((b.level, b.weight), (level, weight));
     }
