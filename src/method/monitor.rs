@@ -38,6 +38,11 @@ pub struct Thresholds {
     /// 1.33 with the window 7 and 1.21 with the window 11, the photos without ghosts at most 1.14; the held-out
     /// nodule fields and run 1632 at most 1.02.
     pub structure_added: f32,
+    /// The photo's lights against its window's `M` ([`Health::lights_misfit`], log units) above which the
+    /// correction is taken to leave the lights' pattern. 0.08, chosen on the randomized family's tuning dives of both
+    /// simulators (docs/results.md) as the lowest, in steps of 0.01, that flags no more than 10 % of their good
+    /// photos on either (0.07: 10.1 % of ours); the figure also holds the seafloor's texture.
+    pub lights_misfit: f32,
 }
 
 impl Default for Thresholds {
@@ -52,6 +57,7 @@ impl Default for Thresholds {
             texture_kept: 0.2,
             exposure_jump: 0.25,
             structure_added: 1.15,
+            lights_misfit: 0.08,
         }
     }
 }
@@ -114,6 +120,12 @@ pub enum Flag {
         /// Whether exposure levelling ran (`false`: turned off, and turning it on is the advice for a jump).
         levelled: bool,
     },
+    /// The lights' shape in the photo differs from its window's `M`: the lighting changed along the window (the
+    /// altitude swings, the vehicle pitches or rolls, a light dims) and the correction leaves its pattern.
+    LightsMisfit {
+        /// [`Health::lights_misfit`].
+        misfit: f32,
+    },
     /// Fewer photos in the mission than the window: every `F` is the median of all of them.
     ShortMission {
         /// Photos in the mission.
@@ -146,6 +158,7 @@ impl Flag {
             Flag::ExposureJump { .. } => "exposure-jump",
             Flag::CameraStill { .. } => "camera-still",
             Flag::StructureAdded { .. } => "structure-added",
+            Flag::LightsMisfit { .. } => "lights-misfit",
             Flag::ShortMission { .. } => "short-mission",
             Flag::FewSamples { .. } => "few-samples",
         }
@@ -218,6 +231,13 @@ impl std::fmt::Display for Flag {
                 exposure,
                 levelled,
             } => structure_added(f, texture_kept, window, longer, exposure, levelled),
+            Flag::LightsMisfit { misfit } => write!(
+                f,
+                "the lights' shape in the photo is {:.0} % off its window's (the altitude or attitude changed along \
+                 the window): the correction leaves about that much of the lighting pattern; with the vehicle's \
+                 altitudes (--navigation) each window is chosen among photos lit from the same height",
+                100.0 * misfit
+            ),
             Flag::ShortMission { photos, window } => write!(
                 f,
                 "only {photos} photos in the mission, fewer than the window n = {window}"
@@ -305,6 +325,13 @@ pub struct Health<F = Flag> {
     /// the scene in `F`.
     #[serde(deserialize_with = "null_is_nan")]
     pub roughness: f32,
+    /// How far the lights in the photo are from its window's `M` (log units; NaN: not measured): per part of an 8×6
+    /// grid of the frame, the 0.9 quantile of its blocks' log ratios photo / window (above `S`), their mean absolute
+    /// spread over the parts once the level is taken out ([`lights_misfit`](crate::method::stretch::lights_misfit)).
+    /// About the lighting pattern the correction leaves (0.05: 5 % brighter or darker in places), plus what the
+    /// seafloor's texture puts into each part's quantile.
+    #[serde(deserialize_with = "null_is_nan", default = "not_measured")]
+    pub lights_misfit: f32,
     /// Shift from the previous photo, in blocks, found by phase correlation of the block medians' texture
     /// (see `register`); `None` for the first photo or images too small.
     pub motion: Option<f32>,
@@ -329,6 +356,7 @@ impl<F> Default for Health<F> {
             factor_change: 0.0,
             colour_shift: 0.0,
             roughness: 0.0,
+            lights_misfit: 0.0,
             motion: None,
             motion_ncc: None,
             window_span: None,
@@ -349,6 +377,7 @@ impl Health {
             factor_change: self.factor_change,
             colour_shift: self.colour_shift,
             roughness: self.roughness,
+            lights_misfit: self.lights_misfit,
             motion: self.motion,
             motion_ncc: self.motion_ncc,
             window_span: self.window_span,
@@ -1006,6 +1035,18 @@ impl Monitor {
         let mut h = self.observe_at(f, fit.contamination, q);
         h.level = fit.level;
         h.texture_kept = fit.texture_kept;
+        // Below the size roughness and texture need, a part of the grid holds too few blocks for its bright side.
+        h.lights_misfit = if own.width >= MIN_ROUGHNESS_SIZE.0 && own.height >= MIN_ROUGHNESS_SIZE.1
+        {
+            crate::method::stretch::lights_misfit(own, m_minus_s, s_low)
+        } else {
+            f32::NAN
+        };
+        if h.lights_misfit > t.lights_misfit {
+            h.flags.push(Flag::LightsMisfit {
+                misfit: h.lights_misfit,
+            });
+        }
         self.observe_stillness(own, &mut h);
         let jumped = (fit.level - 1.0).abs() > t.exposure_jump;
         if jumped {
@@ -1209,6 +1250,21 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
         .collect()
 }
 
+/// Photos per independent view of the ground (the survey's [`Choice::photos_per_sample`]) from which a low texture
+/// kept ([`Thresholds::texture_kept`]) flags `scene-in-factor` under `--window auto`: below it the survey found the
+/// window's photos views of their own, and the fine structure the correction removed is the lights'. On the
+/// randomized family's simdive dives (docs/results.md) the texture kept alone flagged 779 photos and not one was
+/// wrong by the user's definition (on ours 26, 8 wrong); 1.5 keeps the flag where a view fills every other photo or
+/// more (a slow camera).
+///
+/// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
+pub const REPEATED_VIEWS: f32 = 1.5;
+
+/// What [`Health::lights_misfit`] reads back from a report written before it was measured.
+fn not_measured() -> f32 {
+    f32::NAN
+}
+
 /// Count of flagged photos per kind of reason, for the end-of-run summary.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Summary {
@@ -1232,6 +1288,9 @@ pub struct Summary {
     pub few_samples: usize,
     /// Photos flagged [`Flag::StructureAdded`].
     pub structure_added: usize,
+    /// Photos flagged [`Flag::LightsMisfit`].
+    #[serde(default)]
+    pub lights_misfit: usize,
     /// Photos whose exposure change the per-photo gain absorbed ([`Health::exposure_absorbed`]; not flagged).
     pub exposure_absorbed: usize,
 }
@@ -1264,6 +1323,7 @@ impl Summary {
                 "short-mission" => self.short_mission += 1,
                 "few-samples" => self.few_samples += 1,
                 "structure-added" => self.structure_added += 1,
+                "lights-misfit" => self.lights_misfit += 1,
                 _ => {}
             }
         }
@@ -1283,6 +1343,7 @@ impl Summary {
             short_mission,
             few_samples,
             structure_added,
+            lights_misfit,
             exposure_absorbed,
         } = *self;
         let absorbed = match exposure_absorbed {
@@ -1306,6 +1367,7 @@ impl Summary {
                 "too few independent samples (F may hold the scene)",
             ),
             (structure_added, "structure added (ghosts)"),
+            (lights_misfit, "lights unlike their window's"),
         ] {
             if n > 0 {
                 parts.push(format!("{n} {what}"));
@@ -1615,6 +1677,48 @@ mod tests {
         let h = Monitor::new(Thresholds::default()).observe_photo(&own, &lit, None, &f);
         assert!(h.flags.is_empty(), "{:?}", h.flags);
         assert!((h.level - 1.0).abs() < 0.05);
+    }
+
+    /// A photo lit from another height than its window (the cone wider and shifted, the level taken out): flagged
+    /// `lights-misfit` with the figure [`crate::method::stretch::lights_misfit`] gives; the same photo under its
+    /// window's lights, brighter, is not. The figure is in the health either way, and the summary counts the flag.
+    #[test]
+    fn lights_unlike_the_window_s_are_flagged_with_their_misfit() {
+        let cone = |x: usize, y: usize, cx: f32, r: f32| {
+            let (dx, dy) = (x as f32 - cx, y as f32 - 15.0);
+            0.05 + (-(dx * dx + dy * dy) / (r * r)).exp()
+        };
+        let texture = |x: usize, y: usize| 1.0 + 0.05 * (((x * 7 + y * 13) % 5) as f32 - 2.0);
+        let lit = Raster::from_fn(40, 30, 3, |x, y, c| {
+            cone(x, y, 20.0, 14.0) * [1.0, 0.9, 0.7][c]
+        });
+        let f = lit.clone();
+        let swung = Raster::from_fn(40, 30, 3, |x, y, c| {
+            cone(x, y, 26.0, 9.0) * [1.0, 0.9, 0.7][c] * texture(x, y)
+        });
+        let h = Monitor::new(Thresholds::default()).observe_photo(&swung, &lit, None, &f);
+        let want = crate::method::stretch::lights_misfit(&swung, &lit, None);
+        assert!(want > Thresholds::default().lights_misfit, "{want}");
+        assert_eq!(h.lights_misfit, want);
+        assert!(
+            h.flags
+                .iter()
+                .any(|g| matches!(g, Flag::LightsMisfit { misfit } if *misfit == want)),
+            "{:?}",
+            h.flags
+        );
+        let mut s = Summary::default();
+        s.add(&h.flags);
+        assert_eq!(s.lights_misfit, 1);
+        assert!(
+            s.line(1).contains("lights unlike their window's"),
+            "{}",
+            s.line(1)
+        );
+        let brighter = Raster::from_fn(40, 30, 3, |x, y, c| 1.2 * lit.get(x, y, c) * texture(x, y));
+        let h = Monitor::new(Thresholds::default()).observe_photo(&brighter, &lit, None, &f);
+        assert!(h.lights_misfit < 0.03, "{}", h.lights_misfit);
+        assert!(!has(&h.flags, "lights-misfit"), "{:?}", h.flags);
     }
 
     /// Deterministic noise in `[-1, 1]` for pixel `p` (a hash; no RNG crate in the library's tests).

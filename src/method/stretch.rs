@@ -443,7 +443,7 @@ pub fn shape_misfit(
     if others.len() < 2 {
         return f32::NAN;
     }
-    let mut r: Vec<f32> = (0..SHAPE_PARTS)
+    let r: Vec<f32> = (0..SHAPE_PARTS)
         .filter_map(|k| {
             let mut m: Vec<f32> = others
                 .iter()
@@ -463,11 +463,58 @@ pub fn shape_misfit(
             d.is_finite().then_some(d)
         })
         .collect();
-    if r.len() < 4 {
+    spread(&r)
+}
+
+/// The spread of per-part differences of the lights' shape ([`shape`]) over the parts of [`SHAPE_GRID`]: their mean
+/// absolute difference from their median over the parts (the level: the per-photo gain takes it). NaN where fewer
+/// than 4 parts are left.
+fn spread(d: &[f32]) -> f32 {
+    if d.len() < 4 {
         return f32::NAN;
     }
-    let level = quantile(&mut r.clone(), 0.5);
-    r.iter_mut().map(|v| (*v - level).abs()).sum::<f32>() / r.len() as f32
+    let level = quantile(&mut d.to_vec(), 0.5);
+    d.iter().map(|v| (v - level).abs()).sum::<f32>() / d.len() as f32
+}
+
+/// Quantile of a part's block ratios photo / window that [`lights_misfit`] reads: above the dark objects of a dense
+/// field (up to half of the blocks), on the seafloor's side.
+pub const LIGHTS_QUANTILE: f64 = 0.9;
+
+/// How far the lights in a photo are from its window's (see [`Health::lights_misfit`]): per part of [`SHAPE_GRID`],
+/// the [`LIGHTS_QUANTILE`] of the log ratios of its blocks' grey level above `s_low` (`own`) to its window's `M − S`
+/// (`m_minus_s`) at the same blocks, lit to at least 5 % of the window's brightest; their [`spread`] over the parts
+/// (log units). Block by block, so that a part's own gradient of light cancels wherever its seafloor lies: it is
+/// what the correction leaves of the lights' pattern at the grid the residual pattern is scored on, plus what the
+/// seafloor's texture puts into each part's quantile. NaN where the two are not the same size or fewer than 4 parts
+/// have half their blocks lit.
+///
+/// [`Health::lights_misfit`]: crate::method::monitor::Health::lights_misfit
+pub fn lights_misfit(own: &Raster, m_minus_s: &Raster, s_low: Option<&Raster>) -> f32 {
+    let (w, h) = (own.width, own.height);
+    if (m_minus_s.width, m_minus_s.height) != (w, h) {
+        return f32::NAN;
+    }
+    let (a, b) = (grey_above(own, s_low), grey_above(m_minus_s, None));
+    let mut lit: Vec<f32> = b.iter().copied().filter(|v| v.is_finite()).collect();
+    let floor = 0.05 * quantile(&mut lit, 0.95);
+    let (gx, gy) = SHAPE_GRID;
+    let mut parts: Vec<Vec<f32>> = vec![Vec::new(); SHAPE_PARTS];
+    let mut blocks = [0usize; SHAPE_PARTS];
+    for (p, (&x, &y)) in a.iter().zip(&b).enumerate() {
+        let k = ((p / w) * gy / h) * gx + (p % w) * gx / w;
+        blocks[k] += 1;
+        if x > 0.0 && y > floor {
+            parts[k].push((x / y).ln());
+        }
+    }
+    let d: Vec<f32> = parts
+        .iter_mut()
+        .zip(blocks)
+        .filter(|(part, n)| !part.is_empty() && 2 * part.len() >= *n)
+        .map(|(part, _)| quantile(part, LIGHTS_QUANTILE))
+        .collect();
+    spread(&d)
 }
 
 /// A photo's scene at block resolution, from its [`lit_ratios`] `own / reference`: their log less its box average
@@ -1028,6 +1075,50 @@ mod tests {
             let got = shape_misfit(&photos, i, range.clone(), q, leave_out);
             assert!((got - want).abs() < 1e-6, "{i} {range:?}: {got} vs {want}");
         }
+    }
+
+    /// [`lights_misfit`] against its definition worked by hand: a photo lit as its window's `M − S` (a cone steep
+    /// across each part) times a pattern constant over each part of the grid (and an overall gain, which it must
+    /// not see), above a backscatter `S`, with one unlit corner part; the spread of the pattern over the lit parts,
+    /// its median taken out.
+    #[test]
+    fn the_lights_misfit_is_the_spread_of_the_lights_pattern_left() {
+        let (w, h) = (64usize, 48usize);
+        let (gx, gy) = SHAPE_GRID;
+        let part = |x: usize, y: usize| (y * gy / h) * gx + x * gx / w;
+        let pattern: Vec<f32> = (0..SHAPE_PARTS)
+            .map(|k| 0.2 * (((k * 37) % 11) as f32 / 10.0 - 0.5))
+            .collect();
+        // The window's lights: a smooth cone, the corner part 0 unlit (below 5 % of the brightest parts).
+        let lit = |x: usize, y: usize, c: usize| {
+            if part(x, y) == 0 {
+                return 1e-4;
+            }
+            let d = ((x as f32 - 32.0) / 40.0).powi(2) + ((y as f32 - 24.0) / 30.0).powi(2);
+            (0.2 + 0.6 * (-d).exp()) * [1.0, 0.8, 0.6][c]
+        };
+        let m = Raster::from_fn(w, h, 3, lit);
+        let s = Raster::from_fn(w, h, 3, |x, _, c| {
+            0.01 * (1 + c) as f32 * x as f32 / w as f32
+        });
+        let own = Raster::from_fn(w, h, 3, |x, y, c| {
+            1.7 * lit(x, y, c) * pattern[part(x, y)].exp() + s.data[(y * w + x) * 3 + c]
+        });
+        // By hand: block by block the photo over `M` is the part's pattern times the gain, so every quantile of a
+        // part's log ratios is the pattern plus the gain's log.
+        let d: Vec<f32> = (1..SHAPE_PARTS).map(|k| pattern[k] + 1.7f32.ln()).collect();
+        let mut sorted = d.clone();
+        sorted.sort_by(f32::total_cmp);
+        let level = sorted[((sorted.len() - 1) as f64 * 0.5).round() as usize];
+        let want = d.iter().map(|v| (v - level).abs()).sum::<f32>() / d.len() as f32;
+        let got = lights_misfit(&own, &m, Some(&s));
+        assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+        assert!(want > 0.03, "the pattern is there to see: {want}");
+        // The same lights, only brighter: nothing left to see; a window of another size: not measured.
+        let brighter = Raster::from_fn(w, h, 3, |x, y, c| 1.3 * lit(x, y, c));
+        assert!(lights_misfit(&brighter, &m, None).abs() < 1e-5);
+        let other = Raster::from_fn(w / 2, h, 3, lit);
+        assert!(lights_misfit(&own, &other, Some(&s)).is_nan());
     }
 
     /// The streaming survey (a running reference, photos measured in batches on all workers) gives bit for bit what

@@ -100,6 +100,15 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> Vec<Series<'static
             kinds: &["scene-in-factor", "structure-added"],
         },
         Series {
+            title: "lights against the window's M: about the lighting pattern left (0.05 = 5 %), plus the \
+                    seafloor's texture",
+            values: frames.iter().map(|f| f.health.lights_misfit).collect(),
+            threshold: Some(t.lights_misfit),
+            upper: None,
+            moving: None,
+            kinds: &["lights-misfit"],
+        },
+        Series {
             title: "exposure against the window's M: |level - 1| (0.1 = 10 %; flagged only without the per-photo gain)",
             values: frames
                 .iter()
@@ -252,8 +261,11 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
     draw::line(img, (f.left, y0 + h - 1), (right, y0 + h - 1), BLACK);
     let marks = [(0.0, BLACK), (vmax / 2.0, BLACK), (vmax, BLACK)];
     let thresholds = s.threshold.into_iter().chain(s.upper);
+    // A value mark whose label a threshold's label would overwrite (within a line of text) is left out.
+    let clear = |v: f32| thresholds.clone().all(|u| (y_of(u) - y_of(v)).abs() >= 10);
     for (v, colour) in marks
         .into_iter()
+        .filter(|&(v, _)| clear(v))
         .chain(thresholds.clone().map(|u| (u, RED)))
     {
         let y = y_of(v);
@@ -881,12 +893,12 @@ mod tests {
         let y = HEADER + (22 + 130 + 30) + 22;
         assert_eq!(red(f.x_of(10), y), 9, "the flagged photo's point");
         assert_eq!(red(f.x_of(14), y), 0, "an unflagged photo's point");
-        let six = img.height();
+        let seven = img.height();
         for (i, f) in fr.iter_mut().enumerate() {
             f.altitude = (i > 2).then_some(3.0 + i as f32 / 10.0);
         }
-        assert_eq!(overview_series(&fr, &t).len(), 7);
-        assert_eq!(overview(&fr, &t).height(), six + 22 + 130 + 30);
+        assert_eq!(overview_series(&fr, &t).len(), 8);
+        assert_eq!(overview(&fr, &t).height(), seven + 22 + 130 + 30);
     }
 
     /// The flagged sheet has a title over each column, above the first photo's name.

@@ -9,41 +9,66 @@ use crate::common::*;
 
 use abysslight::{correct_mission, Options, Silent, Transfer};
 
-/// 40 photos of 160×120 (16-bit linear RGB) and 6 water-column frames: sediment of level 1 with a little texture and
-/// dark nodules (0.15) covering 40 % in patches of 8×8 pixels, the camera moving 12 pixels a photo, under a side
-/// light whose centre moves by 12 pixels and whose width grows with each metre of altitude, dimming with its square
-/// (4 ± 1.6 m, 1.3 cycles), over a backscatter that falls off across the frame.
-fn swinging_field(root: &Path) {
-    let (w, h, n) = (160u32, 120u32, 40usize);
+/// The swinging field's size and photos (at scale 1).
+const FIELD: (u32, u32, usize) = (160, 120, 40);
+
+/// Photo `t` of the swinging field at pixel (`x`, `y`) of its photos at `k` times [`FIELD`]'s size (the same dive,
+/// each pixel of scale 1 `k`×`k` pixels), the altitude swinging by `swing` metres: its albedo, the light on it, and
+/// the backscatter.
+fn swinging_pixel(k: u32, swing: f32, t: usize, x: u32, y: u32) -> (f32, f32, f32) {
+    let (w, h, n) = FIELD;
+    let (x, y) = (x / k, y / k);
     let hash = |a: u64, b: u64, k: u64| {
         let v = (a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b.wrapping_mul(0xC2B2_AE3D_27D4_EB4F) ^ k)
             .wrapping_mul(0x1656_67B1_9E37_79F9);
         (v >> 11) as f64 / (1u64 << 53) as f64
     };
-    let s = |x: u32| 0.05 * (1.0 - x as f32 / w as f32);
+    let a = 4.0 + swing * (std::f32::consts::TAU * 1.3 * t as f32 / n as f32).sin();
+    let (cx, sigma) = (0.65 * w as f32 + 12.0 * (a - 4.0), 0.3 * w as f32 * a / 4.0);
+    let gx = x as u64 + 12 * t as u64;
+    let texture = 1.0 + 0.1 * (hash(gx, y as u64, 1) as f32 - 0.5);
+    let nodule = hash(gx / 8, y as u64 / 8, 2) < 0.4;
+    let albedo = texture * if nodule { 0.15 } else { 1.0 };
+    let d =
+        ((x as f32 - cx) / sigma).powi(2) + ((y as f32 - 0.5 * h as f32) / (1.2 * sigma)).powi(2);
+    let light = 0.5 * (4.0 / a).powi(2) * (-d).exp();
+    (albedo, light, 0.05 * (1.0 - x as f32 / w as f32))
+}
+
+/// 40 photos of 160×120 (16-bit linear RGB) and 6 water-column frames: sediment of level 1 with a little texture and
+/// dark nodules (0.15) covering 40 % in patches of 8×8 pixels, the camera moving 12 pixels a photo, under a side
+/// light whose centre moves by 12 pixels and whose width grows with each metre of altitude, dimming with its square
+/// (4 ± `swing` m, 1.3 cycles; 1.6 m but where said), over a backscatter that falls off across the frame
+/// ([`swinging_pixel`]).
+fn swinging_field(root: &Path, k: u32, swing: f32) {
+    let (w, h, n) = (k * FIELD.0, k * FIELD.1, FIELD.2);
     let code = |v: f32| image::Rgb([(v.clamp(0.0, 1.0) * 65535.0).round() as u16; 3]);
     std::fs::create_dir_all(root.join("survey")).unwrap();
     std::fs::create_dir_all(root.join("water")).unwrap();
     for t in 0..n {
-        let a = 4.0 + 1.6 * (std::f32::consts::TAU * 1.3 * t as f32 / n as f32).sin();
-        let (cx, sigma) = (0.65 * w as f32 + 12.0 * (a - 4.0), 0.3 * w as f32 * a / 4.0);
         let photo = image::ImageBuffer::from_fn(w, h, |x, y| {
-            let gx = x as u64 + 12 * t as u64;
-            let texture = 1.0 + 0.1 * (hash(gx, y as u64, 1) as f32 - 0.5);
-            let nodule = hash(gx / 8, y as u64 / 8, 2) < 0.4;
-            let albedo = texture * if nodule { 0.15 } else { 1.0 };
-            let d = ((x as f32 - cx) / sigma).powi(2)
-                + ((y as f32 - 0.5 * h as f32) / (1.2 * sigma)).powi(2);
-            code(0.5 * (4.0 / a).powi(2) * (-d).exp() * albedo + s(x))
+            let (albedo, light, s) = swinging_pixel(k, swing, t, x, y);
+            code(light * albedo + s)
         });
         photo
             .save(root.join(format!("survey/s{t:04}.png")))
             .unwrap();
     }
     for i in 0..6 {
-        image::ImageBuffer::from_fn(w, h, |x, _| code(s(x)))
+        image::ImageBuffer::from_fn(w, h, |x, y| code(swinging_pixel(k, swing, 0, x, y).2))
             .save(root.join(format!("water/w{i}.png")))
             .unwrap();
+    }
+}
+
+/// The default options for a field written by [`swinging_field`] into `root`, corrected into `out`.
+fn field_options(root: &Path, out: &Path) -> Options {
+    Options {
+        water_column: Some(root.join("water")),
+        survey: Some(root.join("survey")),
+        out: Some(out.to_path_buf()),
+        transfer: Some(Transfer::Linear),
+        ..Options::default()
     }
 }
 
@@ -51,15 +76,9 @@ fn swinging_field(root: &Path) {
 fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_said() {
     let d = tempfile::tempdir().unwrap();
     let root = d.path().join("dive");
-    swinging_field(&root);
+    swinging_field(&root, 1, 1.6);
     let out = d.path().join("batch");
-    let opts = Options {
-        water_column: Some(root.join("water")),
-        survey: Some(root.join("survey")),
-        out: Some(out.clone()),
-        transfer: Some(Transfer::Linear),
-        ..Options::default()
-    };
+    let opts = field_options(&root, &out);
     let report = correct_mission(&opts, &Silent).unwrap();
     assert_eq!(report.corrected, 40);
 
@@ -141,4 +160,105 @@ fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_s
             c.tag.display()
         );
     }
+}
+
+/// The monitor's `lights-misfit` on the field at default options, level and swinging (4 ± 1.6 m): report.json gives
+/// every photo its figure and flags exactly the photos above the threshold the guide states; the level field's
+/// photos, lit as their window, are not flagged and keep no lighting pattern against their true albedo; the
+/// swinging field's window mixes photos lit from other heights and most of its photos are flagged, and keep the
+/// lights' pattern; the in-memory engine (what Python and --watch run) flags the same photos.
+#[test]
+fn photos_whose_lights_are_not_their_window_s_are_flagged_lights_misfit() {
+    let d = tempfile::tempdir().unwrap();
+    // The limit docs/guide.md's flag table promises.
+    let limit = 0.08;
+    let (mut counts, mut kept) = (Vec::new(), Vec::new());
+    for swing in [0.0, 1.6] {
+        let root = d.path().join(format!("dive-{swing}"));
+        // Twice the size, so that each part of the grid holds 5×5 of the blocks the monitor judges (the figure is
+        // not measured below 32×24 of them).
+        swinging_field(&root, 2, swing);
+        let out = d.path().join(format!("out-{swing}"));
+        let opts = field_options(&root, &out);
+        correct_mission(&opts, &Silent).unwrap();
+        let json = report(&out);
+        let (mut in_report, mut left_max, mut left_flagged) = (Vec::new(), 0.0f64, Vec::new());
+        for (t, f) in json["frames"].as_array().unwrap().iter().enumerate() {
+            let misfit = f["health"]["lights_misfit"].as_f64().expect("measured");
+            let flag = f["health"]["flags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|g| g["kind"] == "lights-misfit");
+            assert_eq!(flag, misfit > limit, "photo {t}: {f}");
+            in_report.push(flag);
+            let left = pattern_left(&out.join(format!("s{t:04}.png")), 2, swing, t);
+            eprintln!("{swing} photo {t}: misfit {misfit:.3}, pattern left {left:.3}");
+            left_max = left_max.max(left);
+            if flag {
+                left_flagged.push(left);
+            }
+        }
+        let flagged = in_report.iter().filter(|&&f| f).count();
+        assert_eq!(
+            json["monitor"]["lights_misfit"].as_u64(),
+            Some(flagged as u64)
+        );
+        counts.push(flagged);
+        let mean = left_flagged.iter().sum::<f64>() / left_flagged.len().max(1) as f64;
+        kept.push((left_max, mean));
+        let mut engine = engine_over(&root.join("water"), opts.params().unwrap());
+        let mut got = Vec::new();
+        for (name, photo) in decoded_photos(&root.join("survey")) {
+            got.extend(engine.push((photo, name)).unwrap());
+        }
+        got.extend(engine.finish());
+        let engine_flags: Vec<bool> = got
+            .iter()
+            .map(|c| c.health.flags.iter().any(|g| g.kind() == "lights-misfit"))
+            .collect();
+        assert_eq!(
+            engine_flags, in_report,
+            "the engine's monitor as the batch run's"
+        );
+    }
+    eprintln!("lights-misfit on {counts:?} of 40 photos, level and swinging");
+    assert!(counts[0] <= 2, "the level field: {counts:?}");
+    assert!(counts[1] >= 20, "the swinging field: {counts:?}");
+    // Against the truth: the level field's photos keep no pattern (the flags it does not raise are right), the
+    // swinging field's flagged photos keep the lights' (pattern left, max and flagged mean: {kept:?}).
+    assert!(kept[0].0 < 0.01, "{kept:?}");
+    assert!(kept[1].1 > 0.05, "{kept:?}");
+}
+
+/// The lighting pattern a corrected photo of the field keeps, scored against its true albedo as `evaluate`'s residual
+/// pattern is: per part of an 8×6 grid, the median of corrected / albedo over the sediment (no nodule) lit to at
+/// least 10 % of the photo's brightest, and the mean absolute spread of their logs about their median.
+fn pattern_left(corrected: &Path, k: u32, swing: f32, t: usize) -> f64 {
+    let (w, h) = (k * FIELD.0, k * FIELD.1);
+    let photo = image::open(corrected).unwrap().to_rgb16();
+    let top = (0..w)
+        .flat_map(|x| (0..h).map(move |y| swinging_pixel(k, swing, t, x, y).1))
+        .fold(0.0f32, f32::max);
+    let mut parts = vec![Vec::new(); 48];
+    for y in 0..h {
+        for x in 0..w {
+            let (albedo, light, _) = swinging_pixel(k, swing, t, x, y);
+            if albedo > 0.5 && light >= 0.1 * top {
+                let v = photo.get_pixel(x, y)[1] as f64 / 65535.0;
+                parts[((y * 6 / h) * 8 + x * 8 / w) as usize].push(v / albedo as f64);
+            }
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let logs: Vec<f64> = parts
+        .into_iter()
+        .filter(|p| p.len() >= 20)
+        .map(|p| median(p).max(1e-6).ln())
+        .collect();
+    let level = median(logs.clone());
+    logs.iter().map(|v| (v - level).abs()).sum::<f64>() / logs.len() as f64
 }
