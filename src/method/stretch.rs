@@ -477,20 +477,23 @@ fn spread(d: &[f32]) -> f32 {
     d.iter().map(|v| (v - level).abs()).sum::<f32>() / d.len() as f32
 }
 
-/// Quantile of a part's block ratios photo / window that [`lights_misfit`] reads: above the dark objects of a dense
-/// field (up to half of the blocks), on the seafloor's side.
+/// The upper quantile of a part's block ratios photo / window that [`lights_misfit`] reads: above the dark objects
+/// of a dense part (up to nine tenths of its blocks), on the seafloor's side.
 pub const LIGHTS_QUANTILE: f64 = 0.9;
 
 /// How far the lights in a photo are from its window's (see [`Health::lights_misfit`]): per part of [`SHAPE_GRID`],
-/// the [`LIGHTS_QUANTILE`] of the log ratios of its blocks' grey level above `s_low` (`own`) to its window's `M − S`
+/// a quantile of the log ratios of its blocks' grey level above `s_low` (`own`) to its window's `M − S`
 /// (`m_minus_s`) at the same blocks, lit to at least 5 % of the window's brightest; their [`spread`] over the parts
-/// (log units). Block by block, so that a part's own gradient of light cancels wherever its seafloor lies: it is
-/// what the correction leaves of the lights' pattern at the grid the residual pattern is scored on, plus what the
-/// seafloor's texture puts into each part's quantile. NaN where the two are not the same size or fewer than 4 parts
-/// have half their blocks lit.
+/// (log units), read at two quantiles and the lesser taken: [`LIGHTS_QUANTILE`] and the window's own `q`. Block by
+/// block, so that a part's own gradient of light cancels wherever its seafloor lies. Each reading has its own false
+/// alarm — noise lifts the upper quantile most in the dim parts (a sound 12 MP mission of noisy JPEGs read 0.07–0.11
+/// there), a part mostly covered by nodules pulls the window's quantile down (a sound level 40 % field read up to
+/// 0.2) — while the lights' pattern moves every quantile of a part alike and so both readings. It is what the
+/// correction leaves of the lights' pattern at the grid the residual pattern is scored on, plus what the seafloor's
+/// texture puts in. NaN where the two are not the same size or fewer than 4 parts have half their blocks lit.
 ///
 /// [`Health::lights_misfit`]: crate::method::monitor::Health::lights_misfit
-pub fn lights_misfit(own: &Raster, m_minus_s: &Raster, s_low: Option<&Raster>) -> f32 {
+pub fn lights_misfit(own: &Raster, m_minus_s: &Raster, s_low: Option<&Raster>, q: f64) -> f32 {
     let (w, h) = (own.width, own.height);
     if (m_minus_s.width, m_minus_s.height) != (w, h) {
         return f32::NAN;
@@ -508,13 +511,17 @@ pub fn lights_misfit(own: &Raster, m_minus_s: &Raster, s_low: Option<&Raster>) -
             parts[k].push((x / y).ln());
         }
     }
-    let d: Vec<f32> = parts
+    let mut lit_parts: Vec<&mut Vec<f32>> = parts
         .iter_mut()
         .zip(blocks)
         .filter(|(part, n)| !part.is_empty() && 2 * part.len() >= *n)
-        .map(|(part, _)| quantile(part, LIGHTS_QUANTILE))
+        .map(|(part, _)| part)
         .collect();
-    spread(&d)
+    let mut at = |q: f64| -> f32 {
+        let d: Vec<f32> = lit_parts.iter_mut().map(|part| quantile(part, q)).collect();
+        spread(&d)
+    };
+    at(LIGHTS_QUANTILE).min(at(q))
 }
 
 /// A photo's scene at block resolution, from its [`lit_ratios`] `own / reference`: their log less its box average
@@ -1111,14 +1118,14 @@ mod tests {
         sorted.sort_by(f32::total_cmp);
         let level = sorted[((sorted.len() - 1) as f64 * 0.5).round() as usize];
         let want = d.iter().map(|v| (v - level).abs()).sum::<f32>() / d.len() as f32;
-        let got = lights_misfit(&own, &m, Some(&s));
+        let got = lights_misfit(&own, &m, Some(&s), 0.5);
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");
         assert!(want > 0.03, "the pattern is there to see: {want}");
         // The same lights, only brighter: nothing left to see; a window of another size: not measured.
         let brighter = Raster::from_fn(w, h, 3, |x, y, c| 1.3 * lit(x, y, c));
-        assert!(lights_misfit(&brighter, &m, None).abs() < 1e-5);
+        assert!(lights_misfit(&brighter, &m, None, 0.5).abs() < 1e-5);
         let other = Raster::from_fn(w / 2, h, 3, lit);
-        assert!(lights_misfit(&own, &other, Some(&s)).is_nan());
+        assert!(lights_misfit(&own, &other, Some(&s), 0.5).is_nan());
     }
 
     /// The streaming survey (a running reference, photos measured in batches on all workers) gives bit for bit what
