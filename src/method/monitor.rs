@@ -899,6 +899,9 @@ pub struct Monitor {
     window: usize,
     /// The quantile of the next photo's window ([`Monitor::set_window`]).
     quantile: f32,
+    /// Photos per independent view of the ground in the next photo's window, as the survey found them
+    /// ([`Monitor::set_views`]; `None`: no survey).
+    views: Option<f32>,
     /// A per-photo gain absorbs exposure changes ([`Monitor::with_gain`]).
     gain: bool,
     /// Exposure levelling runs ([`Monitor::with_levelling`]).
@@ -1015,6 +1018,15 @@ impl Monitor {
         self.quantile = q;
     }
 
+    /// Photos per independent view of the ground in the next photo's window, as `--window auto`'s survey found them
+    /// ([`Choice::photos_per_sample`]; `None`: no survey). Below [`REPEATED_VIEWS`] the texture kept alone does not
+    /// flag `scene-in-factor`.
+    ///
+    /// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
+    pub fn set_views(&mut self, photos_per_sample: Option<f32>) {
+        self.views = photos_per_sample;
+    }
+
     /// Health of the next photo from everything the method knows about it: its own block medians `own`, its
     /// window's `M − S` (`m_minus_s`, before any per-photo adjustment), the scatter at block resolution and the
     /// factor image `f`. Adds the photo's level (exposure jumps) and the texture the correction kept (scene in
@@ -1067,6 +1079,10 @@ impl Monitor {
                 levelled: self.levelling,
             });
         }
+        // The fine structure a correction removes is a scene held in `F` only where the camera repeats its views:
+        // where the survey found the window's photos views of their own, it is the lights' (the cones' steep
+        // edges), and the texture kept alone does not flag the photo (`F`'s own roughness still does).
+        let own_views = self.views.is_some_and(|v| v < REPEATED_VIEWS);
         if fit.texture_kept < t.texture_kept {
             match h
                 .flags
@@ -1074,6 +1090,7 @@ impl Monitor {
                 .find(|f| matches!(f, Flag::SceneInFactor { .. }))
             {
                 Some(Flag::SceneInFactor { texture_kept, .. }) => *texture_kept = fit.texture_kept,
+                _ if own_views => {}
                 _ => h.flags.push(Flag::SceneInFactor {
                     roughness: h.roughness,
                     texture_kept: fit.texture_kept,

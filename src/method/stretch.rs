@@ -393,13 +393,18 @@ fn dark_count(judged: &mut [f32]) -> usize {
     judged.iter().filter(|&&r| r < DARK_RATIO * level).count()
 }
 
+/// The part of [`SHAPE_GRID`] (row by row) that block `b` of a `w`×`h` block image lies in.
+fn part_of(b: usize, (w, h): (usize, usize)) -> usize {
+    let (gx, gy) = SHAPE_GRID;
+    ((b / w) * gy / h) * gx + (b % w) * gx / w
+}
+
 /// The lights' shape in a photo from its blocks' grey levels above `S` (`w`×`h`): [`PhotoSurvey::shape`].
 fn shape(grey: &[f32], (w, h): (usize, usize)) -> [f32; SHAPE_PARTS] {
-    let (gx, gy) = SHAPE_GRID;
     let mut parts: Vec<Vec<f32>> = vec![Vec::new(); SHAPE_PARTS];
     let mut blocks = [0usize; SHAPE_PARTS];
     for (b, &v) in grey.iter().enumerate().take(w * h) {
-        let k = ((b / w) * gy / h) * gx + (b % w) * gx / w;
+        let k = part_of(b, (w, h));
         blocks[k] += 1;
         if v.is_finite() {
             parts[k].push(v);
@@ -501,11 +506,10 @@ pub fn lights_misfit(own: &Raster, m_minus_s: &Raster, s_low: Option<&Raster>, q
     let (a, b) = (grey_above(own, s_low), grey_above(m_minus_s, None));
     let mut lit: Vec<f32> = b.iter().copied().filter(|v| v.is_finite()).collect();
     let floor = 0.05 * quantile(&mut lit, 0.95);
-    let (gx, gy) = SHAPE_GRID;
     let mut parts: Vec<Vec<f32>> = vec![Vec::new(); SHAPE_PARTS];
     let mut blocks = [0usize; SHAPE_PARTS];
     for (p, (&x, &y)) in a.iter().zip(&b).enumerate() {
-        let k = ((p / w) * gy / h) * gx + (p % w) * gx / w;
+        let k = part_of(p, (w, h));
         blocks[k] += 1;
         if x > 0.0 && y > floor {
             parts[k].push((x / y).ln());

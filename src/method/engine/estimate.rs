@@ -12,7 +12,7 @@ use crate::method::correct::{correct_with_offset, Blend, CorrectStats};
 use crate::method::estimate::Estimate;
 use crate::method::factor::{factor_filled, lit_seafloor};
 use crate::method::members::Members;
-use crate::method::monitor::{pool_factor, pooled, Flag, Health, REPEATED_VIEWS};
+use crate::method::monitor::{pool_factor, pooled, Flag, Health};
 use crate::method::raster::{Photo, Raster, Samples};
 use crate::method::seen::{Seen, Window};
 use crate::method::window::window_range;
@@ -48,6 +48,7 @@ impl<T> Engine<T> {
         let pooled = self.pooled_estimate(i, &members);
         let mut monitor = std::mem::take(&mut self.monitor);
         monitor.set_window(self.window_of(i), self.quantile_of(i));
+        monitor.set_views(self.choice(i).map(|c| c.photos_per_sample));
         let mut health = Health::default();
         let (stats, correct_ms) = rayon::in_place_scope(|scope| {
             let judged = self.judged(i, (&lit, &window_f), pooled.as_ref());
@@ -110,17 +111,6 @@ impl<T> Engine<T> {
                     *altitude = i.checked_sub(1).and_then(altitude_of).zip(altitude_of(i))
                 }
                 _ => {}
-            }
-        }
-        // The fine structure a correction removes is a scene held in `F` only where the camera repeats its views:
-        // where the survey found the window's photos views of their own, it is the lights' (the cones' steep
-        // edges), and the texture kept alone does not flag the photo (`F`'s own roughness still does).
-        if let Some(c) = self.choice(i) {
-            if c.photos_per_sample < REPEATED_VIEWS {
-                let rough = self.monitor.thresholds.roughness;
-                health.flags.retain(
-                    |f| !matches!(f, Flag::SceneInFactor { roughness, .. } if *roughness <= rough),
-                );
             }
         }
         match self.choice(i) {
