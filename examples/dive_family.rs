@@ -10,7 +10,10 @@
 //! ```sh
 //! cargo run --release --example dive_family -- [--out DIR] [--count N] [--frames N] [--size WxH] [--sim ours|simdive|both] [--from K] [--summary]
 //! ```
-//! `--count N` dives of each simulator (default 60), `--from K` starts at dive `K` (runs in parts). Each dive's
+//! `--count N` dives of each simulator (default 60), `--from K` starts at dive `K` (runs in parts). `--others-from
+//! DIR` scores only the default and takes the `--window 7` and peer columns from `DIR/family.tsv`, an earlier run of
+//! the same family (another build's default: neither column depends on it), and `simdive.py`'s renders from `DIR`
+//! (linked, not rendered again). Each dive's
 //! scores are appended to `DIR/family.tsv` (default `target/dive-family/`) as it finishes; dives already there are
 //! not run again; each photo of the default's output is appended to `DIR/photos.tsv` with its albedo error and
 //! residual pattern beside the true lighting's on the same photo and the flags the run raised on it. `--summary`
@@ -426,14 +429,42 @@ fn survey_summary(r: &Report) -> (f64, f64, String) {
     )
 }
 
+/// The columns other than the default's of dive `name` in an earlier run's `family.tsv` (its 4 scores each).
+fn earlier_scores(earlier: &str, name: &str) -> Option<Vec<Score>> {
+    let line = earlier
+        .lines()
+        .find(|l| l.split('\t').next() == Some(name))?;
+    let v: Vec<f64> = line
+        .split('\t')
+        .skip(16)
+        .take(4 * COLUMNS.len())
+        .map(|f| f.parse().unwrap_or(f64::NAN))
+        .collect();
+    (v.len() == 4 * COLUMNS.len()).then(|| {
+        v.chunks_exact(4)
+            .map(|c| Score {
+                albedo: c[0],
+                pattern: c[1],
+                nmae: c[2],
+                peer_pattern: c[3],
+            })
+            .collect()
+    })
+}
+
 fn run_one(
     d: &Drawn,
     peers: Option<&Peers>,
     out: &Path,
-    size: (usize, usize),
-    frames: usize,
+    (size, frames): ((usize, usize), usize),
+    earlier: Option<(&Path, &str)>,
 ) -> (String, Vec<String>) {
     let dir = out.join(d.name());
+    let reused = earlier.and_then(|(_, tsv)| earlier_scores(tsv, &d.name()));
+    if let (Some((from, _)), "simdive", false) = (earlier, d.sim, dir.exists()) {
+        let target = std::fs::canonicalize(from.join(d.name())).expect("the earlier run's dive");
+        std::os::unix::fs::symlink(target, &dir).expect("link the earlier render");
+    }
     for col in COLUMNS {
         let _ = std::fs::remove_dir_all(dir.join(col));
     }
@@ -458,9 +489,14 @@ fn run_one(
     let mut survey = (f64::NAN, f64::NAN, String::new());
     let mut times = Vec::new();
     let mut photo_lines = Vec::new();
-    for col in COLUMNS {
+    for (c, col) in COLUMNS.into_iter().enumerate() {
         let t = Instant::now();
         let o = dir.join(col);
+        if let Some(r) = reused.as_ref().filter(|_| col != "default") {
+            scores.push(r[c]);
+            times.push(0.0);
+            continue;
+        }
         if col == "numpy" {
             let Some(p) = peers else {
                 scores.push(Score {
@@ -759,6 +795,7 @@ fn main() {
     let (mut count, mut frames, mut size, mut from) = (60usize, 40usize, (320usize, 240usize), 0);
     let mut sims = vec!["ours", "simdive"];
     let mut only_summary = false;
+    let mut others_from: Option<PathBuf> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = || args.next().unwrap_or_else(|| panic!("{a} needs a value"));
@@ -781,6 +818,7 @@ fn main() {
                 }
             }
             "--summary" => only_summary = true,
+            "--others-from" => others_from = Some(PathBuf::from(value())),
             _ => {
                 eprintln!("dive_family: unknown argument {a:?} (see the docs at the top of examples/dive_family.rs)");
                 std::process::exit(2);
@@ -799,6 +837,12 @@ fn main() {
         if done.is_empty() {
             std::fs::write(&tsv, format!("{HEADER}\n")).expect("write family.tsv");
         }
+        let earlier_tsv = others_from
+            .as_ref()
+            .map(|d| {
+                std::fs::read_to_string(d.join("family.tsv")).expect("--others-from DIR/family.tsv")
+            })
+            .unwrap_or_default();
         // Alternate the simulators so that a run cut short holds both.
         for k in from..count {
             for sim in &sims {
@@ -810,7 +854,11 @@ fn main() {
                     continue;
                 }
                 let t = Instant::now();
-                let (line, photo_lines) = run_one(&d, peers.as_ref(), &out, size, frames);
+                let earlier = others_from
+                    .as_deref()
+                    .map(|dir| (dir, earlier_tsv.as_str()));
+                let (line, photo_lines) =
+                    run_one(&d, peers.as_ref(), &out, (size, frames), earlier);
                 let photos_tsv = out.join("photos.tsv");
                 let mut p = std::fs::OpenOptions::new()
                     .create(true)
