@@ -1020,7 +1020,7 @@ impl Monitor {
 
     /// Photos per independent view of the ground in the next photo's window, as `--window auto`'s survey found them
     /// ([`Choice::photos_per_sample`]; `None`: no survey). Below [`REPEATED_VIEWS`] the texture kept alone does not
-    /// flag `scene-in-factor`.
+    /// flag `scene-in-factor`; below [`STILL_VIEWS`] a match of consecutive photos does not flag `camera-still`.
     ///
     /// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
     pub fn set_views(&mut self, photos_per_sample: Option<f32>) {
@@ -1224,7 +1224,11 @@ impl Monitor {
             };
             let span = step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
             h.window_span = Some(span);
-            if ncc >= STILL_NCC && span < STILL_SPAN {
+            // Where the survey found the window's photos more than two views of the ground (its scenes are measured
+            // against the neighbours' reference, the lights and what is fixed in the frame taken out), the match
+            // locked onto the lights: under a swing the cones' edges and clipped beams stay put in the frame.
+            let moves = self.views.is_some_and(|v| v < STILL_VIEWS);
+            if ncc >= STILL_NCC && span < STILL_SPAN && !moves {
                 h.flags.push(Flag::CameraStill { span });
             }
         }
@@ -1277,6 +1281,11 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
 ///
 /// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
 pub const REPEATED_VIEWS: f32 = 1.5;
+
+/// Photos per independent view of the window's ground ([`Monitor::set_views`]) below which the survey says the
+/// camera moves and `camera-still` is not raised: more than two views in the window 7 (a still camera's window is
+/// one view: 7 or more photos per view).
+pub const STILL_VIEWS: f32 = 3.5;
 
 /// What [`Health::lights_misfit`] reads back from a report written before it was measured.
 fn not_measured() -> f32 {
@@ -1969,5 +1978,37 @@ mod tests {
             "{moving:?}"
         );
         assert!((moving.motion.unwrap() - 9.0).abs() < 0.5, "{moving:?}");
+    }
+
+    /// The match of consecutive photos flags a still camera only where the survey, where one ran, agrees that the
+    /// window's photos repeat their views: a pattern fixed in the frame (the lights' edges under a swing) matches
+    /// at no shift while the survey sees the ground move on.
+    #[test]
+    fn camera_still_needs_the_survey_to_agree_where_one_ran() {
+        let fixed =
+            |x: usize, y: usize| 0.6 + 0.4 * (((x / 3) * 7 + (y / 3) * 13) % 10) as f32 / 10.0;
+        let run = |views: Option<f32>| {
+            let mut mon = Monitor::new(Thresholds::default()).with_window(7);
+            let mut still = 0;
+            for _ in 0..10 {
+                mon.set_views(views);
+                let own = Raster::from_fn(64, 48, 3, |x, y, _| fixed(x, y));
+                let lit = Raster::filled(64, 48, 3, 0.8);
+                let h = mon.observe_photo(&own, &lit, None, &lit);
+                still += h
+                    .flags
+                    .iter()
+                    .any(|f| matches!(f, Flag::CameraStill { .. }))
+                    as usize;
+            }
+            still
+        };
+        // No survey (a window given), or one that found the window a single view: flagged once five matches are in.
+        assert_eq!(run(None), 5);
+        assert_eq!(run(Some(7.0)), 5);
+        assert_eq!(run(Some(STILL_VIEWS)), 5);
+        // The survey found more than two views in the window: not flagged.
+        assert_eq!(run(Some(1.0)), 0);
+        assert_eq!(run(Some(3.4)), 0);
     }
 }
