@@ -137,12 +137,7 @@ fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_s
     );
 
     // The in-memory engine (what Python and --watch run) makes the same choices and writes the same pixels.
-    let mut engine = engine_over(&root.join("water"), opts.params().unwrap());
-    let mut got = Vec::new();
-    for (name, photo) in decoded_photos(&root.join("survey")) {
-        got.extend(engine.push((photo, name)).unwrap());
-    }
-    got.extend(engine.finish());
+    let got = engine_corrects(&root, opts.params().unwrap());
     assert_eq!(got.len(), 40);
     let engine_unsteady = got
         .iter()
@@ -207,12 +202,7 @@ fn photos_whose_lights_are_not_their_window_s_are_flagged_lights_misfit() {
         counts.push(flagged);
         let mean = left_flagged.iter().sum::<f64>() / left_flagged.len().max(1) as f64;
         kept.push((left_max, mean));
-        let mut engine = engine_over(&root.join("water"), opts.params().unwrap());
-        let mut got = Vec::new();
-        for (name, photo) in decoded_photos(&root.join("survey")) {
-            got.extend(engine.push((photo, name)).unwrap());
-        }
-        got.extend(engine.finish());
+        let got = engine_corrects(&root, opts.params().unwrap());
         let engine_flags: Vec<bool> = got
             .iter()
             .map(|c| c.health.flags.iter().any(|g| g.kind() == "lights-misfit"))

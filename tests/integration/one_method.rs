@@ -56,12 +56,7 @@ fn the_engine_writes_the_batch_commands_pixels_on_nodule_fields() {
             Params::default(),
             "the command's defaults are the engine's"
         );
-        let mut engine = engine_over(&root.join("water"), params);
-        let mut out = Vec::new();
-        for (name, photo) in decoded_photos(&root.join("survey")) {
-            out.extend(engine.push((photo, name)).unwrap());
-        }
-        out.extend(engine.finish());
+        let out = engine_corrects(&root, params);
         assert_eq!(out.len(), sim.frames, "{name}");
         let windows: Vec<usize> = out.iter().map(|c| c.choice.unwrap().window).collect();
         assert!(

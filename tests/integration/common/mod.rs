@@ -337,3 +337,18 @@ pub fn engine_over(water: &Path, params: abysslight::Params) -> abysslight::Engi
     let scatter = abysslight::Scatter::from_frames(&frames).unwrap();
     abysslight::Engine::new(params, scatter.as_ref(), None).unwrap()
 }
+
+/// The survey photos of `root/survey` corrected by the in-memory engine at `params` over `root/water` (what Python
+/// and `--watch` run), pushed in mission order with their names as tags; every photo it gave back, in order.
+pub fn engine_corrects(
+    root: &Path,
+    params: abysslight::Params,
+) -> Vec<abysslight::Corrected<PathBuf>> {
+    let mut engine = engine_over(&root.join("water"), params);
+    let mut out = Vec::new();
+    for (name, photo) in decoded_photos(&root.join("survey")) {
+        out.extend(engine.push((photo, name)).unwrap());
+    }
+    out.extend(engine.finish());
+    out
+}
