@@ -1,6 +1,7 @@
 """The Python boundary: options through the library's typed options, float and big-endian arrays, one call for a
 list of arrays, exceptions by kind, ranges before allocation, one engine per mission and per thread."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -230,6 +231,19 @@ def test_error_kinds(tmp_path):
     (tmp_path / "bad.png").write_bytes(b"\x89PNG\r\n\x1a\nnot a png")
     with pytest.raises(ValueError, match="bad.png"):
         abysslight.read(tmp_path / "bad.png")
+
+
+def test_a_scatter_image_that_is_a_fifo_is_refused_not_waited_on(tmp_path):
+    # Opening a FIFO waits for a writer: load must refuse it by name before opening it.
+    fifo = tmp_path / "scatter.png"
+    os.mkfifo(fifo)
+    code, out, err = in_subprocess(f"""
+        try:
+            abysslight.Scatter.load({str(fifo)!r})
+        except Exception as e:
+            print(type(e).__name__, e)
+    """, timeout=60)
+    assert code == 0 and "FIFO" in out and "scatter.png" in out, (code, out, err[-2000:])
 
 
 # correct(cruise=...).

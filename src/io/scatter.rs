@@ -37,8 +37,10 @@ impl Scatter {
         )
     }
 
-    /// A scatter image saved by an earlier run (`--scatter`).
+    /// A scatter image saved by an earlier run (`--scatter`): a regular file (a FIFO would block the run until
+    /// something writes to it, a device might never end).
     pub fn load(path: &Path) -> Result<Scatter> {
+        crate::io::whole::check_regular(path, "scatter image")?;
         Ok(Scatter::from_raster(&load_raster(path)?))
     }
 

@@ -652,8 +652,8 @@ fn clocks_apart(
 }
 
 /// The input folders and files of a run are there, each named by its flag where not (the path checks after it
-/// name only the path); the mask and the navigation log are regular files, not a FIFO that would block the run or
-/// a device that never ends.
+/// name only the path); the scatter image, the mask and the navigation log are regular files, not a FIFO that
+/// would block the run or a device that never ends.
 fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
     let inputs = [
         ("--survey", opts.survey.as_deref().filter(|_| !streaming)),
@@ -672,6 +672,7 @@ fn inputs_exist(opts: &Options, streaming: bool) -> Result<()> {
         }
     }
     for (what, path) in [
+        ("--scatter image", &opts.scatter),
         ("--mask file", &opts.mask),
         ("--navigation log", &opts.navigation),
     ] {

@@ -756,6 +756,8 @@ fn a_fifo_or_a_device_given_as_a_file_is_refused_by_name() {
         ("--config", &zero, "a device"),
         ("--mask", &fifo, "a FIFO"),
         ("--mask", &zero, "a device"),
+        ("--scatter", &fifo, "a FIFO"),
+        ("--scatter", &zero, "a device"),
     ] {
         let o = run_within(&with(&base, &[flag, s(file)]), d.path(), 60);
         assert_eq!(code(&o), 2, "{flag} {}: {}", file.display(), stderr(&o));
