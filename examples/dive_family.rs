@@ -19,7 +19,8 @@
 //! residual pattern beside the true lighting's on the same photo and the flags the run raised on it. `--summary`
 //! only prints, from those files, the distribution (median, 90th percentile, worst) of default ÷ peer and default ÷
 //! `--window 7` per score, per simulator and half, and the monitor as a classifier (precision, recall, good photos
-//! flagged, per flag) by the definition of docs/results.md. Needs the peers' Python (`../peer-venv`, or
+//! flagged, per flag) by the definition of docs/results.md. The default's `report.json` of each dive is kept as
+//! `DIR/reports/DIVE.json` (each photo's health figures and window, to study the monitor). Needs the peers' Python (`../peer-venv`, or
 //! `PEER_PYTHON`; numpy, OpenCV, SciPy) and `../shared/peers/{simdive,paper_numpy,evaluate_dive}.py`; without them only the crate's
 //! dives and columns are run.
 
@@ -533,6 +534,12 @@ fn run_one(
                 survey = survey_summary(&report);
                 let photos = load_set(&o, &r.names, r.transfer);
                 photo_lines = per_photo(d, &r, &photos, &report);
+                // Every photo's health figures and window, kept for the monitor's analysis.
+                if let Some(json) = &report.report_path {
+                    let kept = out.join("reports");
+                    let _ = std::fs::create_dir_all(&kept);
+                    let _ = std::fs::copy(json, kept.join(format!("{}.json", d.name())));
+                }
             }
         }
         let photos = load_set(&o, &r.names, r.transfer);
