@@ -895,6 +895,9 @@ pub struct Monitor {
     previous_spectrum: Option<crate::method::matching::Spectrum>,
     /// Recent (motion, correlation) of consecutive photos, at most [`STILL_PHOTOS`].
     recent_motion: std::collections::VecDeque<(f32, f32)>,
+    /// The last photo's own match with the one before it is trusted and moves the ground less than [`STILL_SPAN`]
+    /// over the window (what [`Monitor::supports_few_views`] reads before [`STILL_PHOTOS`] matches are in).
+    moved_little: bool,
     /// The window `n` (0: not told; [`STILL_DEFAULT_WINDOW`] is assumed).
     window: usize,
     /// The quantile of the next photo's window ([`Monitor::set_window`]).
@@ -1019,12 +1022,27 @@ impl Monitor {
     }
 
     /// Photos per independent view of the ground in the next photo's window, as `--window auto`'s survey found them
-    /// ([`Choice::photos_per_sample`]; `None`: no survey). Below [`REPEATED_VIEWS`] the texture kept alone does not
-    /// flag `scene-in-factor`; below [`STILL_VIEWS`] a match of consecutive photos does not flag `camera-still`.
+    /// ([`Choice::photos_per_sample`]; `None`: no survey). With a survey the texture kept alone does not flag
+    /// `scene-in-factor`; below [`STILL_VIEWS`] a match of consecutive photos does not flag `camera-still`.
     ///
     /// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
     pub fn set_views(&mut self, photos_per_sample: Option<f32>) {
         self.views = photos_per_sample;
+    }
+
+    /// Whether the photo last observed, of health `h`, supports the survey's reading that a window the do-no-harm
+    /// check fell back to (`Rule::Unsteady`) holds too few views of the ground: `F`'s roughness or the photo's
+    /// lights misfit past [`FEW_VIEWS_SUPPORT`] of its own threshold, or its match with the photo before it trusted
+    /// and moving the ground less than a still camera's share of the frame over the window (Sparus' first photos,
+    /// before `camera-still` has its matches). There the survey's longer choice was already overruled by the
+    /// lights, and its count of views is the one a swing misleads (photos lit alike read as one view, while their
+    /// match finds no trusted shift): the claim that `F` may hold the scene needs the photo to show something of
+    /// it.
+    pub fn supports_few_views(&self, h: &Health) -> bool {
+        let t = self.thresholds;
+        h.roughness > FEW_VIEWS_SUPPORT * t.roughness
+            || h.lights_misfit > FEW_VIEWS_SUPPORT * t.lights_misfit
+            || self.moved_little
     }
 
     /// Health of the next photo from everything the method knows about it: its own block medians `own`, its
@@ -1079,10 +1097,11 @@ impl Monitor {
                 levelled: self.levelling,
             });
         }
-        // The fine structure a correction removes is a scene held in `F` only where the camera repeats its views:
-        // where the survey found the window's photos views of their own, it is the lights' (the cones' steep
-        // edges), and the texture kept alone does not flag the photo (`F`'s own roughness still does).
-        let own_views = self.views.is_some_and(|v| v < REPEATED_VIEWS);
+        // The fine structure a correction removes is a scene held in `F` only where the camera repeats its views.
+        // Where a survey ran (`--window auto`), the views are counted and named by `few-samples`, and `F`'s own
+        // roughness still flags a scene in it: the texture kept alone does not flag the photo. On smooth ground
+        // the fine structure removed is the lights' (the cones' steep fall-off), whatever the survey read.
+        let own_views = self.views.is_some();
         if fit.texture_kept < t.texture_kept {
             match h
                 .flags
@@ -1186,6 +1205,15 @@ impl Monitor {
         // are matched at full block resolution, as before.
         let scale = crate::method::matching::reduction_to(own.width, own.height, STILL_MATCH_SIDE);
         let texture = crate::method::matching::texture(own, scale);
+        // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
+        let short_side = (texture.width.min(texture.height) * scale) as f32;
+        let n = if self.window > 0 {
+            self.window
+        } else {
+            STILL_DEFAULT_WINDOW
+        };
+        let span_of = |step: f32| step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
+        self.moved_little = false;
         // Each photo's spectrum once: the next photo is matched against it.
         let spectrum = (texture.width >= MIN_ROUGHNESS_SIZE.0
             && texture.height >= MIN_ROUGHNESS_SIZE.1)
@@ -1197,6 +1225,8 @@ impl Monitor {
                     crate::method::matching::match_spectra(prev, &texture, prev_spectrum, spectrum);
                 h.motion = Some(m.shift.0.hypot(m.shift.1) as f32);
                 h.motion_ncc = Some(m.ncc as f32);
+                self.moved_little = m.ncc as f32 >= STILL_NCC
+                    && span_of(m.shift.0.hypot(m.shift.1) as f32) < STILL_SPAN;
                 if self.recent_motion.len() == STILL_PHOTOS {
                     self.recent_motion.pop_front();
                 }
@@ -1204,8 +1234,6 @@ impl Monitor {
                     .push_back((m.shift.0.hypot(m.shift.1) as f32, m.ncc as f32));
             }
         }
-        // The shift is in `own`'s pixels (match_pair scales it back), and so is the side it is compared with.
-        let short_side = (texture.width.min(texture.height) * scale) as f32;
         self.previous_texture = Some(texture);
         self.previous_spectrum = spectrum;
         // A camera that hardly moves: the window's photos see the same ground, so F holds the scene (MBARI
@@ -1217,12 +1245,7 @@ impl Monitor {
             };
             let ncc = med(&mut self.recent_motion.iter().map(|m| m.1).collect());
             let step = med(&mut self.recent_motion.iter().map(|m| m.0).collect());
-            let n = if self.window > 0 {
-                self.window
-            } else {
-                STILL_DEFAULT_WINDOW
-            };
-            let span = step * (n.saturating_sub(1)) as f32 / short_side.max(1.0);
+            let span = span_of(step);
             h.window_span = Some(span);
             // Where the survey found the window's photos more than two views of the ground (its scenes are measured
             // against the neighbours' reference, the lights and what is fixed in the frame taken out), the match
@@ -1272,15 +1295,12 @@ fn median_balance(v: &[Vec<f32>]) -> Vec<f32> {
         .collect()
 }
 
-/// Photos per independent view of the ground (the survey's [`Choice::photos_per_sample`]) from which a low texture
-/// kept ([`Thresholds::texture_kept`]) flags `scene-in-factor` under `--window auto`: below it the survey found the
-/// window's photos views of their own, and the fine structure the correction removed is the lights'. On the
-/// randomized family's simdive dives (docs/results.md) the texture kept alone flagged 779 photos and not one was
-/// wrong by the user's definition (on ours 26, 8 wrong); 1.5 keeps the flag where a view fills every other photo or
-/// more (a slow camera).
-///
-/// [`Choice::photos_per_sample`]: crate::method::stretch::Choice::photos_per_sample
-pub const REPEATED_VIEWS: f32 = 1.5;
+/// Share of its own threshold at which `F`'s roughness or the photo's lights misfit supports a `few-samples` reading
+/// of a window the do-no-harm check fell back to ([`Monitor::supports_few_views`]). On the randomized family's
+/// simdive dives (docs/results.md) the flag was raised on 84 such photos, 78 of them good (their misfit 0.004,
+/// roughness 0.03 at the median; the wrong ones' misfit 0.04–0.07); AQUALOC's, under a still ROV, have roughness
+/// 0.15–0.19.
+pub const FEW_VIEWS_SUPPORT: f32 = 0.5;
 
 /// Photos per independent view of the window's ground ([`Monitor::set_views`]) below which the survey says the
 /// camera moves and `camera-still` is not raised: more than two views in the window 7 (a still camera's window is
@@ -1827,6 +1847,63 @@ mod tests {
         let bad = photo_fit(&own, &copy, None, 0.5).texture_kept;
         assert!(good > 0.9, "{good}");
         assert!(bad < 0.05, "{bad}");
+    }
+
+    /// The texture kept alone flags `scene-in-factor` only where no survey counted the views (a window given); with
+    /// one, `few-samples` names too few views and `F`'s own roughness still flags a scene in it.
+    #[test]
+    fn the_texture_kept_alone_flags_only_without_a_survey() {
+        let cone = |x: usize, y: usize| {
+            let (dx, dy) = (x as f32 - 32.0, y as f32 - 20.0);
+            0.2 + (-(dx * dx + dy * dy) / 900.0).exp()
+        };
+        let scene = |x: usize, y: usize| 0.8 + 0.2 * ((x / 3 + y / 3) % 2) as f32;
+        let own = Raster::from_fn(64, 48, 3, |x, y, _| cone(x, y) * scene(x, y));
+        let flat = Raster::filled(64, 48, 3, 0.8);
+        let scene_in = |views: Option<f32>| {
+            let mut mon = Monitor::new(Thresholds::default()).with_window(7);
+            mon.set_views(views);
+            // `M − S` a copy of the photo: nothing of its texture is kept; `F` itself smooth.
+            let h = mon.observe_photo(&own, &own, None, &flat);
+            assert!(h.texture_kept < 0.2 && h.roughness < 0.12, "{h:?}");
+            has(&h.flags, "scene-in-factor")
+        };
+        assert!(scene_in(None));
+        for views in [1.0, 2.0, 7.0] {
+            assert!(!scene_in(Some(views)), "{views} photos per view");
+        }
+    }
+
+    /// `few-samples` on a window the do-no-harm check fell back to needs the photo's support: `F`'s roughness or the
+    /// lights' misfit past half its own flag's threshold.
+    #[test]
+    fn few_views_need_the_photo_s_support() {
+        let mon = Monitor::new(Thresholds::default());
+        let t = Thresholds::default();
+        let with = |roughness: f32, lights_misfit: f32| Health {
+            roughness,
+            lights_misfit,
+            ..Health::default()
+        };
+        assert!(!mon.supports_few_views(&with(0.03, 0.004)));
+        assert!(!mon.supports_few_views(&with(0.03, f32::NAN)));
+        assert!(!mon.supports_few_views(&with(0.059, 0.034)));
+        assert!(mon.supports_few_views(&with(0.061, 0.0)));
+        assert!(mon.supports_few_views(&with(0.0, 0.036)));
+        assert!(mon.supports_few_views(&with(t.roughness, 0.0)));
+        // A trusted match with the photo before that hardly moves the ground (a slow camera's first photos, before
+        // `camera-still` has its five matches) supports it too; a first photo (no match) does not.
+        let textured =
+            |x: usize, y: usize| 0.6 + 0.4 * (((x / 3) * 7 + (y / 3) * 13) % 10) as f32 / 10.0;
+        let own = Raster::from_fn(64, 48, 3, |x, y, _| textured(x, y));
+        let lit = Raster::filled(64, 48, 3, 0.8);
+        let mut mon = Monitor::new(Thresholds::default()).with_window(7);
+        mon.set_views(Some(1.0));
+        let first = mon.observe_photo(&own, &lit, None, &lit);
+        assert!(!mon.supports_few_views(&with(0.0, 0.0)), "{first:?}");
+        let second = mon.observe_photo(&own, &lit, None, &lit);
+        assert!(second.motion_ncc.unwrap() >= STILL_NCC, "{second:?}");
+        assert!(mon.supports_few_views(&with(0.0, 0.0)), "{second:?}");
     }
 
     #[test]

@@ -113,13 +113,21 @@ impl<T> Engine<T> {
                 _ => {}
             }
         }
+        // Where the do-no-harm check fell back to the window 7, the survey's count of views needs the photo's
+        // support (`Monitor::supports_few_views`).
+        let supported = |c: &crate::method::stretch::Choice| {
+            c.rule != crate::method::stretch::Rule::Unsteady
+                || self.monitor.supports_few_views(health)
+        };
         match self.choice(i) {
-            Some(c) if c.samples < c.needed => health.flags.push(Flag::FewSamples {
-                samples: c.samples,
-                needed: c.needed,
-                window: c.window,
-                whole_mission: c.rule == crate::method::stretch::Rule::Short,
-            }),
+            Some(c) if c.samples < c.needed && supported(c) => {
+                health.flags.push(Flag::FewSamples {
+                    samples: c.samples,
+                    needed: c.needed,
+                    window: c.window,
+                    whole_mission: c.rule == crate::method::stretch::Rule::Short,
+                })
+            }
             None if eof && photos < n => {
                 health.flags.push(Flag::ShortMission { photos, window: n })
             }
