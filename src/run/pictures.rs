@@ -57,6 +57,8 @@ fn factor_change_condition(changes: &[f32], ratio: f32) -> Vec<f32> {
 /// altitudes (a navigation log).
 fn overview_series(frames: &[FrameReport], t: &Thresholds) -> Vec<Series<'static>> {
     let changes: Vec<f32> = frames.iter().map(|f| f.health.factor_change).collect();
+    // Under `--window auto` a low texture kept flags nothing by itself (the survey counts the views): no line there.
+    let surveyed = frames.iter().any(|f| f.window_auto.is_some());
     let mut series = vec![
         Series {
             title: "contamination: share of blocks off the seafloor colour (0 to 1)",
@@ -94,7 +96,7 @@ fn overview_series(frames: &[FrameReport], t: &Thresholds) -> Vec<Series<'static
         Series {
             title: "texture kept by the correction: low = scene left in F, high = structure added (share, 1 = all)",
             values: frames.iter().map(|f| f.health.texture_kept).collect(),
-            threshold: Some(t.texture_kept),
+            threshold: (!surveyed).then_some(t.texture_kept),
             upper: Some(t.structure_added),
             moving: None,
             kinds: &["scene-in-factor", "structure-added"],
@@ -244,7 +246,7 @@ fn panel(img: &mut RgbImage, f: &Frame, frames: &[FrameReport], s: &Series, top:
         .copied()
         .filter(|v| v.is_finite())
         .fold(0.0, f32::max);
-    let vmax = match s.threshold {
+    let vmax = match s.threshold.or(s.upper) {
         Some(t) => values_max.max(t.max(s.upper.unwrap_or(0.0)) * 1.5),
         None => values_max * 1.1,
     }
@@ -810,6 +812,42 @@ mod tests {
             .flat_map(|y| (x0.max(0)..x1.min(w)).map(move |x| (x, y)))
             .filter(|&(x, y)| img.get_pixel(x as u32, y as u32).0[0] < 100)
             .count()
+    }
+
+    /// The texture panel draws the low line (`scene-in-factor` from the texture kept alone) only where it flags:
+    /// with a window given, not under `--window auto`; the structure-added line always.
+    #[test]
+    fn the_texture_panel_draws_only_the_lines_that_flag() {
+        let t = Thresholds::default();
+        let texture = |fr: &[FrameReport]| {
+            overview_series(fr, &t)
+                .into_iter()
+                .find(|s| s.title.starts_with("texture kept"))
+                .map(|s| (s.threshold, s.upper))
+                .unwrap()
+        };
+        let mut fr = frames(3, Path::new("/nowhere"));
+        assert_eq!(
+            texture(&fr),
+            (Some(t.texture_kept), Some(t.structure_added))
+        );
+        fr[1].window_auto = Some(crate::report::WindowAuto::from(
+            crate::method::stretch::Choice {
+                window: 7,
+                quantile: 0.5,
+                near: None,
+                coverage: 0.0,
+                photos_per_sample: 2.0,
+                samples: 3,
+                needed: 3,
+                rule: crate::method::stretch::Rule::Sparse,
+                misfit: None,
+            },
+        ));
+        assert_eq!(texture(&fr), (None, Some(t.structure_added)));
+        // The panel still reaches above the upper line.
+        let img = overview(&fr, &t);
+        assert!(img.height() > 0);
     }
 
     /// Under every panel of the overview, the photo numbers of the ticks (photo 20, 40, … of 151), where the
