@@ -1101,7 +1101,7 @@ impl Monitor {
         // Where a survey ran (`--window auto`), the views are counted and named by `few-samples`, and `F`'s own
         // roughness still flags a scene in it: the texture kept alone does not flag the photo. On smooth ground
         // the fine structure removed is the lights' (the cones' steep fall-off), whatever the survey read.
-        let own_views = self.views.is_some();
+        let surveyed = self.views.is_some();
         if fit.texture_kept < t.texture_kept {
             match h
                 .flags
@@ -1109,7 +1109,7 @@ impl Monitor {
                 .find(|f| matches!(f, Flag::SceneInFactor { .. }))
             {
                 Some(Flag::SceneInFactor { texture_kept, .. }) => *texture_kept = fit.texture_kept,
-                _ if own_views => {}
+                _ if surveyed => {}
                 _ => h.flags.push(Flag::SceneInFactor {
                     roughness: h.roughness,
                     texture_kept: fit.texture_kept,
