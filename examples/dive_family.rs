@@ -435,9 +435,11 @@ fn earlier_scores(earlier: &str, name: &str) -> Option<Vec<Score>> {
     let line = earlier
         .lines()
         .find(|l| l.split('\t').next() == Some(name))?;
+    // The columns' scores start at the default's first, in HEADER's order.
+    let first = HEADER.split('\t').position(|h| h == "default_albedo")?;
     let v: Vec<f64> = line
         .split('\t')
-        .skip(16)
+        .skip(first)
         .take(4 * COLUMNS.len())
         .map(|f| f.parse().unwrap_or(f64::NAN))
         .collect();

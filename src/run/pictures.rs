@@ -845,9 +845,8 @@ mod tests {
             },
         ));
         assert_eq!(texture(&fr), (None, Some(t.structure_added)));
-        // The panel still reaches above the upper line.
-        let img = overview(&fr, &t);
-        assert!(img.height() > 0);
+        // A panel with only its upper line is drawn (its scale from that line) without failing.
+        overview(&fr, &t);
     }
 
     /// Under every panel of the overview, the photo numbers of the ticks (photo 20, 40, … of 151), where the

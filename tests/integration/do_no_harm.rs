@@ -113,15 +113,7 @@ fn where_the_lights_change_along_the_survey_s_window_the_window_7_is_taken_and_s
                 // (0.12, 0.07 by default), or a trusted match with the photo before that hardly moves.
                 let (samples, needed) = (w["samples"].as_u64().unwrap(), w["needed"].as_u64());
                 assert_eq!(needed, Some(3), "{w}");
-                let h = &f["health"];
-                let figure = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
-                let shows = figure("roughness") > 0.06 || figure("lights_misfit") > 0.035;
-                let trusted = figure("motion_ncc") >= 0.6;
-                let few = h["flags"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .any(|g| g["kind"] == "few-samples");
+                let (few, shows, trusted) = few_samples_and_support(f);
                 assert!(!few || samples < 3, "{f}");
                 if samples < 3 && (shows || !trusted) {
                     assert_eq!(few, shows, "{f}");
@@ -265,6 +257,21 @@ fn pattern_left(corrected: &Path, k: u32, swing: f32, t: usize) -> f64 {
     logs.iter().map(|v| (v - level).abs()).sum::<f64>() / logs.len() as f64
 }
 
+/// A report.json frame's `few-samples` flag, whether the photo shows what supports it (`F`'s roughness or the
+/// lights' misfit past half its own flag's threshold: 0.12 and 0.07 by default), and whether its match with the photo
+/// before is trusted (`motion_ncc` ≥ 0.6; where that match hardly moves the ground it supports the flag too).
+fn few_samples_and_support(f: &serde_json::Value) -> (bool, bool, bool) {
+    let h = &f["health"];
+    let figure = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
+    let few = h["flags"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|g| g["kind"] == "few-samples");
+    let shows = figure("roughness") > 0.06 || figure("lights_misfit") > 0.035;
+    (few, shows, figure("motion_ncc") >= 0.6)
+}
+
 /// Bare sediment under a swing (dive 57 of the randomized family, docs/results.md: two lights, 4.1 ± 1.4 m): photos
 /// lit alike a swing apart read as one view, and where the do-no-harm check fell back to the window 7 the survey
 /// counts too few views in it. Where the photo shows nothing of a scene in `F` (its roughness and its lights' misfit
@@ -318,17 +325,10 @@ fn a_swing_s_repeated_lighting_is_not_called_too_few_views_where_the_photo_shows
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
     let (mut short, mut unsupported, mut flagged) = (0, 0, 0);
     for f in json["frames"].as_array().unwrap() {
-        let (w, h) = (&f["window_auto"], &f["health"]);
-        let figure = |k: &str| h[k].as_f64().unwrap_or(f64::NAN);
-        let trusted = figure("motion_ncc") >= 0.6;
-        let shows = figure("roughness") > 0.06 || figure("lights_misfit") > 0.035;
+        let w = &f["window_auto"];
+        let (few, shows, trusted) = few_samples_and_support(f);
         let unsteady = w["rule"] == "unsteady";
         let is_short = w["samples"].as_u64().unwrap() < w["needed"].as_u64().unwrap();
-        let few = h["flags"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|g| g["kind"] == "few-samples");
         assert!(!few || is_short, "{f}");
         if is_short && (!unsteady || shows) {
             assert!(few, "{f}");
